@@ -1,0 +1,85 @@
+//! Binds the system Embree with bindgen.
+//!
+//! Search order for the headers: `$EMBREE_DIR/include`, then the standard include paths
+//! (`/usr/include`, `/usr/local/include`). Embree 4 headers, if present, are preferred;
+//! the choice is passed to the crate as `cfg(embree4)`. The library is linked as
+//! `embree4` or `embree3`, from `$EMBREE_DIR/lib` when given, else from the default
+//! linker paths (Debian's `libembree-dev` has no pkg-config file).
+
+use std::env;
+use std::path::{Path, PathBuf};
+
+fn main() {
+    println!("cargo:rerun-if-changed=wrapper.h");
+    println!("cargo:rerun-if-env-changed=EMBREE_DIR");
+    println!("cargo::rustc-check-cfg=cfg(embree4)");
+
+    let embree_dir = env::var_os("EMBREE_DIR").map(PathBuf::from);
+    let mut include_dirs: Vec<PathBuf> = Vec::new();
+    if let Some(dir) = &embree_dir {
+        include_dirs.push(dir.join("include"));
+    }
+    include_dirs.push(PathBuf::from("/usr/local/include"));
+    include_dirs.push(PathBuf::from("/usr/include"));
+
+    let has = |major: &str| -> Option<PathBuf> {
+        include_dirs
+            .iter()
+            .find(|d| d.join(format!("embree{major}/rtcore.h")).is_file())
+            .cloned()
+    };
+    let (major, include) = match (has("4"), has("3")) {
+        (Some(dir), _) => ("4", dir),
+        (None, Some(dir)) => ("3", dir),
+        (None, None) => {
+            let searched: Vec<String> = include_dirs
+                .iter()
+                .map(|d| d.display().to_string())
+                .collect();
+            panic!(
+                "Embree headers not found (looked for embree4/rtcore.h and embree3/rtcore.h in {}). \
+                 Install them with `scripts/setup.sh` (Debian: `apt-get install libembree-dev`) \
+                 or point EMBREE_DIR at an Embree installation.",
+                searched.join(", ")
+            );
+        }
+    };
+
+    if let Some(dir) = &embree_dir {
+        for lib in ["lib", "lib64"] {
+            let p = dir.join(lib);
+            if p.is_dir() {
+                println!("cargo:rustc-link-search=native={}", p.display());
+            }
+        }
+    }
+    println!("cargo:rustc-link-lib=dylib=embree{major}");
+    if major == "4" {
+        println!("cargo:rustc-cfg=embree4");
+    }
+
+    let mut builder = bindgen::Builder::default()
+        .header("wrapper.h")
+        .clang_arg(format!("-I{}", include.display()))
+        .allowlist_function("rtc.*")
+        .allowlist_type("RTC.*")
+        .allowlist_var("RTC_.*")
+        .rustified_enum("RTCError")
+        .rustified_enum("RTCGeometryType")
+        .rustified_enum("RTCBufferType")
+        .rustified_enum("RTCFormat")
+        .rustified_enum("RTCBuildQuality")
+        .rustified_enum("RTCDeviceProperty")
+        .bitfield_enum("RTCSceneFlags")
+        .prepend_enum_name(false)
+        .layout_tests(true)
+        .parse_callbacks(Box::new(bindgen::CargoCallbacks::new()));
+    if major == "4" {
+        builder = builder.clang_arg("-DPCBPT_EMBREE4");
+    }
+    let bindings = builder.generate().expect("bindgen failed on wrapper.h");
+    let out = PathBuf::from(env::var("OUT_DIR").expect("OUT_DIR is set by cargo"));
+    bindings
+        .write_to_file(Path::new(&out).join("embree_bindings.rs"))
+        .expect("could not write the Embree bindings");
+}

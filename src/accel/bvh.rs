@@ -1,0 +1,138 @@
+//! The pure-Rust backend: a compressed wide BVH (CWBVH) from the `obvhs` crate over the
+//! same triangles and spheres Embree sees, with our own primitive tests. Exists so that
+//! every result can be cross-checked against Embree, ray by ray.
+
+use super::{BuildOptions, BuildQuality, Geometry, Hit, Ray, intersect_sphere, intersect_triangle};
+use glam::{Vec3, Vec3A};
+use obvhs::{BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh, ray::RayHit};
+
+#[derive(Clone, Copy)]
+enum Prim {
+    Triangle { p: [Vec3; 3] },
+    Sphere { center: Vec3, radius: f32 },
+}
+
+pub struct ObvhsScene {
+    bvh: CwBvh,
+    /// Primitives in BVH leaf order, so traversal indexes them directly.
+    prims: Vec<Prim>,
+    /// (geometry id, primitive id) of each entry of `prims`.
+    ids: Vec<(u32, u32)>,
+}
+
+impl ObvhsScene {
+    pub fn build(geometry: &[Geometry<'_>], options: BuildOptions) -> ObvhsScene {
+        let mut prims = Vec::new();
+        let mut ids = Vec::new();
+        for (g, geom) in geometry.iter().enumerate() {
+            match geom {
+                Geometry::Triangles { positions, indices } => {
+                    for (i, t) in indices.iter().enumerate() {
+                        prims.push(Prim::Triangle {
+                            p: t.map(|k| positions[k as usize]),
+                        });
+                        ids.push((g as u32, i as u32));
+                    }
+                }
+                Geometry::Sphere { center, radius } => {
+                    prims.push(Prim::Sphere {
+                        center: *center,
+                        radius: *radius,
+                    });
+                    ids.push((g as u32, 0));
+                }
+            }
+        }
+        let aabbs: Vec<Aabb> = prims
+            .iter()
+            .map(|p| match p {
+                Prim::Triangle { p } => Aabb::from_points(&p.map(Vec3A::from)),
+                Prim::Sphere { center, radius } => Aabb::new(
+                    Vec3A::from(*center - Vec3::splat(*radius)),
+                    Vec3A::from(*center + Vec3::splat(*radius)),
+                ),
+            })
+            .collect();
+        let params = match options.quality {
+            BuildQuality::Low => BvhBuildParams::fast_build(),
+            BuildQuality::Medium => BvhBuildParams::medium_build(),
+            BuildQuality::High => BvhBuildParams::slow_build(),
+        };
+        let mut build_time = std::time::Duration::ZERO;
+        let bvh = if aabbs.is_empty() {
+            CwBvh::default()
+        } else {
+            build_cwbvh(&aabbs, params, &mut build_time)
+        };
+        let ordered = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| prims[i as usize])
+            .collect();
+        let ordered_ids = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| ids[i as usize])
+            .collect();
+        ObvhsScene {
+            bvh,
+            prims: ordered,
+            ids: ordered_ids,
+        }
+    }
+
+    fn bvh_ray(r: &Ray) -> obvhs::ray::Ray {
+        obvhs::ray::Ray::new(Vec3A::from(r.o), Vec3A::from(r.d), r.tmin, r.tmax)
+    }
+
+    pub fn intersect(&self, r: &Ray) -> Option<Hit> {
+        if self.prims.is_empty() {
+            return None;
+        }
+        let mut best: Option<(f32, u32, f32, f32)> = None;
+        let mut hit = RayHit::none();
+        let mut ray = *r;
+        self.bvh
+            .ray_traverse(Self::bvh_ray(r), &mut hit, |_, id| match self.prims[id] {
+                Prim::Triangle { p } => match intersect_triangle(&ray, p[0], p[1], p[2]) {
+                    Some((t, u, v)) => {
+                        best = Some((t, id as u32, u, v));
+                        ray.tmax = t;
+                        t
+                    }
+                    None => f32::INFINITY,
+                },
+                Prim::Sphere { center, radius } => match intersect_sphere(&ray, center, radius) {
+                    Some(t) => {
+                        best = Some((t, id as u32, 0.0, 0.0));
+                        ray.tmax = t;
+                        t
+                    }
+                    None => f32::INFINITY,
+                },
+            });
+        best.map(|(t, id, u, v)| {
+            let (geom, prim) = self.ids[id as usize];
+            Hit {
+                t,
+                geom,
+                prim,
+                u,
+                v,
+            }
+        })
+    }
+
+    pub fn occluded(&self, r: &Ray) -> bool {
+        if self.prims.is_empty() {
+            return false;
+        }
+        !self.bvh.ray_traverse_miss(Self::bvh_ray(r), |_, id| {
+            let t = match self.prims[id] {
+                Prim::Triangle { p } => intersect_triangle(r, p[0], p[1], p[2]).map(|h| h.0),
+                Prim::Sphere { center, radius } => intersect_sphere(r, center, radius),
+            };
+            t.unwrap_or(f32::INFINITY)
+        })
+    }
+}

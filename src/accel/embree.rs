@@ -1,0 +1,428 @@
+//! The Embree backend: the system Embree (3.13 on Debian; Embree 4 when its headers are
+//! found, `cfg(embree4)`) through the bindings `build.rs` generates from `wrapper.h`.
+//!
+//! This is the only module of the crate with `unsafe` code. Ownership is RAII: [`Device`],
+//! [`EmbreeScene`] and the geometries release their Embree handles on `Drop`. Errors that
+//! Embree reports through the device error callback are collected and returned as
+//! [`AccelError::Embree`]; nothing aborts.
+#![allow(unsafe_code)]
+
+use super::{AccelError, BuildOptions, BuildQuality, Geometry, Hit, Ray};
+use std::ffi::{CStr, c_char, c_void};
+use std::ptr;
+use std::sync::{Arc, Mutex};
+
+#[allow(
+    non_upper_case_globals,
+    non_camel_case_types,
+    non_snake_case,
+    dead_code,
+    unused_imports,
+    unnecessary_transmutes,
+    clippy::all
+)]
+mod ffi {
+    include!(concat!(env!("OUT_DIR"), "/embree_bindings.rs"));
+}
+
+/// `RTC_INVALID_GEOMETRY_ID` (a cast macro that bindgen does not translate).
+const INVALID_ID: u32 = u32::MAX;
+
+/// Messages the device error callback has collected since the last check.
+type ErrorLog = Mutex<Vec<String>>;
+
+unsafe extern "C" fn error_callback(
+    user: *mut c_void,
+    code: ffi::RTCError,
+    message: *const c_char,
+) {
+    // SAFETY: `user` is the `ErrorLog` owned by the `Device` that registered this callback;
+    // the device outlives every call Embree makes on it. `message` is a NUL-terminated
+    // string owned by Embree for the duration of the call, or null.
+    let (log, text) = unsafe {
+        let log = &*(user as *const ErrorLog);
+        let text = if message.is_null() {
+            String::new()
+        } else {
+            CStr::from_ptr(message).to_string_lossy().into_owned()
+        };
+        (log, text)
+    };
+    if let Ok(mut log) = log.lock() {
+        log.push(format!("{code:?}: {text}"));
+    }
+}
+
+/// An Embree device with its error log.
+pub struct Device {
+    raw: ffi::RTCDevice,
+    errors: Box<ErrorLog>,
+}
+
+// SAFETY: an Embree device is internally synchronised; we only create scenes from it on one
+// thread at a time (building takes `&self` but is not shared across threads here) and read
+// the error log through a mutex.
+unsafe impl Send for Device {}
+// SAFETY: see `Send`; all shared access goes through Embree's thread-safe API or the mutex.
+unsafe impl Sync for Device {}
+
+impl Device {
+    pub fn new() -> Result<Arc<Device>, AccelError> {
+        // SAFETY: the configuration string is a valid NUL-terminated C string.
+        let raw = unsafe { ffi::rtcNewDevice(c"verbose=0".as_ptr()) };
+        if raw.is_null() {
+            // SAFETY: querying the error of a null device is allowed and returns the last
+            // device-creation error.
+            let code = unsafe { ffi::rtcGetDeviceError(ptr::null_mut()) };
+            return Err(AccelError::Embree(format!(
+                "rtcNewDevice failed ({code:?})"
+            )));
+        }
+        let errors: Box<ErrorLog> = Box::new(Mutex::new(Vec::new()));
+        // SAFETY: `raw` is a live device; the user pointer points into a Box that lives as
+        // long as the `Device` (the box's heap address is stable when the struct moves).
+        unsafe {
+            ffi::rtcSetDeviceErrorFunction(
+                raw,
+                Some(error_callback),
+                &*errors as *const ErrorLog as *mut c_void,
+            );
+        }
+        Ok(Arc::new(Device { raw, errors }))
+    }
+
+    /// Turns errors collected by the callback (or pending on the device) into a Rust error.
+    fn check(&self, what: &str) -> Result<(), AccelError> {
+        // SAFETY: `self.raw` is a live device.
+        let code = unsafe { ffi::rtcGetDeviceError(self.raw) };
+        let mut log = self
+            .errors
+            .lock()
+            .map_err(|_| AccelError::Embree("error log poisoned".into()))?;
+        if !log.is_empty() || code != ffi::RTCError::RTC_ERROR_NONE {
+            let mut messages: Vec<String> = log.drain(..).collect();
+            if messages.is_empty() {
+                messages.push(format!("{code:?}"));
+            }
+            return Err(AccelError::Embree(format!(
+                "{what}: {}",
+                messages.join("; ")
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: `self.raw` was returned by `rtcNewDevice` and is released exactly once;
+        // scenes keep an `Arc<Device>`, so none outlives it.
+        unsafe { ffi::rtcReleaseDevice(self.raw) }
+    }
+}
+
+/// A geometry handle, released on drop (the scene keeps its own reference once attached).
+struct GeometryHandle(ffi::RTCGeometry);
+
+impl Drop for GeometryHandle {
+    fn drop(&mut self) {
+        // SAFETY: the handle came from `rtcNewGeometry` and is released exactly once.
+        unsafe { ffi::rtcReleaseGeometry(self.0) }
+    }
+}
+
+/// A committed Embree scene.
+///
+/// `Send + Sync`: after `rtcCommitScene` Embree allows any number of threads to call
+/// `rtcIntersect*`/`rtcOccluded*` on the scene at once, and this type offers no way to
+/// modify the scene after it is committed (every method takes `&self` and only queries).
+pub struct EmbreeScene {
+    raw: ffi::RTCScene,
+    device: Arc<Device>,
+}
+
+// SAFETY: see the type's documentation: a committed scene is immutable and Embree's query
+// functions are thread-safe.
+unsafe impl Send for EmbreeScene {}
+// SAFETY: as above.
+unsafe impl Sync for EmbreeScene {}
+
+impl Drop for EmbreeScene {
+    fn drop(&mut self) {
+        // SAFETY: `self.raw` came from `rtcNewScene` and is released exactly once; the device
+        // is kept alive by `self.device` until after this call.
+        unsafe { ffi::rtcReleaseScene(self.raw) }
+    }
+}
+
+fn quality(q: BuildQuality) -> ffi::RTCBuildQuality {
+    match q {
+        BuildQuality::Low => ffi::RTCBuildQuality::RTC_BUILD_QUALITY_LOW,
+        BuildQuality::Medium => ffi::RTCBuildQuality::RTC_BUILD_QUALITY_MEDIUM,
+        BuildQuality::High => ffi::RTCBuildQuality::RTC_BUILD_QUALITY_HIGH,
+    }
+}
+
+impl EmbreeScene {
+    /// Builds and commits a scene; geometry `i` gets geometry id `i`.
+    pub fn build(
+        geometry: &[Geometry<'_>],
+        options: BuildOptions,
+    ) -> Result<EmbreeScene, AccelError> {
+        let device = Device::new()?;
+        // SAFETY: `device.raw` is a live device.
+        let raw = unsafe { ffi::rtcNewScene(device.raw) };
+        if raw.is_null() {
+            device.check("rtcNewScene")?;
+            return Err(AccelError::Embree("rtcNewScene returned null".into()));
+        }
+        let scene = EmbreeScene { raw, device };
+        let mut flags = ffi::RTCSceneFlags::RTC_SCENE_FLAG_NONE;
+        if options.robust {
+            flags |= ffi::RTCSceneFlags::RTC_SCENE_FLAG_ROBUST;
+        }
+        if options.compact {
+            flags |= ffi::RTCSceneFlags::RTC_SCENE_FLAG_COMPACT;
+        }
+        // SAFETY: `scene.raw` is a live, not yet committed scene.
+        unsafe {
+            ffi::rtcSetSceneFlags(scene.raw, flags);
+            ffi::rtcSetSceneBuildQuality(scene.raw, quality(options.quality));
+        }
+        for (id, g) in geometry.iter().enumerate() {
+            let handle = scene.new_geometry(g, options.quality)?;
+            // SAFETY: both handles are live; the id is unique because it is the index.
+            unsafe { ffi::rtcAttachGeometryByID(scene.raw, handle.0, id as u32) };
+            scene.device.check("rtcAttachGeometryByID")?;
+        }
+        // SAFETY: every attached geometry is committed; building happens on this thread.
+        unsafe { ffi::rtcCommitScene(scene.raw) };
+        scene.device.check("rtcCommitScene")?;
+        Ok(scene)
+    }
+
+    fn new_geometry(
+        &self,
+        g: &Geometry<'_>,
+        q: BuildQuality,
+    ) -> Result<GeometryHandle, AccelError> {
+        let kind = match g {
+            Geometry::Triangles { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_TRIANGLE,
+            Geometry::Sphere { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_SPHERE_POINT,
+        };
+        // SAFETY: the device is live.
+        let raw = unsafe { ffi::rtcNewGeometry(self.device.raw, kind) };
+        self.device.check("rtcNewGeometry")?;
+        if raw.is_null() {
+            return Err(AccelError::Embree("rtcNewGeometry returned null".into()));
+        }
+        let handle = GeometryHandle(raw);
+        match g {
+            Geometry::Triangles { positions, indices } => {
+                // Embree reads vertices with 16-byte loads: a buffer it allocates itself
+                // (`rtcSetNewGeometryBuffer`) carries the padding it needs.
+                let verts = self.new_buffer::<[f32; 3]>(
+                    &handle,
+                    ffi::RTCBufferType::RTC_BUFFER_TYPE_VERTEX,
+                    ffi::RTCFormat::RTC_FORMAT_FLOAT3,
+                    positions.len(),
+                )?;
+                for (dst, p) in verts.iter_mut().zip(positions.iter()) {
+                    *dst = p.to_array();
+                }
+                let tris = self.new_buffer::<[u32; 3]>(
+                    &handle,
+                    ffi::RTCBufferType::RTC_BUFFER_TYPE_INDEX,
+                    ffi::RTCFormat::RTC_FORMAT_UINT3,
+                    indices.len(),
+                )?;
+                tris.copy_from_slice(indices);
+            }
+            Geometry::Sphere { center, radius } => {
+                let v = self.new_buffer::<[f32; 4]>(
+                    &handle,
+                    ffi::RTCBufferType::RTC_BUFFER_TYPE_VERTEX,
+                    ffi::RTCFormat::RTC_FORMAT_FLOAT4,
+                    1,
+                )?;
+                v[0] = [center.x, center.y, center.z, *radius];
+            }
+        }
+        // SAFETY: the geometry is live and its buffers are filled.
+        unsafe {
+            ffi::rtcSetGeometryBuildQuality(handle.0, quality(q));
+            ffi::rtcCommitGeometry(handle.0);
+        }
+        self.device.check("rtcCommitGeometry")?;
+        Ok(handle)
+    }
+
+    /// A new Embree-owned buffer of `count` items of `T`, as a mutable slice.
+    #[allow(clippy::mut_from_ref)]
+    fn new_buffer<'g, T: Copy>(
+        &self,
+        geom: &'g GeometryHandle,
+        kind: ffi::RTCBufferType,
+        format: ffi::RTCFormat,
+        count: usize,
+    ) -> Result<&'g mut [T], AccelError> {
+        // SAFETY: the geometry is live and not committed; slot 0 is valid for both buffer
+        // types used here; the stride is the item size.
+        let ptr =
+            unsafe { ffi::rtcSetNewGeometryBuffer(geom.0, kind, 0, format, size_of::<T>(), count) };
+        self.device.check("rtcSetNewGeometryBuffer")?;
+        if ptr.is_null() {
+            return Err(AccelError::Embree(
+                "rtcSetNewGeometryBuffer returned null".into(),
+            ));
+        }
+        // SAFETY: Embree allocated `count * size_of::<T>()` bytes (plus padding), aligned to
+        // at least 16 bytes, owned by the geometry, which lives as long as `'g` and is only
+        // written through this slice before commit.
+        Ok(unsafe { std::slice::from_raw_parts_mut(ptr as *mut T, count) })
+    }
+
+    #[cfg(not(embree4))]
+    fn context(coherent: bool) -> ffi::RTCIntersectContext {
+        // `rtcInitIntersectContext` is a header-only inline function that the library does
+        // not export: this is its body for RTC_MAX_INSTANCE_LEVEL_COUNT = 1 (bindgen's
+        // layout test guards the struct shape).
+        ffi::RTCIntersectContext {
+            flags: if coherent {
+                ffi::RTC_INTERSECT_CONTEXT_FLAG_COHERENT
+            } else {
+                ffi::RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
+            },
+            filter: None,
+            instID: [INVALID_ID; 1],
+        }
+    }
+
+    fn ray(r: &Ray) -> ffi::RTCRay {
+        ffi::RTCRay {
+            org_x: r.o.x,
+            org_y: r.o.y,
+            org_z: r.o.z,
+            tnear: r.tmin,
+            dir_x: r.d.x,
+            dir_y: r.d.y,
+            dir_z: r.d.z,
+            time: 0.0,
+            tfar: r.tmax,
+            mask: u32::MAX,
+            id: 0,
+            flags: 0,
+        }
+    }
+
+    fn rayhit(r: &Ray) -> ffi::RTCRayHit {
+        ffi::RTCRayHit {
+            ray: Self::ray(r),
+            hit: ffi::RTCHit {
+                Ng_x: 0.0,
+                Ng_y: 0.0,
+                Ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                primID: INVALID_ID,
+                geomID: INVALID_ID,
+                instID: [INVALID_ID; 1],
+            },
+        }
+    }
+
+    fn hit(rh: &ffi::RTCRayHit) -> Option<Hit> {
+        (rh.hit.geomID != INVALID_ID).then(|| Hit {
+            t: rh.ray.tfar,
+            geom: rh.hit.geomID,
+            prim: rh.hit.primID,
+            u: rh.hit.u,
+            v: rh.hit.v,
+        })
+    }
+
+    pub fn intersect(&self, r: &Ray) -> Option<Hit> {
+        let mut rh = Self::rayhit(r);
+        #[cfg(not(embree4))]
+        {
+            let mut ctx = Self::context(false);
+            // SAFETY: the scene is committed; `ctx` and `rh` are valid, initialised structs
+            // with geomID = INVALID and mask = all, as Embree requires.
+            unsafe { ffi::rtcIntersect1(self.raw, &mut ctx, &mut rh) };
+        }
+        #[cfg(embree4)]
+        // SAFETY: as above; a null argument pointer selects Embree 4's defaults.
+        unsafe {
+            ffi::rtcIntersect1(self.raw, &mut rh, ptr::null_mut())
+        };
+        Self::hit(&rh)
+    }
+
+    pub fn occluded(&self, r: &Ray) -> bool {
+        let mut ray = Self::ray(r);
+        #[cfg(not(embree4))]
+        {
+            let mut ctx = Self::context(false);
+            // SAFETY: the scene is committed; `ctx` and `ray` are valid, initialised structs.
+            unsafe { ffi::rtcOccluded1(self.raw, &mut ctx, &mut ray) };
+        }
+        #[cfg(embree4)]
+        // SAFETY: as above; a null argument pointer selects Embree 4's defaults.
+        unsafe {
+            ffi::rtcOccluded1(self.raw, &mut ray, ptr::null_mut())
+        };
+        // Embree marks an occluded ray by setting tfar to -inf.
+        ray.tfar == f32::NEG_INFINITY
+    }
+
+    pub fn intersect_batch(&self, rays: &[Ray], coherent: bool, out: &mut Vec<Option<Hit>>) {
+        let mut buf: Vec<ffi::RTCRayHit> = rays.iter().map(Self::rayhit).collect();
+        #[cfg(not(embree4))]
+        if !buf.is_empty() {
+            let mut ctx = Self::context(coherent);
+            // SAFETY: `buf` holds `buf.len()` initialised ray/hit structs laid out with the
+            // given stride; the scene is committed.
+            unsafe {
+                ffi::rtcIntersect1M(
+                    self.raw,
+                    &mut ctx,
+                    buf.as_mut_ptr(),
+                    buf.len() as u32,
+                    size_of::<ffi::RTCRayHit>(),
+                )
+            };
+        }
+        #[cfg(embree4)]
+        for rh in &mut buf {
+            let _ = coherent;
+            // SAFETY: as in `intersect` (Embree 4 has no ray streams).
+            unsafe { ffi::rtcIntersect1(self.raw, rh, ptr::null_mut()) };
+        }
+        out.extend(buf.iter().map(Self::hit));
+    }
+
+    pub fn occluded_batch(&self, rays: &[Ray], coherent: bool, out: &mut Vec<bool>) {
+        let mut buf: Vec<ffi::RTCRay> = rays.iter().map(Self::ray).collect();
+        #[cfg(not(embree4))]
+        if !buf.is_empty() {
+            let mut ctx = Self::context(coherent);
+            // SAFETY: `buf` holds `buf.len()` initialised rays with the given stride.
+            unsafe {
+                ffi::rtcOccluded1M(
+                    self.raw,
+                    &mut ctx,
+                    buf.as_mut_ptr(),
+                    buf.len() as u32,
+                    size_of::<ffi::RTCRay>(),
+                )
+            };
+        }
+        #[cfg(embree4)]
+        for r in &mut buf {
+            let _ = coherent;
+            // SAFETY: as in `occluded`.
+            unsafe { ffi::rtcOccluded1(self.raw, r, ptr::null_mut()) };
+        }
+        out.extend(buf.iter().map(|r| r.tfar == f32::NEG_INFINITY));
+    }
+}

@@ -1,0 +1,135 @@
+//! Unidirectional path tracing (contract §1): next-event estimation with one light sample
+//! per vertex, MIS by the power heuristic between BSDF and light sampling, Russian roulette
+//! from `rr_depth` on, and Mitsuba's `max_depth` (segments from the camera; -1 unlimited).
+
+use super::Counters;
+use crate::accel::Ray;
+use crate::bsdf::TransportMode;
+use crate::math::{Rgb, max_component};
+use crate::sampling::{Sampler, power_heuristic};
+use crate::scene::{IntegratorSpec, Scene};
+
+#[derive(Clone, Debug)]
+pub struct PathTracer {
+    /// Maximum number of segments; `u32::MAX` for unlimited.
+    pub max_depth: u32,
+    pub rr_depth: u32,
+    pub hide_emitters: bool,
+}
+
+impl PathTracer {
+    pub fn new(spec: &IntegratorSpec) -> PathTracer {
+        PathTracer {
+            max_depth: if spec.max_depth < 0 {
+                u32::MAX
+            } else {
+                spec.max_depth as u32
+            },
+            rr_depth: spec.rr_depth,
+            hide_emitters: spec.hide_emitters,
+        }
+    }
+
+    /// Radiance arriving along a camera ray.
+    pub fn li(
+        &self,
+        scene: &Scene,
+        mut ray: Ray,
+        sampler: &mut Sampler,
+        counters: &mut Counters,
+    ) -> Rgb {
+        let mut l = Rgb::ZERO;
+        let mut beta = Rgb::ONE;
+        let mut depth = 0u32;
+        // The last BSDF sample's density (solid angle) and whether it was a delta lobe.
+        let mut prev_pdf = 0.0f32;
+        let mut prev_delta = true;
+        let mut prev_p = ray.o;
+        if self.max_depth == 0 {
+            return l;
+        }
+        loop {
+            counters.extension_rays += 1;
+            let Some(si) = scene.intersect(&ray) else {
+                break;
+            };
+            depth += 1;
+
+            if let Some((light_index, light)) = scene.area_light(&si) {
+                let le = light.radiance(si.ng, si.uv, si.wo);
+                if le != Rgb::ZERO {
+                    if depth == 1 {
+                        if !self.hide_emitters {
+                            l += beta * le;
+                        }
+                    } else if prev_delta {
+                        l += beta * le;
+                    } else {
+                        let pdf_light = scene.light_sampler.pmf(light_index)
+                            * light.pdf_li(&scene.shapes, prev_p, &si);
+                        l += beta * le * power_heuristic(prev_pdf, pdf_light);
+                    }
+                }
+            }
+            if depth >= self.max_depth {
+                break;
+            }
+
+            let bsdf = scene.bsdf(&si);
+            let wo = si.shading.to_local(si.wo);
+
+            // Next-event estimation.
+            let u_light = sampler.next_1d();
+            let u_light1 = sampler.next_1d();
+            let u_light2 = sampler.next_2d();
+            if !bsdf.is_delta() {
+                if let Some((light_index, pmf, _)) = scene.light_sampler.sample(u_light) {
+                    let light = &scene.lights[light_index];
+                    if let Some(ls) = light.sample_li(&scene.shapes, si.p, u_light1, u_light2) {
+                        let wi = si.shading.to_local(ls.wi);
+                        let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance) * wi.z.abs();
+                        if f != Rgb::ZERO {
+                            counters.shadow_rays += 1;
+                            if !scene.occluded(&si.spawn_ray_to(ls.p)) {
+                                let pdf_light = pmf * ls.pdf;
+                                let w = if ls.delta {
+                                    1.0
+                                } else {
+                                    power_heuristic(
+                                        pdf_light,
+                                        bsdf.pdf(wo, wi, si.uv, TransportMode::Radiance),
+                                    )
+                                };
+                                l += beta * f * ls.li * (w / pdf_light);
+                            }
+                        }
+                    }
+                }
+            }
+
+            // Continue the path by sampling the BSDF.
+            let u_lobe = sampler.next_1d();
+            let u_dir = sampler.next_2d();
+            let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u_dir, TransportMode::Radiance) else {
+                break;
+            };
+            beta *= bs.weight;
+            if beta == Rgb::ZERO {
+                break;
+            }
+            prev_pdf = bs.pdf;
+            prev_delta = bs.delta;
+            prev_p = si.p;
+
+            if depth >= self.rr_depth {
+                let q = max_component(beta).min(0.95);
+                if sampler.next_1d() >= q {
+                    break;
+                }
+                beta /= q;
+            }
+            ray = si.spawn_ray(si.shading.to_world(bs.wi));
+        }
+        l
+    }
+}

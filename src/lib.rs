@@ -1,0 +1,24 @@
+//! `pcbpt`: a CPU renderer for probabilistic connections in bidirectional path tracing
+//! (Popov et al. 2015) and the light-transport methods it is compared against.
+//!
+//! The crate is organised by what things are: ray queries ([`accel`]), scene loading and
+//! the render-ready scene ([`scene`]), the camera and film, BSDFs, lights, textures,
+//! sampling ([`sampling`], with the χ² harness), integrators, image I/O and comparison.
+//! `unsafe` code lives only in [`accel::embree`].
+#![deny(unsafe_code)]
+
+pub mod accel;
+pub mod bsdf;
+pub mod camera;
+pub mod compare;
+pub mod error;
+pub mod film;
+pub mod image_io;
+pub mod integrator;
+pub mod light;
+pub mod math;
+pub mod sampling;
+pub mod scene;
+pub mod texture;
+
+pub use error::{Error, Result};

@@ -1,0 +1,257 @@
+//! The `pcbpt` command line: `render` a Mitsuba scene, `compare` two images.
+
+use clap::{Args, Parser, Subcommand};
+use pcbpt::accel::{Backend, BuildOptions, BuildQuality};
+use pcbpt::compare;
+use pcbpt::error::{Error, Result};
+use pcbpt::image_io::{self, Image};
+use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use pcbpt::scene::{LoadOptions, Scene};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(
+    name = "pcbpt",
+    version,
+    about = "A CPU renderer for probabilistic connections in bidirectional path tracing and the methods it is compared against"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a Mitsuba XML scene.
+    Render(RenderArgs),
+    /// Compare a test image with a reference: MSE, relMSE and the ratio of image means.
+    Compare(CompareArgs),
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// The scene file (Mitsuba 3 XML; version 0.x files are upgraded).
+    scene: PathBuf,
+    /// Output image; `.exr` (linear float RGB) or `.png` (sRGB). Default: the scene's name with `.exr`.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Integrator (default: the one the scene names).
+    #[arg(long, value_enum)]
+    integrator: Option<IntegratorKind>,
+    /// Samples per pixel (default: the scene's sample_count).
+    #[arg(long, conflicts_with = "time")]
+    spp: Option<u32>,
+    /// Render for this many seconds instead of a sample count (whole passes of 1 spp).
+    #[arg(long)]
+    time: Option<f64>,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Seed of the random number streams (default: the scene sampler's seed).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Scene parameter overrides, `-D name=value` (e.g. `-D spp=64 -D resx=320`).
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    define: Vec<(String, String)>,
+    /// Ray-tracing backend.
+    #[arg(long, value_enum, default_value_t = Backend::Embree)]
+    backend: Backend,
+    /// Acceleration structure build quality.
+    #[arg(long, value_enum, default_value_t = BuildQuality::Medium)]
+    bvh_quality: BuildQuality,
+    /// Embree's robust traversal mode (slower, fewer arithmetic shortcuts).
+    #[arg(long)]
+    robust: bool,
+    /// Write render statistics as JSON to this file.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// The reference image (EXR).
+    reference: PathBuf,
+    /// The image to test (EXR).
+    test: PathBuf,
+    /// Write a false-colour image of the per-pixel relMSE (PNG).
+    #[arg(long)]
+    error_image: Option<PathBuf>,
+    /// relMSE shown as white in the error image.
+    #[arg(long, default_value_t = 1.0)]
+    error_scale: f64,
+    /// Print the metrics as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_define(s: &str) -> std::result::Result<(String, String), String> {
+    let (k, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("\"{s}\" is not NAME=VALUE"))?;
+    if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        return Err(format!("\"{k}\" is not a parameter name"));
+    }
+    Ok((k.to_string(), v.to_string()))
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(a) => render(a),
+        Command::Compare(a) => compare_images(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Exit status of a render stopped by a signal (as a shell reports SIGINT).
+const INTERRUPTED: u8 = 130;
+
+fn install_signal_handlers() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // A second signal while the first is being handled exits at once.
+        signal_hook::flag::register_conditional_shutdown(sig, INTERRUPTED as i32, stop.clone())
+            .map_err(|e| Error::Usage(format!("cannot install signal handler: {e}")))?;
+        signal_hook::flag::register(sig, stop.clone())
+            .map_err(|e| Error::Usage(format!("cannot install signal handler: {e}")))?;
+    }
+    Ok(stop)
+}
+
+fn render(a: RenderArgs) -> Result<ExitCode> {
+    let stop = install_signal_handlers()?;
+    let t0 = Instant::now();
+    let build = BuildOptions {
+        quality: a.bvh_quality,
+        robust: a.robust,
+        compact: false,
+    };
+    let scene = Scene::load(
+        &a.scene,
+        &LoadOptions {
+            overrides: a.define.clone(),
+            backend: a.backend,
+            build,
+        },
+    )?;
+    let load_seconds = t0.elapsed().as_secs_f64();
+    if !a.quiet {
+        for w in &scene.stats.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    let kind = match a.integrator {
+        Some(k) => k,
+        None => IntegratorKind::from_plugin(&scene.integrator.plugin).ok_or_else(|| Error::Usage(format!("the scene's integrator \"{}\" has no implementation here; pick one with --integrator", scene.integrator.plugin)))?,
+    };
+    let budget = match (a.spp, a.time) {
+        (_, Some(t)) if !(t > 0.0 && t.is_finite()) => {
+            return Err(Error::Usage(format!(
+                "--time must be a positive number of seconds, got {t}"
+            )));
+        }
+        (_, Some(t)) => Budget::Time(t),
+        (Some(0), _) => return Err(Error::Usage("--spp must be at least 1".into())),
+        (Some(s), None) => Budget::Spp(s),
+        (None, None) => Budget::Spp(scene.sampler.spp),
+    };
+    let output = a.output.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "{}.exr",
+            a.scene
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "render".into())
+        ))
+    });
+    image_io::Format::from_path(&output)?;
+    let mut opts = RenderOptions::new(kind, budget);
+    opts.seed = a.seed.unwrap_or(scene.sampler.seed);
+    opts.threads = a.threads;
+    opts.progress = !a.quiet;
+    opts.stop = Some(stop);
+    let out = integrator::render(&scene, &opts)?;
+    let s = &out.stats;
+    image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
+    if let Some(path) = &a.stats {
+        let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "render": s });
+        write_text(
+            path,
+            &serde_json::to_string_pretty(&json).unwrap_or_default(),
+        )?;
+    }
+    if !a.quiet || s.interrupted {
+        eprintln!(
+            "{}: {}×{} at {} spp ({:?}, {}, {} threads) in {:.2} s (+{:.2} s loading): {:.3} M samples/s, {:.2} M rays/s, {} NaN/Inf samples dropped → {}",
+            if s.interrupted {
+                "interrupted"
+            } else {
+                "rendered"
+            },
+            s.width,
+            s.height,
+            s.spp,
+            s.integrator,
+            s.backend,
+            s.threads,
+            s.seconds,
+            load_seconds,
+            s.samples_per_second / 1e6,
+            s.rays_per_second / 1e6,
+            s.invalid_samples,
+            output.display()
+        );
+    }
+    Ok(if s.interrupted {
+        ExitCode::from(INTERRUPTED)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, text)
+        .and_then(|_| std::fs::rename(&tmp, path))
+        .map_err(|e| Error::Output {
+            path: path.to_path_buf(),
+            msg: e.to_string(),
+        })
+}
+
+fn compare_images(a: CompareArgs) -> Result<ExitCode> {
+    let r = image_io::read(&a.reference)?;
+    let t = image_io::read(&a.test)?;
+    let m = compare::metrics(&r, &t)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&m).unwrap_or_default());
+    } else {
+        println!("MSE        {:.6e}", m.mse);
+        println!("relMSE     {:.6e}", m.relmse);
+        println!(
+            "mean ratio {:.6} (test {:.6} / reference {:.6})",
+            m.mean_ratio, m.test_mean, m.reference_mean
+        );
+        if m.non_finite > 0 {
+            println!("non-finite pixels in the test image: {}", m.non_finite);
+        }
+    }
+    if let Some(path) = &a.error_image {
+        let bytes = compare::error_image(&r, &t, a.error_scale)?;
+        image_io::write_png_rgb8(path, r.width, r.height, &bytes)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,704 @@
+//! Stage three of scene loading: instantiating the parsed document into a [`Scene`].
+//!
+//! Each plugin reads the properties it knows; whatever is left unread is an error that
+//! names the file and line (as in Mitsuba), as is an unknown plugin type.
+
+use super::mesh::{self, TriangleMesh};
+use super::shape::{Shape, ShapeGeometry};
+use super::xml::{self, Document, Node, NodeId};
+use super::{FilmSpec, IntegratorSpec, LoadOptions, LoadStats, SamplerSpec, Scene};
+use crate::accel::Accel;
+use crate::bsdf::{Bsdf, BsdfModel};
+use crate::camera::{Camera, FovAxis};
+use crate::error::{Error, Result};
+use crate::film::Filter;
+use crate::light::{Light, LightSampler};
+use crate::math::Transform;
+use crate::texture::Texture;
+use glam::{Mat4, Vec3};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Integrator plugins a scene file may name.
+pub const INTEGRATOR_PLUGINS: &[&str] = &["path"];
+
+/// The largest image this renderer accepts (pixels).
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+impl Scene {
+    /// Loads a Mitsuba XML scene and builds its accelerator.
+    pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
+        let doc = xml::parse_file(path, &options.overrides)?;
+        let mut b = Builder {
+            doc: &doc,
+            base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
+            bsdf_ids: HashMap::new(),
+            bsdfs: Vec::new(),
+            shapes: Vec::new(),
+            lights: Vec::new(),
+            stats: LoadStats::default(),
+        };
+        let mut sensor = None;
+        let mut integrator = None;
+        let root = doc.node(doc.root);
+        for child in &root.children {
+            let node = doc.node(child.node);
+            child.used.set(true);
+            match node.tag.as_str() {
+                "shape" => b.shape(child.node)?,
+                "bsdf" => {
+                    b.bsdf(child.node)?;
+                }
+                "emitter" => {
+                    let light = b.emitter(child.node, None)?;
+                    b.lights.push(light);
+                }
+                "sensor" => {
+                    if sensor.is_some() {
+                        return Err(Error::input(
+                            &node.loc,
+                            "a second <sensor>: this renderer renders one sensor per scene",
+                        ));
+                    }
+                    sensor = Some(b.sensor(child.node)?);
+                }
+                "integrator" => {
+                    if integrator.is_some() {
+                        return Err(Error::input(&node.loc, "a second <integrator>"));
+                    }
+                    integrator = Some(b.integrator(child.node)?);
+                }
+                "texture" => {
+                    b.texture_node(child.node)?;
+                }
+                t => {
+                    return Err(Error::input(
+                        &node.loc,
+                        format!("<{t}> plugins are not supported by this renderer"),
+                    ));
+                }
+            }
+        }
+        doc.check_unused(doc.root)?;
+        let (camera, film, sampler) =
+            sensor.ok_or_else(|| Error::input(&root.loc, "the scene has no <sensor>"))?;
+        let integrator = integrator.unwrap_or(IntegratorSpec {
+            plugin: "path".into(),
+            max_depth: -1,
+            rr_depth: 3,
+            hide_emitters: false,
+        });
+        if b.lights.is_empty() {
+            return Err(Error::input(
+                &root.loc,
+                "the scene has no emitters: the image would be black",
+            ));
+        }
+        for (o, _) in &options.overrides {
+            if !doc.params.contains_key(o) {
+                b.stats.warnings.push(format!("parameter -D {o}=… is not declared by a <default> in the scene and was used only where referenced"));
+            }
+        }
+        for s in &mut b.shapes {
+            if s.light.is_some() {
+                s.prepare_sampling();
+            }
+        }
+        let light_sampler = LightSampler::new(&b.lights, &b.shapes);
+        let geometry: Vec<_> = b.shapes.iter().map(|s| s.accel_geometry()).collect();
+        let accel = Accel::build(options.backend, &geometry, options.build)?;
+        drop(geometry);
+        Ok(Scene {
+            path: path.to_path_buf(),
+            shapes: b.shapes,
+            bsdfs: b.bsdfs,
+            lights: b.lights,
+            light_sampler,
+            camera,
+            film,
+            integrator,
+            sampler,
+            accel,
+            stats: b.stats,
+        })
+    }
+}
+
+struct Builder<'d> {
+    doc: &'d Document,
+    base: PathBuf,
+    bsdf_ids: HashMap<NodeId, usize>,
+    bsdfs: Vec<Bsdf>,
+    shapes: Vec<Shape>,
+    lights: Vec<Light>,
+    stats: LoadStats,
+}
+
+fn positive(node: &Node, name: &str, v: f32) -> Result<f32> {
+    if v > 0.0 && v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Error::input(
+            &node.prop_loc(name),
+            format!("\"{name}\" must be positive, got {v}"),
+        ))
+    }
+}
+
+fn non_negative_rgb(node: &Node, name: &str, v: Vec3) -> Result<Vec3> {
+    if v.is_finite() && v.min_element() >= 0.0 {
+        Ok(v)
+    } else {
+        Err(Error::input(
+            &node.prop_loc(name),
+            format!("\"{name}\" must be finite and non-negative, got {v}"),
+        ))
+    }
+}
+
+impl<'d> Builder<'d> {
+    fn node(&self, id: NodeId) -> &'d Node {
+        self.doc.node(id)
+    }
+
+    fn unknown_plugin(&self, id: NodeId, known: &[&str]) -> Error {
+        let n = self.node(id);
+        Error::input(
+            &n.loc,
+            format!(
+                "unknown {} plugin \"{}\" (supported: {})",
+                n.tag,
+                n.plugin,
+                known.join(", ")
+            ),
+        )
+    }
+
+    /// A colour property that Mitsuba would also accept as a texture.
+    fn texture_prop(&mut self, id: NodeId, name: &str, default: Vec3) -> Result<Texture> {
+        let node = self.node(id);
+        let nested: Vec<NodeId> = node
+            .children
+            .iter()
+            .filter(|c| c.name.as_deref() == Some(name) && self.node(c.node).tag == "texture")
+            .map(|c| {
+                c.used.set(true);
+                c.node
+            })
+            .collect();
+        match (node.rgb(name)?, nested.as_slice()) {
+            (Some(_), [t, ..]) => Err(Error::input(
+                &self.node(*t).loc,
+                format!("\"{name}\" is given both as a value and as a texture"),
+            )),
+            (Some(v), []) => Ok(Texture::Constant(non_negative_rgb(node, name, v)?)),
+            (None, []) => Ok(Texture::Constant(default)),
+            (None, [t]) => self.texture_node(*t),
+            (None, [_, t, ..]) => Err(Error::input(
+                &self.node(*t).loc,
+                format!("\"{name}\" is given twice"),
+            )),
+        }
+    }
+
+    fn texture_node(&mut self, id: NodeId) -> Result<Texture> {
+        Err(self.unknown_plugin(id, &[]))
+    }
+
+    /// Instantiates a BSDF once per node (shared through `ref`).
+    fn bsdf(&mut self, id: NodeId) -> Result<usize> {
+        if let Some(&i) = self.bsdf_ids.get(&id) {
+            return Ok(i);
+        }
+        let bsdf = self.bsdf_value(id)?;
+        self.bsdfs.push(bsdf);
+        self.bsdf_ids.insert(id, self.bsdfs.len() - 1);
+        Ok(self.bsdfs.len() - 1)
+    }
+
+    fn bsdf_value(&mut self, id: NodeId) -> Result<Bsdf> {
+        let plugin = self.node(id).plugin.clone();
+        let bsdf = match plugin.as_str() {
+            "diffuse" => Bsdf::diffuse(self.texture_prop(id, "reflectance", Vec3::splat(0.5))?),
+            "twosided" => {
+                let inner: Vec<NodeId> = self.doc.children(id, "bsdf").map(|c| c.node).collect();
+                match inner.as_slice() {
+                    [one] => {
+                        let mut b = self.bsdf_value(*one)?;
+                        b.two_sided = true;
+                        b
+                    }
+                    [] => {
+                        return Err(Error::input(
+                            &self.node(id).loc,
+                            "twosided needs a nested <bsdf>",
+                        ));
+                    }
+                    _ => {
+                        return Err(Error::input(
+                            &self.node(id).loc,
+                            "twosided with different front and back BSDFs is not supported",
+                        ));
+                    }
+                }
+            }
+            _ => return Err(self.unknown_plugin(id, &["diffuse", "twosided"])),
+        };
+        debug_assert!(matches!(bsdf.model, BsdfModel::Diffuse { .. }));
+        self.doc.check_unused(id)?;
+        Ok(bsdf)
+    }
+
+    fn resolve_path(&self, node: &Node, name: &str) -> Result<PathBuf> {
+        let f = node.string(name)?.ok_or_else(|| {
+            Error::input(
+                &node.loc,
+                format!("{} \"{}\" needs a \"{name}\"", node.tag, node.plugin),
+            )
+        })?;
+        Ok(self.base.join(f))
+    }
+
+    fn load_mesh(
+        &self,
+        node: &Node,
+        loader: fn(&Path) -> Result<TriangleMesh>,
+    ) -> Result<TriangleMesh> {
+        let path = self.resolve_path(node, "filename")?;
+        if !path.is_file() {
+            return Err(Error::input(
+                &node.prop_loc("filename"),
+                format!("mesh file {} does not exist", path.display()),
+            ));
+        }
+        loader(&path).map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))
+    }
+
+    fn shape(&mut self, id: NodeId) -> Result<()> {
+        let node = self.doc.node(id);
+        let to_world = Transform::new(node.transform("to_world")?.unwrap_or(Mat4::IDENTITY));
+        let flip_normals = node.boolean_or("flip_normals", false)?;
+        let name = node.id.clone().unwrap_or_else(|| node.plugin.clone());
+        let geometry = match node.plugin.as_str() {
+            "obj" | "ply" => {
+                let mut m = self.load_mesh(
+                    node,
+                    if node.plugin == "obj" {
+                        mesh::load_obj
+                    } else {
+                        mesh::load_ply
+                    },
+                )?;
+                if node.boolean_or("face_normals", false)? {
+                    m.normals = None;
+                }
+                // Mitsuba flips OBJ texture coordinates by default (`flip_tex_coords`).
+                let flip_default = node.plugin == "obj";
+                if node.boolean_or("flip_tex_coords", flip_default)? {
+                    if let Some(uv) = &mut m.uvs {
+                        uv.iter_mut().for_each(|t| t.y = 1.0 - t.y);
+                    }
+                }
+                m.transform(&to_world);
+                ShapeGeometry::Mesh(m)
+            }
+            "rectangle" | "cube" | "disk" => {
+                let mut m = match node.plugin.as_str() {
+                    "rectangle" => mesh::rectangle(),
+                    "cube" => mesh::cube(),
+                    _ => mesh::disk(256),
+                };
+                m.transform(&to_world);
+                // These shapes transform their normals as normals; keep the winding (and so
+                // the geometric normal) consistent with that under mirroring transforms.
+                if to_world.flips_handedness() {
+                    m.reverse_winding();
+                }
+                ShapeGeometry::Mesh(m)
+            }
+            "sphere" => {
+                let center = node.vector("center")?.unwrap_or(Vec3::ZERO);
+                let radius = positive(node, "radius", node.float_or("radius", 1.0)?)?;
+                let c = to_world.point(center);
+                let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| to_world.vector(a).length());
+                if (axes[0] - axes[1]).abs() > 1e-4 * axes[0]
+                    || (axes[0] - axes[2]).abs() > 1e-4 * axes[0]
+                {
+                    return Err(Error::input(
+                        &node.prop_loc("to_world"),
+                        "a sphere's to_world must scale uniformly",
+                    ));
+                }
+                ShapeGeometry::Sphere {
+                    center: c,
+                    radius: radius * axes[0],
+                }
+            }
+            _ => {
+                return Err(
+                    self.unknown_plugin(id, &["obj", "ply", "rectangle", "cube", "disk", "sphere"])
+                );
+            }
+        };
+        let bsdfs: Vec<NodeId> = self.doc.children(id, "bsdf").map(|c| c.node).collect();
+        let bsdf = match bsdfs.as_slice() {
+            [] => {
+                self.bsdfs
+                    .push(Bsdf::diffuse(Texture::Constant(Vec3::splat(0.5))));
+                self.bsdfs.len() - 1
+            }
+            [b] => self.bsdf(*b)?,
+            [_, b, ..] => {
+                return Err(Error::input(
+                    &self.node(*b).loc,
+                    "a shape can have only one BSDF",
+                ));
+            }
+        };
+        let mut shape = Shape::new(geometry, bsdf, flip_normals, name);
+        if let ShapeGeometry::Mesh(m) = &shape.geometry {
+            self.stats.triangles += m.indices.len();
+            let degenerate = m.degenerate_count();
+            if degenerate > 0 {
+                self.stats.degenerate_triangles += degenerate;
+                self.stats.warnings.push(format!("{}: shape \"{}\" has {degenerate} degenerate (zero-area) triangles; they are never hit", node.loc, shape.name));
+            }
+        } else {
+            self.stats.spheres += 1;
+        }
+        let emitters: Vec<NodeId> = self.doc.children(id, "emitter").map(|c| c.node).collect();
+        match emitters.as_slice() {
+            [] => {}
+            [e] => {
+                if !(shape.area() > 0.0) {
+                    return Err(Error::input(
+                        &self.node(*e).loc,
+                        format!("the emitting shape \"{}\" has zero area", shape.name),
+                    ));
+                }
+                let light = self.emitter(*e, Some(self.shapes.len()))?;
+                shape.light = Some(self.lights.len());
+                self.lights.push(light);
+            }
+            [_, e, ..] => {
+                return Err(Error::input(
+                    &self.node(*e).loc,
+                    "a shape can have only one emitter",
+                ));
+            }
+        }
+        self.doc.check_unused(id)?;
+        self.shapes.push(shape);
+        Ok(())
+    }
+
+    fn emitter(&mut self, id: NodeId, shape: Option<usize>) -> Result<Light> {
+        let node = self.doc.node(id);
+        let light = match (node.plugin.as_str(), shape) {
+            ("area", Some(shape)) => Light::Area {
+                shape,
+                radiance: self.texture_prop(id, "radiance", Vec3::ONE)?,
+            },
+            ("area", None) => {
+                return Err(Error::input(
+                    &node.loc,
+                    "an area emitter must be nested in a <shape>",
+                ));
+            }
+            ("point", None) => {
+                let pos = match (node.vector("position")?, node.transform("to_world")?) {
+                    (Some(_), Some(_)) => {
+                        return Err(Error::input(
+                            &node.loc,
+                            "give either \"position\" or \"to_world\", not both",
+                        ));
+                    }
+                    (Some(p), None) => p,
+                    (None, Some(m)) => m.transform_point3(Vec3::ZERO),
+                    (None, None) => Vec3::ZERO,
+                };
+                let intensity = non_negative_rgb(
+                    node,
+                    "intensity",
+                    node.rgb("intensity")?.unwrap_or(Vec3::ONE),
+                )?;
+                Light::Point {
+                    position: pos,
+                    intensity,
+                }
+            }
+            ("point", Some(_)) => {
+                return Err(Error::input(
+                    &node.loc,
+                    "a point emitter cannot be attached to a shape",
+                ));
+            }
+            _ => return Err(self.unknown_plugin(id, &["area", "point"])),
+        };
+        self.doc.check_unused(id)?;
+        Ok(light)
+    }
+
+    fn sensor(&mut self, id: NodeId) -> Result<(Camera, FilmSpec, SamplerSpec)> {
+        let node = self.doc.node(id);
+        if node.plugin != "perspective" {
+            return Err(self.unknown_plugin(id, &["perspective"]));
+        }
+        let to_world = node.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        if !(to_world.determinant().abs() > 1e-12) {
+            return Err(Error::input(
+                &node.prop_loc("to_world"),
+                "the sensor's to_world is singular",
+            ));
+        }
+        let fov = match (node.float("fov")?, node.string("focal_length")?) {
+            (Some(_), Some(_)) => {
+                return Err(Error::input(
+                    &node.loc,
+                    "give either \"fov\" or \"focal_length\", not both",
+                ));
+            }
+            (Some(f), None) => f,
+            (None, Some(fl)) => {
+                let mm: f32 = fl.trim_end_matches("mm").trim().parse().map_err(|_| {
+                    Error::input(
+                        &node.prop_loc("focal_length"),
+                        format!("focal length \"{fl}\" is not like \"50mm\""),
+                    )
+                })?;
+                // Mitsuba: the focal length of a 35 mm film (36 mm wide), along the diagonal.
+                let fov = 2.0
+                    * ((36.0f32 * 36.0 + 24.0 * 24.0).sqrt()
+                        / (2.0 * positive(node, "focal_length", mm)?))
+                    .atan()
+                    .to_degrees();
+                return self.finish_sensor(id, to_world, fov, Some(FovAxis::Diagonal));
+            }
+            (None, None) => {
+                return Err(Error::input(
+                    &node.loc,
+                    "the perspective sensor needs a \"fov\"",
+                ));
+            }
+        };
+        self.finish_sensor(id, to_world, fov, None)
+    }
+
+    fn finish_sensor(
+        &mut self,
+        id: NodeId,
+        to_world: Mat4,
+        fov: f32,
+        axis: Option<FovAxis>,
+    ) -> Result<(Camera, FilmSpec, SamplerSpec)> {
+        let node = self.doc.node(id);
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(Error::input(
+                &node.prop_loc("fov"),
+                format!("the field of view must lie strictly between 0 and 180 degrees, got {fov}"),
+            ));
+        }
+        let axis = match axis {
+            Some(a) => a,
+            None => {
+                let s = node.string("fov_axis")?.unwrap_or("x");
+                FovAxis::parse(s).ok_or_else(|| {
+                    Error::input(
+                        &node.prop_loc("fov_axis"),
+                        format!("unknown fov_axis \"{s}\" (x, y, diagonal, smaller, larger)"),
+                    )
+                })?
+            }
+        };
+        let near = positive(node, "near_clip", node.float_or("near_clip", 0.01)?)?;
+        let far = positive(node, "far_clip", node.float_or("far_clip", 10000.0)?)?;
+        if far <= near {
+            return Err(Error::input(
+                &node.prop_loc("far_clip"),
+                "far_clip must exceed near_clip",
+            ));
+        }
+        let films: Vec<NodeId> = self.doc.children(id, "film").map(|c| c.node).collect();
+        let film = match films.as_slice() {
+            [] => FilmSpec {
+                width: 768,
+                height: 576,
+                filter: Filter::Gaussian { stddev: 0.5 },
+            },
+            [f] => self.film(*f)?,
+            [_, f, ..] => {
+                return Err(Error::input(
+                    &self.node(*f).loc,
+                    "a sensor can have only one film",
+                ));
+            }
+        };
+        let samplers: Vec<NodeId> = self.doc.children(id, "sampler").map(|c| c.node).collect();
+        let sampler = match samplers.as_slice() {
+            [] => SamplerSpec { spp: 4, seed: 0 },
+            [s] => self.sampler(*s)?,
+            [_, s, ..] => {
+                return Err(Error::input(
+                    &self.node(*s).loc,
+                    "a sensor can have only one sampler",
+                ));
+            }
+        };
+        self.doc.check_unused(id)?;
+        let camera = Camera::new(
+            Transform::new(to_world),
+            fov,
+            axis,
+            (film.width, film.height),
+            near,
+            far,
+        );
+        Ok((camera, film, sampler))
+    }
+
+    fn film(&mut self, id: NodeId) -> Result<FilmSpec> {
+        let node = self.doc.node(id);
+        if node.plugin != "hdrfilm" {
+            return Err(self.unknown_plugin(id, &["hdrfilm"]));
+        }
+        let dim = |name: &str, default: i64| -> Result<u32> {
+            let v = node.integer(name)?.unwrap_or(default);
+            if v <= 0 || v > 65536 {
+                return Err(Error::input(
+                    &node.prop_loc(name),
+                    format!("film {name} must be between 1 and 65536, got {v}"),
+                ));
+            }
+            Ok(v as u32)
+        };
+        let width = dim("width", 768)?;
+        let height = dim("height", 576)?;
+        if width as u64 * height as u64 > MAX_PIXELS {
+            return Err(Error::input(
+                &node.loc,
+                format!("a {width}×{height} film exceeds the limit of {MAX_PIXELS} pixels"),
+            ));
+        }
+        // Output format options: this renderer writes float RGB (EXR) or sRGB (PNG) by the
+        // output file's extension; accept Mitsuba's values that agree with that.
+        for (name, allowed) in [
+            ("file_format", &["openexr", "exr"][..]),
+            ("pixel_format", &["rgb", "rgba"][..]),
+            ("component_format", &["float16", "float32"][..]),
+        ] {
+            if let Some(v) = node.string(name)? {
+                if !allowed.contains(&v.to_ascii_lowercase().as_str()) {
+                    return Err(Error::input(
+                        &node.prop_loc(name),
+                        format!(
+                            "{name} \"{v}\" is not supported (supported: {})",
+                            allowed.join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
+        if node.boolean_or("sample_border", false)? {
+            return Err(Error::input(
+                &node.prop_loc("sample_border"),
+                "sample_border = true is not supported",
+            ));
+        }
+        let filters: Vec<NodeId> = self.doc.children(id, "rfilter").map(|c| c.node).collect();
+        let filter = match filters.as_slice() {
+            [] => Filter::Gaussian { stddev: 0.5 },
+            [f] => self.rfilter(*f)?,
+            [_, f, ..] => {
+                return Err(Error::input(
+                    &self.node(*f).loc,
+                    "a film can have only one rfilter",
+                ));
+            }
+        };
+        self.doc.check_unused(id)?;
+        Ok(FilmSpec {
+            width,
+            height,
+            filter,
+        })
+    }
+
+    fn rfilter(&mut self, id: NodeId) -> Result<Filter> {
+        let node = self.doc.node(id);
+        let f = match node.plugin.as_str() {
+            "box" => Filter::Box {
+                radius: positive(node, "radius", node.float_or("radius", 0.5)?)?,
+            },
+            "tent" => Filter::Tent {
+                radius: positive(node, "radius", node.float_or("radius", 1.0)?)?,
+            },
+            "gaussian" => Filter::Gaussian {
+                stddev: positive(node, "stddev", node.float_or("stddev", 0.5)?)?,
+            },
+            _ => return Err(self.unknown_plugin(id, &["box", "tent", "gaussian"])),
+        };
+        if f.radius() > 7.5 {
+            return Err(Error::input(
+                &node.loc,
+                "the filter radius may be at most 7.5 pixels",
+            ));
+        }
+        self.doc.check_unused(id)?;
+        Ok(f)
+    }
+
+    fn sampler(&mut self, id: NodeId) -> Result<SamplerSpec> {
+        let node = self.doc.node(id);
+        if node.plugin != "independent" {
+            return Err(self.unknown_plugin(id, &["independent"]));
+        }
+        let spp = node.integer("sample_count")?.unwrap_or(4);
+        if !(1..=1 << 24).contains(&spp) {
+            return Err(Error::input(
+                &node.prop_loc("sample_count"),
+                format!("sample_count must be between 1 and 2^24, got {spp}"),
+            ));
+        }
+        let seed = node.integer("seed")?.unwrap_or(0);
+        if seed < 0 {
+            return Err(Error::input(
+                &node.prop_loc("seed"),
+                "seed must be non-negative",
+            ));
+        }
+        self.doc.check_unused(id)?;
+        Ok(SamplerSpec {
+            spp: spp as u32,
+            seed: seed as u64,
+        })
+    }
+
+    fn integrator(&mut self, id: NodeId) -> Result<IntegratorSpec> {
+        let node = self.doc.node(id);
+        if !INTEGRATOR_PLUGINS.contains(&node.plugin.as_str()) {
+            return Err(self.unknown_plugin(id, INTEGRATOR_PLUGINS));
+        }
+        let max_depth = node.integer("max_depth")?.unwrap_or(-1);
+        if max_depth < -1 || max_depth > 1 << 16 {
+            return Err(Error::input(
+                &node.prop_loc("max_depth"),
+                format!("max_depth must be -1 (unlimited) or between 0 and 65536, got {max_depth}"),
+            ));
+        }
+        let rr_depth = node.integer("rr_depth")?.unwrap_or(3);
+        if rr_depth < 1 {
+            return Err(Error::input(
+                &node.prop_loc("rr_depth"),
+                "rr_depth must be at least 1",
+            ));
+        }
+        let hide_emitters = node.boolean_or("hide_emitters", false)?;
+        self.doc.check_unused(id)?;
+        Ok(IntegratorSpec {
+            plugin: node.plugin.clone(),
+            max_depth: max_depth as i32,
+            rr_depth: rr_depth.min(1 << 16) as u32,
+            hide_emitters,
+        })
+    }
+}

@@ -1,0 +1,116 @@
+//! Scenes: loading Mitsuba XML into an editable description ([`xml`]), instantiating it
+//! into the render-ready, immutable [`Scene`] ([`load`]), and the queries integrators make.
+
+pub mod load;
+pub mod mesh;
+pub mod shape;
+pub mod xml;
+
+use crate::accel::{Accel, Backend, BuildOptions, Ray};
+use crate::bsdf::Bsdf;
+use crate::camera::Camera;
+use crate::film::Filter;
+use crate::light::{Light, LightSampler};
+use shape::{Shape, SurfaceInteraction};
+use std::path::PathBuf;
+
+/// Image size and reconstruction filter (`hdrfilm`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FilmSpec {
+    pub width: u32,
+    pub height: u32,
+    pub filter: Filter,
+}
+
+/// The integrator the scene asks for, with the parameters all integrators share.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IntegratorSpec {
+    /// Plugin name in the scene file (`path`, …).
+    pub plugin: String,
+    /// Longest path, in segments from the camera; -1 = unlimited (Mitsuba's meaning).
+    pub max_depth: i32,
+    /// Depth from which Russian roulette may end paths.
+    pub rr_depth: u32,
+    /// Emitters seen directly by the camera are not shown.
+    pub hide_emitters: bool,
+}
+
+/// Sample count and seed (`independent` sampler).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SamplerSpec {
+    pub spp: u32,
+    pub seed: u64,
+}
+
+/// Counts and warnings gathered while loading.
+#[derive(Clone, Debug, Default)]
+pub struct LoadStats {
+    pub triangles: usize,
+    pub spheres: usize,
+    pub degenerate_triangles: usize,
+    pub warnings: Vec<String>,
+}
+
+/// Options for loading a scene.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// `-D name=value` parameter overrides.
+    pub overrides: Vec<(String, String)>,
+    pub backend: Backend,
+    pub build: BuildOptions,
+}
+
+/// A render-ready scene.
+pub struct Scene {
+    pub path: PathBuf,
+    pub shapes: Vec<Shape>,
+    pub bsdfs: Vec<Bsdf>,
+    pub lights: Vec<Light>,
+    pub light_sampler: LightSampler,
+    pub camera: Camera,
+    pub film: FilmSpec,
+    pub integrator: IntegratorSpec,
+    pub sampler: SamplerSpec,
+    pub accel: Accel,
+    pub stats: LoadStats,
+}
+
+impl Scene {
+    /// The closest surface along the ray.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
+        let hit = self.accel.intersect(ray)?;
+        Some(self.shapes[hit.geom as usize].interaction(ray, &hit))
+    }
+
+    /// `true` when something blocks the ray segment.
+    #[inline]
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.accel.occluded(ray)
+    }
+
+    /// The BSDF of a surface point.
+    #[inline]
+    pub fn bsdf(&self, si: &SurfaceInteraction) -> &Bsdf {
+        &self.bsdfs[self.shapes[si.shape as usize].bsdf]
+    }
+
+    /// The area light of a surface point, if its shape emits.
+    #[inline]
+    pub fn area_light(&self, si: &SurfaceInteraction) -> Option<(usize, &Light)> {
+        self.shapes[si.shape as usize]
+            .light
+            .map(|l| (l, &self.lights[l]))
+    }
+
+    /// Rebuilds the accelerator with another backend (same shapes, same ids).
+    pub fn rebuild_accel(
+        &mut self,
+        backend: Backend,
+        options: BuildOptions,
+    ) -> crate::error::Result<()> {
+        let geometry: Vec<_> = self.shapes.iter().map(|s| s.accel_geometry()).collect();
+        self.accel = Accel::build(backend, &geometry, options)?;
+        Ok(())
+    }
+}

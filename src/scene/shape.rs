@@ -1,0 +1,285 @@
+//! Render-ready shapes: triangle meshes and exact spheres, their surface interactions and
+//! the area sampling that area lights use.
+
+use super::mesh::TriangleMesh;
+use crate::accel::{Geometry, Hit, Ray};
+use crate::math::Frame;
+use crate::sampling::{
+    Distribution1D, square_to_uniform_cone, square_to_uniform_cone_pdf, square_to_uniform_sphere,
+    square_to_uniform_triangle,
+};
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+#[derive(Clone, Debug)]
+pub enum ShapeGeometry {
+    Mesh(TriangleMesh),
+    Sphere { center: Vec3, radius: f32 },
+}
+
+/// A shape of the scene with its material and (optional) area emitter.
+#[derive(Clone, Debug)]
+pub struct Shape {
+    pub geometry: ShapeGeometry,
+    /// Index into `Scene::bsdfs`.
+    pub bsdf: usize,
+    /// Index into `Scene::lights` when the shape emits.
+    pub light: Option<usize>,
+    /// Normals point inwards (Mitsuba's `flip_normals`).
+    pub flip_normals: bool,
+    /// The shape's `id` in the scene file, or its plugin name.
+    pub name: String,
+    area: f32,
+    /// Triangle selection by area (meshes that emit).
+    area_distribution: Option<Distribution1D>,
+}
+
+/// A point on a surface hit by a ray.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceInteraction {
+    pub p: Vec3,
+    pub t: f32,
+    /// Geometric normal (after `flip_normals`).
+    pub ng: Vec3,
+    /// Shading frame (its `n` is the interpolated normal, after `flip_normals`).
+    pub shading: Frame,
+    pub uv: Vec2,
+    pub shape: u32,
+    pub prim: u32,
+    /// Unit direction back along the incoming ray.
+    pub wo: Vec3,
+}
+
+impl SurfaceInteraction {
+    /// A ray leaving the surface in direction `d`, offset to avoid self-intersection.
+    #[inline]
+    pub fn spawn_ray(&self, d: Vec3) -> Ray {
+        Ray::new(crate::math::offset_origin(self.p, self.ng, d), d)
+    }
+
+    /// A shadow ray towards `target` (stopping just short of it).
+    #[inline]
+    pub fn spawn_ray_to(&self, target: Vec3) -> Ray {
+        let o = crate::math::offset_origin(self.p, self.ng, target - self.p);
+        Ray::segment(o, target - o, 1.0 - crate::math::SHADOW_EPSILON)
+    }
+}
+
+/// A point sampled on a shape.
+#[derive(Clone, Copy, Debug)]
+pub struct PositionSample {
+    pub p: Vec3,
+    pub n: Vec3,
+    pub uv: Vec2,
+}
+
+impl Shape {
+    pub fn new(geometry: ShapeGeometry, bsdf: usize, flip_normals: bool, name: String) -> Shape {
+        let area = match &geometry {
+            ShapeGeometry::Mesh(m) => (0..m.indices.len())
+                .map(|i| m.triangle_area(i) as f64)
+                .sum::<f64>() as f32,
+            ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
+        };
+        Shape {
+            geometry,
+            bsdf,
+            light: None,
+            flip_normals,
+            name,
+            area,
+            area_distribution: None,
+        }
+    }
+
+    /// Prepares area sampling (called for emitting shapes).
+    pub fn prepare_sampling(&mut self) {
+        if let ShapeGeometry::Mesh(m) = &self.geometry {
+            let areas: Vec<f32> = (0..m.indices.len()).map(|i| m.triangle_area(i)).collect();
+            self.area_distribution = Some(Distribution1D::new(&areas));
+        }
+    }
+
+    pub fn area(&self) -> f32 {
+        self.area
+    }
+
+    pub fn accel_geometry(&self) -> Geometry<'_> {
+        match &self.geometry {
+            ShapeGeometry::Mesh(m) => Geometry::Triangles {
+                positions: &m.positions,
+                indices: &m.indices,
+            },
+            ShapeGeometry::Sphere { center, radius } => Geometry::Sphere {
+                center: *center,
+                radius: *radius,
+            },
+        }
+    }
+
+    /// The surface interaction of a hit on this shape.
+    pub fn interaction(&self, ray: &Ray, hit: &Hit) -> SurfaceInteraction {
+        let sign = if self.flip_normals { -1.0 } else { 1.0 };
+        let wo = -ray.d.normalize();
+        match &self.geometry {
+            ShapeGeometry::Mesh(m) => {
+                let tri = m.indices[hit.prim as usize];
+                let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
+                let (b1, b2) = (hit.u, hit.v);
+                let b0 = 1.0 - b1 - b2;
+                let p = p0 * b0 + p1 * b1 + p2 * b2;
+                let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero() * sign;
+                let ns = match &m.normals {
+                    Some(n) => {
+                        let [n0, n1, n2] = tri.map(|k| n[k as usize]);
+                        let n = (n0 * b0 + n1 * b1 + n2 * b2).normalize_or_zero() * sign;
+                        if n == Vec3::ZERO { ng } else { n }
+                    }
+                    None => ng,
+                };
+                let uv = match &m.uvs {
+                    Some(t) => {
+                        let [t0, t1, t2] = tri.map(|k| t[k as usize]);
+                        t0 * b0 + t1 * b1 + t2 * b2
+                    }
+                    None => Vec2::new(b1, b2),
+                };
+                SurfaceInteraction {
+                    p,
+                    t: hit.t,
+                    ng,
+                    shading: Frame::from_normal(ns),
+                    uv,
+                    shape: hit.geom,
+                    prim: hit.prim,
+                    wo,
+                }
+            }
+            ShapeGeometry::Sphere { center, radius } => {
+                let local = (ray.at(hit.t) - *center).normalize_or_zero();
+                let p = *center + local * *radius;
+                let n = local * sign;
+                let uv = sphere_uv(local);
+                SurfaceInteraction {
+                    p,
+                    t: hit.t,
+                    ng: n,
+                    shading: Frame::from_normal(n),
+                    uv,
+                    shape: hit.geom,
+                    prim: hit.prim,
+                    wo,
+                }
+            }
+        }
+    }
+
+    /// Samples a point uniformly by area; the density is `1 / area()`.
+    pub fn sample_area(&self, u1: f32, u: Vec2) -> PositionSample {
+        let sign = if self.flip_normals { -1.0 } else { 1.0 };
+        match &self.geometry {
+            ShapeGeometry::Mesh(m) => {
+                let (i, _) = self
+                    .area_distribution
+                    .as_ref()
+                    .map(|d| d.sample(u1))
+                    .unwrap_or((
+                        (u1 * m.indices.len() as f32) as usize % m.indices.len().max(1),
+                        0.0,
+                    ));
+                let tri = m.indices[i];
+                let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
+                let b = square_to_uniform_triangle(u);
+                let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+                let n = (p1 - p0).cross(p2 - p0).normalize_or_zero() * sign;
+                let uv = match &m.uvs {
+                    Some(t) => {
+                        let [t0, t1, t2] = tri.map(|k| t[k as usize]);
+                        t0 * (1.0 - b.x - b.y) + t1 * b.x + t2 * b.y
+                    }
+                    None => b,
+                };
+                PositionSample { p, n, uv }
+            }
+            ShapeGeometry::Sphere { center, radius } => {
+                let d = square_to_uniform_sphere(u);
+                PositionSample {
+                    p: *center + d * *radius,
+                    n: d * sign,
+                    uv: sphere_uv(d),
+                }
+            }
+        }
+    }
+
+    /// Samples a point on the shape as seen from `reference`, returning it with the
+    /// solid-angle density at `reference`. Spheres sample the cone they subtend (when
+    /// `reference` is outside); other shapes sample by area.
+    pub fn sample_direction(
+        &self,
+        reference: Vec3,
+        u1: f32,
+        u: Vec2,
+    ) -> Option<(PositionSample, f32)> {
+        if let ShapeGeometry::Sphere { center, radius } = &self.geometry {
+            let dc = *center - reference;
+            let dist2 = dc.length_squared();
+            if dist2 > radius * radius * (1.0 + 1e-4) {
+                let dist = dist2.sqrt();
+                let sin_max2 = radius * radius / dist2;
+                let cos_max = (1.0 - sin_max2).max(0.0).sqrt();
+                let frame = Frame::from_normal(dc / dist);
+                let w = frame.to_world(square_to_uniform_cone(u, cos_max));
+                // Nearest intersection of the ray reference + t w with the sphere.
+                let b = w.dot(dc);
+                let disc = (radius * radius - (dist2 - b * b)).max(0.0);
+                let t = b - disc.sqrt();
+                let local = (reference + w * t - *center).normalize_or_zero();
+                let sign = if self.flip_normals { -1.0 } else { 1.0 };
+                let ps = PositionSample {
+                    p: *center + local * *radius,
+                    n: local * sign,
+                    uv: sphere_uv(local),
+                };
+                return Some((ps, square_to_uniform_cone_pdf(cos_max)));
+            }
+        }
+        let ps = self.sample_area(u1, u);
+        let d = ps.p - reference;
+        let dist2 = d.length_squared();
+        let cos = ps.n.dot(-d).abs() / dist2.sqrt();
+        if cos <= 0.0 || dist2 <= 0.0 {
+            return None;
+        }
+        Some((ps, dist2 / (cos * self.area)))
+    }
+
+    /// The solid-angle density with which [`Shape::sample_direction`] from `reference`
+    /// yields the point `p` with normal `n`.
+    pub fn pdf_direction(&self, reference: Vec3, p: Vec3, n: Vec3) -> f32 {
+        if let ShapeGeometry::Sphere { center, radius } = &self.geometry {
+            let dist2 = (*center - reference).length_squared();
+            if dist2 > radius * radius * (1.0 + 1e-4) {
+                let cos_max = (1.0 - radius * radius / dist2).max(0.0).sqrt();
+                return square_to_uniform_cone_pdf(cos_max);
+            }
+        }
+        let d = p - reference;
+        let dist2 = d.length_squared();
+        let cos = n.dot(d).abs() / dist2.sqrt();
+        if cos <= 0.0 {
+            0.0
+        } else {
+            dist2 / (cos * self.area)
+        }
+    }
+}
+
+/// Mitsuba's sphere parameterisation: `u = φ / 2π`, `v = θ / π`.
+fn sphere_uv(local: Vec3) -> Vec2 {
+    let mut phi = local.y.atan2(local.x);
+    if phi < 0.0 {
+        phi += 2.0 * PI;
+    }
+    Vec2::new(phi / (2.0 * PI), local.z.clamp(-1.0, 1.0).acos() / PI)
+}
