@@ -53,39 +53,82 @@ impl SphereDomain {
         Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32)
     }
 
-    /// ∫ pdf over each cell (solid angle = dz dφ), by composite Simpson's rule.
+    /// ∫ pdf over each cell (solid angle = dz dφ), by adaptive Simpson quadrature: a
+    /// cell is split in four until the Simpson estimate agrees with the sum over its
+    /// quarters, so discontinuities (the edge of a light, of a cone) are resolved.
     fn integrate(&self, pdf: &mut dyn FnMut(Vec3) -> f32) -> Vec<f64> {
-        const K: usize = 8; // Simpson intervals per cell side (even)
         let dz = 2.0 / self.res_z as f64;
         let dp = 2.0 * PI / self.res_phi as f64;
-        let w = |i: usize| -> f64 {
-            if i == 0 || i == K {
-                1.0
-            } else if i % 2 == 1 {
-                4.0
-            } else {
-                2.0
-            }
-        };
         let mut out = vec![0.0; self.res_z * self.res_phi];
+        let mut f = |z: f64, p: f64| pdf(Self::direction(z.clamp(-1.0, 1.0), p)) as f64;
         for iz in 0..self.res_z {
             for ip in 0..self.res_phi {
                 let (z0, p0) = (-1.0 + iz as f64 * dz, ip as f64 * dp);
-                let mut sum = 0.0;
-                for a in 0..=K {
-                    for b in 0..=K {
-                        // Stay a hair inside the cell so edge values belong to it.
-                        let z = z0 + dz * (a as f64 / K as f64).clamp(1e-6, 1.0 - 1e-6);
-                        let p = p0 + dp * (b as f64 / K as f64).clamp(1e-6, 1.0 - 1e-6);
-                        sum += w(a) * w(b) * pdf(Self::direction(z, p)) as f64;
-                    }
-                }
-                out[iz * self.res_phi + ip] =
-                    sum * (dz / (3.0 * K as f64)) * (dp / (3.0 * K as f64));
+                out[iz * self.res_phi + ip] = adaptive(&mut f, z0, z0 + dz, p0, p0 + dp, 0);
             }
         }
         out
     }
+}
+
+/// Simpson's rule on a rectangle from its 3×3 grid of values.
+fn simpson(v: &[[f64; 3]; 3], area: f64) -> f64 {
+    let w = [1.0, 4.0, 1.0];
+    let mut s = 0.0;
+    for a in 0..3 {
+        for b in 0..3 {
+            s += w[a] * w[b] * v[a][b];
+        }
+    }
+    s * area / 36.0
+}
+
+fn grid(f: &mut dyn FnMut(f64, f64) -> f64, z0: f64, z1: f64, p0: f64, p1: f64) -> [[f64; 3]; 3] {
+    // Sample a hair inside the rectangle so values on shared edges belong to it.
+    let e = 1e-7;
+    let zs = [z0 + e * (z1 - z0), 0.5 * (z0 + z1), z1 - e * (z1 - z0)];
+    let ps = [p0 + e * (p1 - p0), 0.5 * (p0 + p1), p1 - e * (p1 - p0)];
+    let mut v = [[0.0; 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            v[a][b] = f(zs[a], ps[b]);
+        }
+    }
+    v
+}
+
+fn adaptive(
+    f: &mut dyn FnMut(f64, f64) -> f64,
+    z0: f64,
+    z1: f64,
+    p0: f64,
+    p1: f64,
+    depth: u32,
+) -> f64 {
+    const MAX_DEPTH: u32 = 6;
+    let area = (z1 - z0) * (p1 - p0);
+    let whole = simpson(&grid(f, z0, z1, p0, p1), area);
+    let (zm, pm) = (0.5 * (z0 + z1), 0.5 * (p0 + p1));
+    let quarters = [
+        (z0, zm, p0, pm),
+        (z0, zm, pm, p1),
+        (zm, z1, p0, pm),
+        (zm, z1, pm, p1),
+    ];
+    let parts: Vec<f64> = quarters
+        .iter()
+        .map(|&(a, b, c, d)| simpson(&grid(f, a, b, c, d), area / 4.0))
+        .collect();
+    let sum: f64 = parts.iter().sum();
+    if depth >= MAX_DEPTH
+        || (sum - whole).abs() <= 1e-5 * area.max(1e-12) * 4f64.powi(depth as i32).sqrt()
+    {
+        return sum;
+    }
+    quarters
+        .iter()
+        .map(|&(a, b, c, d)| adaptive(f, a, b, c, d, depth + 1))
+        .sum()
 }
 
 /// The outcome of one χ² test.

@@ -1,0 +1,109 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use pcbpt::accel::Backend;
+use pcbpt::compare::{self, Metrics};
+use pcbpt::image_io::{self, Image};
+use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput};
+use pcbpt::scene::{LoadOptions, Scene};
+use std::path::{Path, PathBuf};
+
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn load(path: &Path, defines: &[(&str, &str)], backend: Backend) -> Scene {
+    let overrides = defines
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    Scene::load(
+        path,
+        &LoadOptions {
+            overrides,
+            backend,
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+pub fn render(
+    scene: &Scene,
+    kind: IntegratorKind,
+    spp: u32,
+    seed: u64,
+    threads: usize,
+) -> RenderOutput {
+    let mut o = RenderOptions::new(kind, Budget::Spp(spp));
+    o.seed = seed;
+    o.threads = threads;
+    integrator::render(scene, &o).unwrap()
+}
+
+pub fn image(out: RenderOutput) -> Image {
+    Image::new(out.width, out.height, out.image)
+}
+
+pub fn reference(name: &str) -> Image {
+    image_io::read_exr(&root().join("tests/data").join(name)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The verdict of a render against a reference: the image mean must agree within
+/// `mean_tol`, and the relMSE must not exceed what the noise of the two renders explains.
+///
+/// The test's own noise is estimated from two renders with different seeds,
+/// `noise = relMSE(A, B) / 2`; the reference, made by the same kind of estimator with
+/// `ref_spp` samples, carries `noise * spp / ref_spp`. Bias (a wrong weight, a missing
+/// bounce, a wrong pdf) shows up as relMSE in excess of that sum, which `excess_tol` bounds.
+pub struct Verdict {
+    pub metrics: Metrics,
+    pub noise: f64,
+    pub expected: f64,
+}
+
+impl Verdict {
+    pub fn new(reference: &Image, a: &Image, b: &Image, spp: u32, ref_spp: u32) -> Verdict {
+        let metrics = compare::metrics(reference, a).unwrap();
+        let noise = a
+            .pixels
+            .iter()
+            .zip(&b.pixels)
+            .zip(&reference.pixels)
+            .map(|((x, y), r)| {
+                (0..3)
+                    .map(|c| ((x[c] - y[c]) as f64).powi(2) / ((r[c] as f64).powi(2) + 0.01))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / (3.0 * a.pixels.len() as f64)
+            / 2.0;
+        let expected = noise * (1.0 + spp as f64 / ref_spp as f64);
+        Verdict {
+            metrics,
+            noise,
+            expected,
+        }
+    }
+
+    pub fn check(&self, what: &str, mean_tol: f64, excess_tol: f64) -> Result<(), String> {
+        let m = &self.metrics;
+        let msg = format!(
+            "{what}: mean ratio {:.5}, relMSE {:.4e}, noise {:.4e}, expected relMSE {:.4e}",
+            m.mean_ratio, m.relmse, self.noise, self.expected
+        );
+        eprintln!("{msg}");
+        if (m.mean_ratio - 1.0).abs() > mean_tol {
+            return Err(format!(
+                "image mean off by more than {:.2}%: {msg}",
+                mean_tol * 100.0
+            ));
+        }
+        if m.relmse > self.expected * excess_tol {
+            return Err(format!(
+                "relMSE exceeds {excess_tol}× what noise explains: {msg}"
+            ));
+        }
+        Ok(())
+    }
+}
