@@ -57,6 +57,12 @@ struct RenderArgs {
     /// Scene parameter overrides, `-D name=value` (e.g. `-D spp=64 -D resx=320`).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     define: Vec<(String, String)>,
+    /// Override the integrator's max_depth (path segments from the camera; -1 = unlimited).
+    #[arg(long, allow_negative_numbers = true)]
+    max_depth: Option<i32>,
+    /// Override the depth from which Russian roulette may end paths.
+    #[arg(long)]
+    rr_depth: Option<u32>,
     /// Ray-tracing backend.
     #[arg(long, value_enum, default_value_t = Backend::Embree)]
     backend: Backend,

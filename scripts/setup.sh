@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs what pcbpt needs to build on Debian/Ubuntu: the system Embree (headers and
+# library), libclang for bindgen, pkg-config. Idempotent: installs only what is missing.
+set -euo pipefail
+
+packages=(libembree-dev libclang-dev pkg-config)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+
+if [ ${#missing[@]} -gt 0 ]; then
+  sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  echo "setup: installing ${missing[*]}" >&2
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}" >/dev/null
+else
+  echo "setup: system packages present (${packages[*]})" >&2
+fi
+
+if ! command -v cargo >/dev/null 2>&1; then
+  echo "setup: cargo not found; install a Rust toolchain (rustup, Rust >= 1.88) and re-run" >&2
+  exit 1
+fi
