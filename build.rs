@@ -23,19 +23,13 @@ fn main() {
     include_dirs.push(PathBuf::from("/usr/include"));
 
     let has = |major: &str| -> Option<PathBuf> {
-        include_dirs
-            .iter()
-            .find(|d| d.join(format!("embree{major}/rtcore.h")).is_file())
-            .cloned()
+        include_dirs.iter().find(|d| d.join(format!("embree{major}/rtcore.h")).is_file()).cloned()
     };
     let (major, include) = match (has("4"), has("3")) {
         (Some(dir), _) => ("4", dir),
         (None, Some(dir)) => ("3", dir),
         (None, None) => {
-            let searched: Vec<String> = include_dirs
-                .iter()
-                .map(|d| d.display().to_string())
-                .collect();
+            let searched: Vec<String> = include_dirs.iter().map(|d| d.display().to_string()).collect();
             panic!(
                 "Embree headers not found (looked for embree4/rtcore.h and embree3/rtcore.h in {}). \
                  Install them with `scripts/setup.sh` (Debian: `apt-get install libembree-dev`) \
@@ -79,7 +73,5 @@ fn main() {
     }
     let bindings = builder.generate().expect("bindgen failed on wrapper.h");
     let out = PathBuf::from(env::var("OUT_DIR").expect("OUT_DIR is set by cargo"));
-    bindings
-        .write_to_file(Path::new(&out).join("embree_bindings.rs"))
-        .expect("could not write the Embree bindings");
+    bindings.write_to_file(Path::new(&out).join("embree_bindings.rs")).expect("could not write the Embree bindings");
 }

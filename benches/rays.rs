@@ -27,11 +27,7 @@ fn sphere(n: u32) -> Mesh {
         let theta = PI * i as f32 / n as f32;
         for j in 0..2 * n {
             let phi = PI * j as f32 / n as f32;
-            positions.push(Vec3::new(
-                theta.sin() * phi.cos(),
-                theta.sin() * phi.sin(),
-                theta.cos(),
-            ));
+            positions.push(Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()));
         }
     }
     let mut indices = Vec::new();
@@ -51,10 +47,7 @@ fn terrain(n: u32) -> Mesh {
     let mut positions = Vec::new();
     for i in 0..=n {
         for j in 0..=n {
-            let (x, y) = (
-                2.0 * i as f32 / n as f32 - 1.0,
-                2.0 * j as f32 / n as f32 - 1.0,
-            );
+            let (x, y) = (2.0 * i as f32 / n as f32 - 1.0, 2.0 * j as f32 / n as f32 - 1.0);
             let h = 0.1 * (7.0 * x).sin() * (5.0 * y).cos() + 0.03 * (31.0 * x + 17.0 * y).sin();
             positions.push(Vec3::new(x, y, h));
         }
@@ -79,9 +72,7 @@ fn backends() -> Vec<Backend> {
 }
 
 fn trace_closest(accel: &Accel, rays: &[Ray]) -> usize {
-    rays.par_chunks(4096)
-        .map(|c| c.iter().filter(|r| accel.intersect(r).is_some()).count())
-        .sum()
+    rays.par_chunks(4096).map(|c| c.iter().filter(|r| accel.intersect(r).is_some()).count()).sum()
 }
 
 fn trace_closest_batch(accel: &Accel, rays: &[Ray], coherent: bool) -> usize {
@@ -95,9 +86,7 @@ fn trace_closest_batch(accel: &Accel, rays: &[Ray], coherent: bool) -> usize {
 }
 
 fn trace_occluded(accel: &Accel, rays: &[Ray]) -> usize {
-    rays.par_chunks(4096)
-        .map(|c| c.iter().filter(|r| accel.occluded(r)).count())
-        .sum()
+    rays.par_chunks(4096).map(|c| c.iter().filter(|r| accel.occluded(r)).count()).sum()
 }
 
 fn camera_rays() -> Vec<Ray> {
@@ -105,10 +94,7 @@ fn camera_rays() -> Vec<Ray> {
     let o = Vec3::new(0.0, -3.0, 0.0);
     (0..N_RAYS)
         .map(|i| {
-            let (x, y) = (
-                (i % 256) as f32 / 256.0 - 0.5,
-                (i / 256) as f32 / 256.0 - 0.5,
-            );
+            let (x, y) = ((i % 256) as f32 / 256.0 - 0.5, (i / 256) as f32 / 256.0 - 0.5);
             Ray::new(o, Vec3::new(x * 0.8, 1.0, y * 0.8).normalize())
         })
         .collect()
@@ -118,10 +104,7 @@ fn incoherent_rays() -> Vec<Ray> {
     let mut s = Sampler::new(&[1]);
     (0..N_RAYS)
         .map(|_| {
-            Ray::new(
-                square_to_uniform_sphere(s.next_2d()) * 0.5 * s.next_1d(),
-                square_to_uniform_sphere(s.next_2d()),
-            )
+            Ray::new(square_to_uniform_sphere(s.next_2d()) * 0.5 * s.next_1d(), square_to_uniform_sphere(s.next_2d()))
         })
         .collect()
 }
@@ -130,16 +113,8 @@ fn shadow_rays() -> Vec<Ray> {
     let mut s = Sampler::new(&[2]);
     (0..N_RAYS)
         .map(|_| {
-            let a = Vec3::new(
-                2.0 * s.next_1d() - 1.0,
-                2.0 * s.next_1d() - 1.0,
-                0.15 + 0.1 * s.next_1d(),
-            );
-            let b = Vec3::new(
-                2.0 * s.next_1d() - 1.0,
-                2.0 * s.next_1d() - 1.0,
-                0.15 + 0.3 * s.next_1d(),
-            );
+            let a = Vec3::new(2.0 * s.next_1d() - 1.0, 2.0 * s.next_1d() - 1.0, 0.15 + 0.1 * s.next_1d());
+            let b = Vec3::new(2.0 * s.next_1d() - 1.0, 2.0 * s.next_1d() - 1.0, 0.15 + 0.3 * s.next_1d());
             Ray::segment(a, b - a, 1.0)
         })
         .collect()
@@ -148,14 +123,8 @@ fn shadow_rays() -> Vec<Ray> {
 fn bench(c: &mut Criterion) {
     let sphere = sphere(500); // 1 000 000 triangles
     let terrain = terrain(708); // 1 002 528 triangles
-    let sphere_geo = [Geometry::Triangles {
-        positions: &sphere.positions,
-        indices: &sphere.indices,
-    }];
-    let terrain_geo = [Geometry::Triangles {
-        positions: &terrain.positions,
-        indices: &terrain.indices,
-    }];
+    let sphere_geo = [Geometry::Triangles { positions: &sphere.positions, indices: &sphere.indices }];
+    let terrain_geo = [Geometry::Triangles { positions: &terrain.positions, indices: &terrain.indices }];
     let (cam, inc, sh) = (camera_rays(), incoherent_rays(), shadow_rays());
 
     let mut g = c.benchmark_group("build_1M_triangles");
@@ -175,20 +144,14 @@ fn bench(c: &mut Criterion) {
     for b in backends() {
         let s = Accel::build(b, &sphere_geo, BuildOptions::default()).unwrap();
         let t = Accel::build(b, &terrain_geo, BuildOptions::default()).unwrap();
-        g.bench_function(format!("{b}/camera"), |bench| {
-            bench.iter(|| black_box(trace_closest(&s, &cam)))
-        });
+        g.bench_function(format!("{b}/camera"), |bench| bench.iter(|| black_box(trace_closest(&s, &cam))));
         if b == Backend::Embree {
             g.bench_function(format!("{b}/camera_stream"), |bench| {
                 bench.iter(|| black_box(trace_closest_batch(&s, &cam, true)))
             });
         }
-        g.bench_function(format!("{b}/incoherent"), |bench| {
-            bench.iter(|| black_box(trace_closest(&s, &inc)))
-        });
-        g.bench_function(format!("{b}/shadow"), |bench| {
-            bench.iter(|| black_box(trace_occluded(&t, &sh)))
-        });
+        g.bench_function(format!("{b}/incoherent"), |bench| bench.iter(|| black_box(trace_closest(&s, &inc))));
+        g.bench_function(format!("{b}/shadow"), |bench| bench.iter(|| black_box(trace_occluded(&t, &sh))));
     }
     g.finish();
 }

@@ -16,22 +16,11 @@ fn bench(c: &mut Criterion) {
     }
     let spp = 4;
     let mut g = c.benchmark_group("path_cornell_ply_256x256");
-    g.sample_size(10)
-        .measurement_time(Duration::from_secs(6))
-        .throughput(Throughput::Elements(256 * 256 * spp as u64));
+    g.sample_size(10).measurement_time(Duration::from_secs(6)).throughput(Throughput::Elements(256 * 256 * spp as u64));
     for b in backends {
-        let scene = Scene::load(
-            &path,
-            &LoadOptions {
-                backend: b,
-                ..Default::default()
-            },
-        )
-        .expect("scene loads");
+        let scene = Scene::load(&path, &LoadOptions { backend: b, ..Default::default() }).expect("scene loads");
         let opts = RenderOptions::new(IntegratorKind::Path, Budget::Spp(spp));
-        g.bench_function(b.to_string(), |bench| {
-            bench.iter(|| black_box(render(&scene, &opts).expect("renders")))
-        });
+        g.bench_function(b.to_string(), |bench| bench.iter(|| black_box(render(&scene, &opts).expect("renders"))));
     }
     g.finish();
 }

@@ -77,14 +77,7 @@ impl Camera {
             }
         };
         let position = to_world.point(Vec3::ZERO);
-        Camera {
-            to_world,
-            position,
-            tan_half,
-            resolution,
-            near_clip,
-            far_clip,
-        }
+        Camera { to_world, position, tan_half, resolution, near_clip, far_clip }
     }
 
     /// The primary ray through a film position in pixel units (`(0,0)` is the top-left
@@ -92,21 +85,12 @@ impl Camera {
     #[inline]
     pub fn generate_ray(&self, film: Vec2) -> Ray {
         let s = film / Vec2::new(self.resolution.0 as f32, self.resolution.1 as f32);
-        let local = Vec3::new(
-            (1.0 - 2.0 * s.x) * self.tan_half.x,
-            (1.0 - 2.0 * s.y) * self.tan_half.y,
-            1.0,
-        );
+        let local = Vec3::new((1.0 - 2.0 * s.x) * self.tan_half.x, (1.0 - 2.0 * s.y) * self.tan_half.y, 1.0);
         let len = local.length();
         let d = self.to_world.vector(local).normalize();
         // The clip planes are perpendicular to the viewing axis: along a unit direction
         // they lie at near / cos θ = near |local|.
-        Ray {
-            o: self.position,
-            d,
-            tmin: self.near_clip * len,
-            tmax: self.far_clip * len,
-        }
+        Ray { o: self.position, d, tmin: self.near_clip * len, tmax: self.far_clip * len }
     }
 }
 
@@ -128,14 +112,7 @@ mod tests {
 
     #[test]
     fn fov_axis_smaller_uses_the_short_side() {
-        let c = Camera::new(
-            Transform::new(Mat4::IDENTITY),
-            90.0,
-            FovAxis::Smaller,
-            (200, 100),
-            0.0,
-            1e4,
-        );
+        let c = Camera::new(Transform::new(Mat4::IDENTITY), 90.0, FovAxis::Smaller, (200, 100), 0.0, 1e4);
         assert!((c.tan_half.y - 1.0).abs() < 1e-6 && (c.tan_half.x - 2.0).abs() < 1e-6);
     }
 

@@ -22,10 +22,7 @@ pub struct Metrics {
 
 pub fn check_same_size(a: &Image, b: &Image) -> Result<()> {
     if a.width != b.width || a.height != b.height {
-        return Err(Error::Usage(format!(
-            "image sizes differ: {}×{} vs {}×{}",
-            a.width, a.height, b.width, b.height
-        )));
+        return Err(Error::Usage(format!("image sizes differ: {}×{} vs {}×{}", a.width, a.height, b.width, b.height)));
     }
     Ok(())
 }
@@ -71,11 +68,7 @@ pub fn error_image(reference: &Image, test: &Image, scale: f64) -> Result<Vec<u8
     let mut out = Vec::with_capacity(reference.pixels.len() * 3);
     for (r, t) in reference.pixels.iter().zip(&test.pixels) {
         let e = (0..3).map(|c| relmse_term(t[c], r[c])).sum::<f64>() / 3.0;
-        let x = if e.is_finite() {
-            (e / scale).clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
+        let x = if e.is_finite() { (e / scale).clamp(0.0, 1.0) } else { 1.0 };
         out.extend(false_colour(x as f32));
     }
     Ok(out)
@@ -83,13 +76,8 @@ pub fn error_image(reference: &Image, test: &Image, scale: f64) -> Result<Vec<u8
 
 /// A perceptually ordered colour ramp for `x` in `[0, 1]`.
 fn false_colour(x: f32) -> [u8; 3] {
-    const STOPS: [[f32; 3]; 5] = [
-        [0.0, 0.0, 0.0],
-        [0.1, 0.1, 0.8],
-        [0.0, 0.75, 0.3],
-        [1.0, 0.85, 0.0],
-        [1.0, 1.0, 1.0],
-    ];
+    const STOPS: [[f32; 3]; 5] =
+        [[0.0, 0.0, 0.0], [0.1, 0.1, 0.8], [0.0, 0.75, 0.3], [1.0, 0.85, 0.0], [1.0, 1.0, 1.0]];
     let s = x * (STOPS.len() - 1) as f32;
     let i = (s as usize).min(STOPS.len() - 2);
     let f = s - i as f32;

@@ -15,11 +15,7 @@ pub struct Location {
 
 impl Location {
     pub fn file(file: &Path) -> Location {
-        Location {
-            file: Arc::new(file.to_path_buf()),
-            line: None,
-            col: None,
-        }
+        Location { file: Arc::new(file.to_path_buf()), line: None, col: None }
     }
 }
 
@@ -53,17 +49,11 @@ pub enum Error {
 
 impl Error {
     pub fn input(loc: &Location, msg: impl Into<String>) -> Error {
-        Error::Input {
-            loc: loc.clone(),
-            msg: msg.into(),
-        }
+        Error::Input { loc: loc.clone(), msg: msg.into() }
     }
 
     pub fn in_file(file: &Path, msg: impl Into<String>) -> Error {
-        Error::Input {
-            loc: Location::file(file),
-            msg: msg.into(),
-        }
+        Error::Input { loc: Location::file(file), msg: msg.into() }
     }
 }
 

@@ -64,12 +64,7 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
     let mut out = Vec::new();
     for y0 in (0..height).step_by(size as usize) {
         for x0 in (0..width).step_by(size as usize) {
-            out.push(Tile {
-                x0,
-                y0,
-                width: size.min(width - x0),
-                height: size.min(height - y0),
-            });
+            out.push(Tile { x0, y0, width: size.min(width - x0), height: size.min(height - y0) });
         }
     }
     out
@@ -91,10 +86,7 @@ pub struct ImageBlock {
 impl ImageBlock {
     pub fn new(tile: Tile, filter: Filter) -> ImageBlock {
         let b = (filter.radius() - 0.5).ceil().max(0.0) as i32;
-        let (w, h) = (
-            tile.width as usize + 2 * b as usize,
-            tile.height as usize + 2 * b as usize,
-        );
+        let (w, h) = (tile.width as usize + 2 * b as usize, tile.height as usize + 2 * b as usize);
         ImageBlock {
             ox: tile.x0 as i32 - b,
             oy: tile.y0 as i32 - b,
@@ -115,21 +107,18 @@ impl ImageBlock {
             return;
         }
         let r = self.filter.radius();
-        if let Filter::Box { radius } = self.filter {
-            if radius <= 0.5 {
-                let (px, py) = (
-                    pos.x.floor() as i32 - self.ox,
-                    pos.y.floor() as i32 - self.oy,
-                );
-                if px >= 0 && py >= 0 && (px as usize) < self.w && (py as usize) < self.h {
-                    let e = &mut self.data[py as usize * self.w + px as usize];
-                    e[0] += value.x;
-                    e[1] += value.y;
-                    e[2] += value.z;
-                    e[3] += 1.0;
-                }
-                return;
+        if let Filter::Box { radius } = self.filter
+            && radius <= 0.5
+        {
+            let (px, py) = (pos.x.floor() as i32 - self.ox, pos.y.floor() as i32 - self.oy);
+            if px >= 0 && py >= 0 && (px as usize) < self.w && (py as usize) < self.h {
+                let e = &mut self.data[py as usize * self.w + px as usize];
+                e[0] += value.x;
+                e[1] += value.y;
+                e[2] += value.z;
+                e[3] += 1.0;
             }
+            return;
         }
         // Pixels whose centre (i + 0.5) lies within the radius of the sample.
         let x_lo = (pos.x - 0.5 - r).ceil() as i32;
@@ -182,13 +171,7 @@ pub struct Film {
 
 impl Film {
     pub fn new(width: u32, height: u32, filter: Filter) -> Film {
-        Film {
-            width,
-            height,
-            filter,
-            data: vec![[0.0; 4]; width as usize * height as usize],
-            invalid_samples: 0,
-        }
+        Film { width, height, filter, data: vec![[0.0; 4]; width as usize * height as usize], invalid_samples: 0 }
     }
 
     /// Adds a block (the caller merges blocks in a fixed order).
@@ -219,11 +202,7 @@ impl Film {
             .iter()
             .map(|d| {
                 if d[3] > 0.0 {
-                    Rgb::new(
-                        (d[0] / d[3]) as f32,
-                        (d[1] / d[3]) as f32,
-                        (d[2] / d[3]) as f32,
-                    )
+                    Rgb::new((d[0] / d[3]) as f32, (d[1] / d[3]) as f32, (d[2] / d[3]) as f32)
                 } else {
                     Rgb::ZERO
                 }
@@ -238,11 +217,7 @@ mod tests {
 
     #[test]
     fn constant_signal_develops_to_itself_with_every_filter() {
-        for filter in [
-            Filter::Box { radius: 0.5 },
-            Filter::Tent { radius: 1.0 },
-            Filter::Gaussian { stddev: 0.5 },
-        ] {
+        for filter in [Filter::Box { radius: 0.5 }, Filter::Tent { radius: 1.0 }, Filter::Gaussian { stddev: 0.5 }] {
             let mut film = Film::new(9, 7, filter);
             let mut s = crate::sampling::Sampler::new(&[1]);
             for t in tiles(9, 7, 4) {
@@ -250,32 +225,21 @@ mod tests {
                 for y in t.y0..t.y0 + t.height {
                     for x in t.x0..t.x0 + t.width {
                         for _ in 0..4 {
-                            b.put(
-                                Vec2::new(x as f32, y as f32) + s.next_2d(),
-                                Rgb::new(0.25, 0.5, 2.0),
-                            );
+                            b.put(Vec2::new(x as f32, y as f32) + s.next_2d(), Rgb::new(0.25, 0.5, 2.0));
                         }
                     }
                 }
                 film.merge(&b);
             }
             for v in film.develop() {
-                assert!(
-                    (v - Rgb::new(0.25, 0.5, 2.0)).abs().max_element() < 1e-5,
-                    "{filter:?}: {v}"
-                );
+                assert!((v - Rgb::new(0.25, 0.5, 2.0)).abs().max_element() < 1e-5, "{filter:?}: {v}");
             }
         }
     }
 
     #[test]
     fn non_finite_samples_are_dropped_and_counted() {
-        let t = Tile {
-            x0: 0,
-            y0: 0,
-            width: 2,
-            height: 2,
-        };
+        let t = Tile { x0: 0, y0: 0, width: 2, height: 2 };
         let mut b = ImageBlock::new(t, Filter::Box { radius: 0.5 });
         b.put(Vec2::new(0.5, 0.5), Rgb::new(f32::NAN, 0.0, 0.0));
         b.put(Vec2::new(0.5, 0.5), Rgb::new(f32::INFINITY, 0.0, 0.0));

@@ -17,25 +17,13 @@ pub struct Image {
 
 impl Image {
     pub fn new(width: u32, height: u32, pixels: Vec<Rgb>) -> Image {
-        assert_eq!(
-            pixels.len(),
-            width as usize * height as usize,
-            "pixel count does not match the size"
-        );
-        Image {
-            width,
-            height,
-            pixels,
-        }
+        assert_eq!(pixels.len(), width as usize * height as usize, "pixel count does not match the size");
+        Image { width, height, pixels }
     }
 
     /// Mean over pixels and channels.
     pub fn mean(&self) -> f64 {
-        self.pixels
-            .iter()
-            .map(|p| (p.x + p.y + p.z) as f64)
-            .sum::<f64>()
-            / (3.0 * self.pixels.len().max(1) as f64)
+        self.pixels.iter().map(|p| (p.x + p.y + p.z) as f64).sum::<f64>() / (3.0 * self.pixels.len().max(1) as f64)
     }
 
     pub fn get(&self, x: u32, y: u32) -> Rgb {
@@ -51,18 +39,10 @@ pub enum Format {
 
 impl Format {
     pub fn from_path(path: &Path) -> Result<Format> {
-        match path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(|e| e.to_ascii_lowercase())
-            .as_deref()
-        {
+        match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
             Some("exr") => Ok(Format::Exr),
             Some("png") => Ok(Format::Png),
-            _ => Err(Error::Usage(format!(
-                "{}: unknown image format (use .exr or .png)",
-                path.display()
-            ))),
+            _ => Err(Error::Usage(format!("{}: unknown image format (use .exr or .png)", path.display()))),
         }
     }
 }
@@ -71,18 +51,11 @@ impl Format {
 #[inline]
 pub fn linear_to_srgb(v: f32) -> f32 {
     let v = v.clamp(0.0, 1.0);
-    if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
+    if v <= 0.003_130_8 { 12.92 * v } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 }
 }
 
 fn temp_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "image".into());
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "image".into());
     path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
 }
 
@@ -90,10 +63,7 @@ fn temp_path(path: &Path) -> PathBuf {
 pub fn write(path: &Path, image: &Image) -> Result<()> {
     let format = Format::from_path(path)?;
     let tmp = temp_path(path);
-    let out_err = |msg: String| Error::Output {
-        path: path.to_path_buf(),
-        msg,
-    };
+    let out_err = |msg: String| Error::Output { path: path.to_path_buf(), msg };
     let result = match format {
         Format::Exr => {
             let w = image.width as usize;
@@ -134,18 +104,8 @@ pub fn write(path: &Path, image: &Image) -> Result<()> {
 /// Writes 8-bit RGB pixels as PNG atomically (false-colour images and figures).
 pub fn write_png_rgb8(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<()> {
     let tmp = temp_path(path);
-    image::save_buffer_with_format(
-        &tmp,
-        bytes,
-        width,
-        height,
-        image::ExtendedColorType::Rgb8,
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| Error::Output {
-        path: path.to_path_buf(),
-        msg: format!("cannot write PNG: {e}"),
-    })?;
+    image::save_buffer_with_format(&tmp, bytes, width, height, image::ExtendedColorType::Rgb8, image::ImageFormat::Png)
+        .map_err(|e| Error::Output { path: path.to_path_buf(), msg: format!("cannot write PNG: {e}") })?;
     std::fs::rename(&tmp, path).map_err(|e| Error::Output {
         path: path.to_path_buf(),
         msg: format!("cannot move the finished image into place: {e}"),
@@ -156,13 +116,7 @@ pub fn write_png_rgb8(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Res
 pub fn read_exr(path: &Path) -> Result<Image> {
     let img = exr::prelude::read_first_rgba_layer_from_file(
         path,
-        |res: exr::prelude::Vec2<usize>, _| {
-            (
-                res.width(),
-                res.height(),
-                vec![Rgb::ZERO; res.width() * res.height()],
-            )
-        },
+        |res: exr::prelude::Vec2<usize>, _| (res.width(), res.height(), vec![Rgb::ZERO; res.width() * res.height()]),
         |(w, _, px): &mut (usize, usize, Vec<Rgb>),
          pos: exr::prelude::Vec2<usize>,
          (r, g, b, _a): (f32, f32, f32, f32)| {
@@ -176,27 +130,15 @@ pub fn read_exr(path: &Path) -> Result<Image> {
 
 /// Reads an EXR (linear) or PNG/JPEG (sRGB, decoded to linear) image.
 pub fn read(path: &Path) -> Result<Image> {
-    match path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase())
-        .as_deref()
-    {
+    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
         Some("exr") => read_exr(path),
         _ => {
-            let img = image::open(path)
-                .map_err(|e| Error::in_file(path, format!("cannot read image: {e}")))?
-                .to_rgb32f();
+            let img =
+                image::open(path).map_err(|e| Error::in_file(path, format!("cannot read image: {e}")))?.to_rgb32f();
             let (w, h) = img.dimensions();
             let px = img
                 .pixels()
-                .map(|p| {
-                    Rgb::new(
-                        srgb_to_linear(p[0]),
-                        srgb_to_linear(p[1]),
-                        srgb_to_linear(p[2]),
-                    )
-                })
+                .map(|p| Rgb::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2])))
                 .collect();
             Ok(Image::new(w, h, px))
         }
@@ -206,11 +148,7 @@ pub fn read(path: &Path) -> Result<Image> {
 /// Inverse of [`linear_to_srgb`].
 #[inline]
 pub fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
+    if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
 }
 
 #[cfg(test)]
@@ -221,16 +159,11 @@ mod tests {
     fn exr_round_trip_is_exact_and_atomic() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("a.exr");
-        let px: Vec<Rgb> = (0..12)
-            .map(|i| Rgb::new(i as f32 * 0.37, 1e-5 * i as f32, 1e4))
-            .collect();
+        let px: Vec<Rgb> = (0..12).map(|i| Rgb::new(i as f32 * 0.37, 1e-5 * i as f32, 1e4)).collect();
         let img = Image::new(4, 3, px);
         write(&path, &img).unwrap();
         assert_eq!(read_exr(&path).unwrap(), img);
-        let leftovers: Vec<_> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().file_name())
-            .collect();
+        let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(leftovers.len(), 1, "{leftovers:?}");
     }
 
@@ -238,11 +171,7 @@ mod tests {
     fn png_is_srgb_encoded() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("a.png");
-        write(
-            &path,
-            &Image::new(2, 1, vec![Rgb::splat(0.5), Rgb::splat(2.0)]),
-        )
-        .unwrap();
+        write(&path, &Image::new(2, 1, vec![Rgb::splat(0.5), Rgb::splat(2.0)])).unwrap();
         let back = image::open(&path).unwrap().to_rgb8();
         assert_eq!(back.get_pixel(0, 0)[0], 188); // sRGB(0.5) = 0.7354
         assert_eq!(back.get_pixel(1, 0)[0], 255);

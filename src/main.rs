@@ -98,9 +98,7 @@ struct CompareArgs {
 }
 
 fn parse_define(s: &str) -> std::result::Result<(String, String), String> {
-    let (k, v) = s
-        .split_once('=')
-        .ok_or_else(|| format!("\"{s}\" is not NAME=VALUE"))?;
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("\"{s}\" is not NAME=VALUE"))?;
     if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
         return Err(format!("\"{k}\" is not a parameter name"));
     }
@@ -140,19 +138,8 @@ fn install_signal_handlers() -> Result<Arc<AtomicBool>> {
 fn render(a: RenderArgs) -> Result<ExitCode> {
     let stop = install_signal_handlers()?;
     let t0 = Instant::now();
-    let build = BuildOptions {
-        quality: a.bvh_quality,
-        robust: a.robust,
-        compact: false,
-    };
-    let scene = Scene::load(
-        &a.scene,
-        &LoadOptions {
-            overrides: a.define.clone(),
-            backend: a.backend,
-            build,
-        },
-    )?;
+    let build = BuildOptions { quality: a.bvh_quality, robust: a.robust, compact: false };
+    let scene = Scene::load(&a.scene, &LoadOptions { overrides: a.define.clone(), backend: a.backend, build })?;
     let load_seconds = t0.elapsed().as_secs_f64();
     if !a.quiet {
         for w in &scene.stats.warnings {
@@ -161,13 +148,16 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     }
     let kind = match a.integrator {
         Some(k) => k,
-        None => IntegratorKind::from_plugin(&scene.integrator.plugin).ok_or_else(|| Error::Usage(format!("the scene's integrator \"{}\" has no implementation here; pick one with --integrator", scene.integrator.plugin)))?,
+        None => IntegratorKind::from_plugin(&scene.integrator.plugin).ok_or_else(|| {
+            Error::Usage(format!(
+                "the scene's integrator \"{}\" has no implementation here; pick one with --integrator",
+                scene.integrator.plugin
+            ))
+        })?,
     };
     let budget = match (a.spp, a.time) {
         (_, Some(t)) if !(t > 0.0 && t.is_finite()) => {
-            return Err(Error::Usage(format!(
-                "--time must be a positive number of seconds, got {t}"
-            )));
+            return Err(Error::Usage(format!("--time must be a positive number of seconds, got {t}")));
         }
         (_, Some(t)) => Budget::Time(t),
         (Some(0), _) => return Err(Error::Usage("--spp must be at least 1".into())),
@@ -177,10 +167,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     let output = a.output.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
             "{}.exr",
-            a.scene
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "render".into())
+            a.scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into())
         ))
     });
     image_io::Format::from_path(&output)?;
@@ -194,19 +181,12 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
     if let Some(path) = &a.stats {
         let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "render": s });
-        write_text(
-            path,
-            &serde_json::to_string_pretty(&json).unwrap_or_default(),
-        )?;
+        write_text(path, &serde_json::to_string_pretty(&json).unwrap_or_default())?;
     }
     if !a.quiet || s.interrupted {
         eprintln!(
             "{}: {}×{} at {} spp ({:?}, {}, {} threads) in {:.2} s (+{:.2} s loading): {:.3} M samples/s, {:.2} M rays/s, {} NaN/Inf samples dropped → {}",
-            if s.interrupted {
-                "interrupted"
-            } else {
-                "rendered"
-            },
+            if s.interrupted { "interrupted" } else { "rendered" },
             s.width,
             s.height,
             s.spp,
@@ -221,21 +201,14 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             output.display()
         );
     }
-    Ok(if s.interrupted {
-        ExitCode::from(INTERRUPTED)
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(if s.interrupted { ExitCode::from(INTERRUPTED) } else { ExitCode::SUCCESS })
 }
 
 fn write_text(path: &Path, text: &str) -> Result<()> {
     let tmp = path.with_extension("json.tmp");
     std::fs::write(&tmp, text)
         .and_then(|_| std::fs::rename(&tmp, path))
-        .map_err(|e| Error::Output {
-            path: path.to_path_buf(),
-            msg: e.to_string(),
-        })
+        .map_err(|e| Error::Output { path: path.to_path_buf(), msg: e.to_string() })
 }
 
 fn compare_images(a: CompareArgs) -> Result<ExitCode> {
@@ -247,10 +220,7 @@ fn compare_images(a: CompareArgs) -> Result<ExitCode> {
     } else {
         println!("MSE        {:.6e}", m.mse);
         println!("relMSE     {:.6e}", m.relmse);
-        println!(
-            "mean ratio {:.6} (test {:.6} / reference {:.6})",
-            m.mean_ratio, m.test_mean, m.reference_mean
-        );
+        println!("mean ratio {:.6} (test {:.6} / reference {:.6})", m.mean_ratio, m.test_mean, m.reference_mean);
         if m.non_finite > 0 {
             println!("non-finite pixels in the test image: {}", m.non_finite);
         }

@@ -45,11 +45,7 @@ fn furnace(shape: &str, max_depth: i32, spp: u32) -> (f64, f64) {
     let path = write_scene(&dir, "furnace.xml", &enclosure(shape), max_depth);
     let scene = load(&path, &[], Backend::Embree);
     let img = image(render(&scene, IntegratorKind::Path, spp, 7, 0));
-    let depth = if max_depth < 0 {
-        f64::INFINITY
-    } else {
-        max_depth as f64
-    };
+    let depth = if max_depth < 0 { f64::INFINITY } else { max_depth as f64 };
     let expected = LE as f64 * (1.0 - (RHO as f64).powf(depth)) / (1.0 - RHO as f64);
     (img.mean(), expected)
 }
@@ -59,20 +55,14 @@ fn sphere_furnace_every_depth() {
     for (d, tol) in [(1, 1e-6), (2, 0.01), (3, 0.01), (5, 0.01), (-1, 0.01)] {
         let (mean, expected) = furnace("sphere", d, 64);
         eprintln!("sphere furnace, max_depth {d}: {mean:.5} (exact {expected:.5})");
-        assert!(
-            (mean / expected - 1.0).abs() < tol,
-            "max_depth {d}: mean {mean}, exact {expected}"
-        );
+        assert!((mean / expected - 1.0).abs() < tol, "max_depth {d}: mean {mean}, exact {expected}");
     }
 }
 
 #[test]
 fn cube_furnace_unlimited_depth() {
     let (mean, expected) = furnace("cube", -1, 64);
-    assert!(
-        (mean / expected - 1.0).abs() < 0.01,
-        "mean {mean}, exact {expected}"
-    );
+    assert!((mean / expected - 1.0).abs() < 0.01, "mean {mean}, exact {expected}");
 }
 
 #[test]
@@ -105,8 +95,5 @@ fn point_light_over_a_diffuse_plane() {
     let img = image(render(&scene, IntegratorKind::Path, 16, 0, 1));
     let c = img.get(1, 1);
     let expected = glam::Vec3::new(0.5 * 4.0, 0.25 * 2.0, 0.8 * 1.0) / std::f32::consts::PI / 4.0;
-    assert!(
-        (c - expected).abs().max_element() < 1e-4 * expected.max_element(),
-        "{c} vs {expected}"
-    );
+    assert!((c - expected).abs().max_element() < 1e-4 * expected.max_element(), "{c} vs {expected}");
 }

@@ -30,9 +30,7 @@ fn near_edge(h: &Hit, geometry: &[Geometry<'_>]) -> bool {
 fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
     match (a, b) {
         (None, None) => true,
-        (Some(a), Some(b)) => {
-            (a.geom, a.prim) == (b.geom, b.prim) && (a.t - b.t).abs() <= 1e-5 * a.t.max(1.0)
-        }
+        (Some(a), Some(b)) => (a.geom, a.prim) == (b.geom, b.prim) && (a.t - b.t).abs() <= 1e-5 * a.t.max(1.0),
         _ => false,
     }
 }
@@ -47,11 +45,7 @@ fn compare_backends(geometry: &[Geometry<'_>], lo: Vec3, hi: Vec3, n: usize) -> 
     let embree = Accel::build(Backend::Embree, geometry, BuildOptions::default()).unwrap();
     let obvhs = Accel::build(Backend::Obvhs, geometry, BuildOptions::default()).unwrap();
     let mut s = Sampler::new(&[2024]);
-    let mut out = Agreement {
-        rays: n,
-        hit_ties: 0,
-        occlusion_ties: 0,
-    };
+    let mut out = Agreement { rays: n, hit_ties: 0, occlusion_ties: 0 };
     let mut rays = Vec::with_capacity(n);
     // A ray that starts on a surface (closer than this) may or may not see it.
     let grazing = 1e-4 * (hi - lo).length();
@@ -65,25 +59,12 @@ fn compare_backends(geometry: &[Geometry<'_>], lo: Vec3, hi: Vec3, n: usize) -> 
     obvhs.intersect_batch(&rays, false, &mut bo);
     for (i, r) in rays.iter().enumerate() {
         let (e, o) = (embree.intersect(r), obvhs.intersect(r));
-        assert!(
-            same_hit(e, be[i]),
-            "Embree single-ray and batch results differ for ray {i}: {e:?} vs {:?}",
-            be[i]
-        );
-        assert!(
-            same_hit(o, bo[i]),
-            "obvhs single-ray and batch results differ for ray {i}: {o:?} vs {:?}",
-            bo[i]
-        );
+        assert!(same_hit(e, be[i]), "Embree single-ray and batch results differ for ray {i}: {e:?} vs {:?}", be[i]);
+        assert!(same_hit(o, bo[i]), "obvhs single-ray and batch results differ for ray {i}: {o:?} vs {:?}", bo[i]);
         match (e, o) {
             (None, None) => {}
             (Some(a), Some(b)) if (a.geom, a.prim) == (b.geom, b.prim) => {
-                assert!(
-                    (a.t - b.t).abs() <= 1e-4 * a.t.max(1.0),
-                    "ray {i}: same primitive at t {} vs {}",
-                    a.t,
-                    b.t
-                );
+                assert!((a.t - b.t).abs() <= 1e-4 * a.t.max(1.0), "ray {i}: same primitive at t {} vs {}", a.t, b.t);
             }
             (Some(a), Some(b))
                 if (a.t - b.t).abs() <= 1e-4 * a.t.max(1.0)
@@ -93,50 +74,29 @@ fn compare_backends(geometry: &[Geometry<'_>], lo: Vec3, hi: Vec3, n: usize) -> 
             {
                 out.hit_ties += 1
             }
-            (Some(a), None) | (None, Some(a)) if near_edge(&a, geometry) || a.t < grazing => {
-                out.hit_ties += 1
-            }
+            (Some(a), None) | (None, Some(a)) if near_edge(&a, geometry) || a.t < grazing => out.hit_ties += 1,
             (e, o) => panic!("ray {i} {r:?}: Embree {e:?}, obvhs {o:?}"),
         }
         // Occlusion of a segment of random length along the same ray.
-        let seg = Ray {
-            tmax: 0.05 + s.next_1d() * (hi - lo).length(),
-            ..*r
-        };
+        let seg = Ray { tmax: 0.05 + s.next_1d() * (hi - lo).length(), ..*r };
         let (oe, oo) = (embree.occluded(&seg), obvhs.occluded(&seg));
         let mut batch = Vec::new();
         embree.occluded_batch(std::slice::from_ref(&seg), false, &mut batch);
-        assert_eq!(
-            batch[0], oe,
-            "Embree single-ray and batch occlusion differ for segment {i}"
-        );
+        assert_eq!(batch[0], oe, "Embree single-ray and batch occlusion differ for segment {i}");
         if oe != oo {
             // Allowed only when the blocking hit is a tie: at an edge, or at the end of the segment.
             let h = embree
-                .intersect(&Ray {
-                    tmax: seg.tmax * 1.001,
-                    ..seg
-                })
-                .or(obvhs.intersect(&Ray {
-                    tmax: seg.tmax * 1.001,
-                    ..seg
-                }));
+                .intersect(&Ray { tmax: seg.tmax * 1.001, ..seg })
+                .or(obvhs.intersect(&Ray { tmax: seg.tmax * 1.001, ..seg }));
             match h {
-                Some(h)
-                    if near_edge(&h, geometry)
-                        || h.t < grazing
-                        || (h.t - seg.tmax).abs() <= 1e-3 * seg.tmax =>
-                {
+                Some(h) if near_edge(&h, geometry) || h.t < grazing || (h.t - seg.tmax).abs() <= 1e-3 * seg.tmax => {
                     out.occlusion_ties += 1
                 }
                 _ => panic!("segment {i}: Embree occluded {oe}, obvhs {oo}, hit {h:?}"),
             }
         }
     }
-    eprintln!(
-        "{} rays: {} hit ties, {} occlusion ties",
-        out.rays, out.hit_ties, out.occlusion_ties
-    );
+    eprintln!("{} rays: {} hit ties, {} occlusion ties", out.rays, out.hit_ties, out.occlusion_ties);
     out
 }
 
@@ -158,76 +118,32 @@ fn random_rays_in_the_door_ajar_room() {
             hi = hi.max(*p);
         }
     }
-    let mut geometry: Vec<Geometry> = meshes
-        .iter()
-        .map(|m| Geometry::Triangles {
-            positions: &m.positions,
-            indices: &m.indices,
-        })
-        .collect();
-    geometry.push(Geometry::Sphere {
-        center: (lo + hi) * 0.5,
-        radius: 0.3,
-    });
+    let mut geometry: Vec<Geometry> =
+        meshes.iter().map(|m| Geometry::Triangles { positions: &m.positions, indices: &m.indices }).collect();
+    geometry.push(Geometry::Sphere { center: (lo + hi) * 0.5, radius: 0.3 });
     let a = compare_backends(&geometry, lo, hi, 150_000);
-    assert!(
-        a.hit_ties + a.occlusion_ties <= a.rays / 1000,
-        "too many ties"
-    );
+    assert!(a.hit_ties + a.occlusion_ties <= a.rays / 1000, "too many ties");
 }
 
 #[test]
 fn random_rays_in_the_cornell_box() {
-    let scene = load(
-        &root().join("scenes/cornell-box/scene.xml"),
-        &[],
-        Backend::Embree,
-    );
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[], Backend::Embree);
     let geometry: Vec<Geometry> = scene.shapes.iter().map(|s| s.accel_geometry()).collect();
-    let a = compare_backends(
-        &geometry,
-        Vec3::new(-1.2, -0.1, -1.2),
-        Vec3::new(1.2, 2.1, 1.2),
-        100_000,
-    );
-    assert!(
-        a.hit_ties + a.occlusion_ties <= a.rays / 1000,
-        "too many ties"
-    );
+    let a = compare_backends(&geometry, Vec3::new(-1.2, -0.1, -1.2), Vec3::new(1.2, 2.1, 1.2), 100_000);
+    assert!(a.hit_ties + a.occlusion_ties <= a.rays / 1000, "too many ties");
 }
 
 #[test]
 fn both_backends_render_the_same_image() {
     let defines = [("resx", "64"), ("resy", "64")];
     let path = root().join("scenes/cornell-box/scene.xml");
-    let e = image(render(
-        &load(&path, &defines, Backend::Embree),
-        IntegratorKind::Path,
-        32,
-        5,
-        0,
-    ));
-    let o = image(render(
-        &load(&path, &defines, Backend::Obvhs),
-        IntegratorKind::Path,
-        32,
-        5,
-        0,
-    ));
-    let e2 = image(render(
-        &load(&path, &defines, Backend::Embree),
-        IntegratorKind::Path,
-        32,
-        6,
-        0,
-    ));
+    let e = image(render(&load(&path, &defines, Backend::Embree), IntegratorKind::Path, 32, 5, 0));
+    let o = image(render(&load(&path, &defines, Backend::Obvhs), IntegratorKind::Path, 32, 5, 0));
+    let e2 = image(render(&load(&path, &defines, Backend::Embree), IntegratorKind::Path, 32, 6, 0));
     // The same seed with either backend differs far less than two seeds with one backend.
     let same_seed = pcbpt::compare::metrics(&e, &o).unwrap();
     let other_seed = pcbpt::compare::metrics(&e, &e2).unwrap();
-    eprintln!(
-        "Embree vs obvhs: relMSE {:.3e}; seed 5 vs 6: {:.3e}",
-        same_seed.relmse, other_seed.relmse
-    );
+    eprintln!("Embree vs obvhs: relMSE {:.3e}; seed 5 vs 6: {:.3e}", same_seed.relmse, other_seed.relmse);
     assert!((same_seed.mean_ratio - 1.0).abs() < 1e-3);
     assert!(same_seed.relmse < 0.01 * other_seed.relmse);
 }

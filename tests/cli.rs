@@ -9,10 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn pcbpt(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pcbpt"))
-        .args(args)
-        .output()
-        .expect("runs the binary")
+    Command::new(env!("CARGO_BIN_EXE_pcbpt")).args(args).output().expect("runs the binary")
 }
 
 /// A minimal valid scene around `body`, written to `dir/name`.
@@ -32,29 +29,20 @@ fn scene(dir: &Path, name: &str, body: &str) -> PathBuf {
     p
 }
 
-const LIGHT: &str = r#"    <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>"#;
+const LIGHT: &str =
+    r#"    <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>"#;
 
 /// Runs a render that must fail; returns its stderr.
 fn fails(scene: &Path, expect: &[&str]) -> String {
     let out_path = scene.with_extension("exr");
-    let out = pcbpt(&[
-        "render",
-        scene.to_str().unwrap(),
-        "-o",
-        out_path.to_str().unwrap(),
-        "--spp",
-        "1",
-        "--quiet",
-    ]);
+    let out = pcbpt(&["render", scene.to_str().unwrap(), "-o", out_path.to_str().unwrap(), "--spp", "1", "--quiet"]);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(!out.status.success(), "{} rendered: {err}", scene.display());
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(!err.contains("panicked"), "{err}");
     assert!(
         err.contains(&scene.file_name().unwrap().to_string_lossy().into_owned())
-            || expect
-                .iter()
-                .any(|e| e.ends_with(".ply") || e.ends_with(".obj")),
+            || expect.iter().any(|e| e.ends_with(".ply") || e.ends_with(".obj")),
         "error does not name the file: {err}"
     );
     for e in expect {
@@ -72,31 +60,17 @@ fn loader_errors_name_file_and_line() {
     let s = scene(
         dir,
         "missing_mesh.xml",
-        &format!(
-            "{LIGHT}\n    <shape type=\"ply\"><string name=\"filename\" value=\"nowhere.ply\"/></shape>"
-        ),
+        &format!("{LIGHT}\n    <shape type=\"ply\"><string name=\"filename\" value=\"nowhere.ply\"/></shape>"),
     );
-    fails(
-        &s,
-        &["missing_mesh.xml:7:", "nowhere.ply", "does not exist"],
-    );
+    fails(&s, &["missing_mesh.xml:7:", "nowhere.ply", "does not exist"]);
     // An unknown plugin.
-    let s = scene(
-        dir,
-        "unknown_plugin.xml",
-        &format!("{LIGHT}\n    <bsdf type=\"velvet\" id=\"v\"/>"),
-    );
-    fails(
-        &s,
-        &["unknown_plugin.xml:7:", "unknown bsdf plugin \"velvet\""],
-    );
+    let s = scene(dir, "unknown_plugin.xml", &format!("{LIGHT}\n    <bsdf type=\"velvet\" id=\"v\"/>"));
+    fails(&s, &["unknown_plugin.xml:7:", "unknown bsdf plugin \"velvet\""]);
     // An unused property.
     let s = scene(
         dir,
         "unused.xml",
-        &format!(
-            "{LIGHT}\n    <bsdf type=\"diffuse\" id=\"d\"><float name=\"roughness\" value=\"0.1\"/></bsdf>"
-        ),
+        &format!("{LIGHT}\n    <bsdf type=\"diffuse\" id=\"d\"><float name=\"roughness\" value=\"0.1\"/></bsdf>"),
     );
     fails(&s, &["unused.xml:7:", "unused property \"roughness\""]);
     // A malformed number.
@@ -110,11 +84,7 @@ fn loader_errors_name_file_and_line() {
     fails(&s, &["number.xml:7:", "\"0.x\" is not a number"]);
     // Not well-formed XML.
     let s = dir.join("broken.xml");
-    std::fs::write(
-        &s,
-        "<scene version=\"3.0.0\">\n  <shape type=\"cube\">\n</scene>\n",
-    )
-    .unwrap();
+    std::fs::write(&s, "<scene version=\"3.0.0\">\n  <shape type=\"cube\">\n</scene>\n").unwrap();
     fails(&s, &["broken.xml:3:", "malformed XML"]);
     // An undefined parameter, a reference to a missing id, a duplicate id.
     let s = scene(
@@ -123,32 +93,21 @@ fn loader_errors_name_file_and_line() {
         &format!("{LIGHT}\n    <shape type=\"cube\"><float name=\"x\" value=\"$nope\"/></shape>"),
     );
     fails(&s, &["param.xml:7:", "undefined parameter \"$nope\""]);
-    let s = scene(
-        dir,
-        "ref.xml",
-        &format!("{LIGHT}\n    <shape type=\"cube\"><ref id=\"ghost\"/></shape>"),
-    );
+    let s = scene(dir, "ref.xml", &format!("{LIGHT}\n    <shape type=\"cube\"><ref id=\"ghost\"/></shape>"));
     fails(&s, &["ref.xml:7:", "undefined id \"ghost\""]);
     let s = scene(
         dir,
         "dup.xml",
-        &format!(
-            "{LIGHT}\n    <bsdf type=\"diffuse\" id=\"a\"/>\n    <bsdf type=\"diffuse\" id=\"a\"/>"
-        ),
+        &format!("{LIGHT}\n    <bsdf type=\"diffuse\" id=\"a\"/>\n    <bsdf type=\"diffuse\" id=\"a\"/>"),
     );
     fails(&s, &["dup.xml:8:", "duplicate id \"a\""]);
     // A mesh file that is not a mesh.
-    std::fs::write(
-        dir.join("garbage.ply"),
-        b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n\xff\xfe",
-    )
-    .unwrap();
+    std::fs::write(dir.join("garbage.ply"), b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n\xff\xfe")
+        .unwrap();
     let s = scene(
         dir,
         "garbage.xml",
-        &format!(
-            "{LIGHT}\n    <shape type=\"ply\"><string name=\"filename\" value=\"garbage.ply\"/></shape>"
-        ),
+        &format!("{LIGHT}\n    <shape type=\"ply\"><string name=\"filename\" value=\"garbage.ply\"/></shape>"),
     );
     fails(&s, &["garbage.xml:7:", "garbage.ply"]);
     // A field of view out of range, and a scene with no light.
@@ -164,10 +123,7 @@ fn missing_scene_file_is_an_error() {
     let out = pcbpt(&["render", "/nonexistent/scene.xml", "--quiet"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(
-        err.contains("/nonexistent/scene.xml") && !err.contains("panicked"),
-        "{err}"
-    );
+    assert!(err.contains("/nonexistent/scene.xml") && !err.contains("panicked"), "{err}");
 }
 
 #[test]
@@ -177,10 +133,7 @@ fn render_writes_image_and_stats_and_compare_reads_them() {
     let exr = d.path().join("cb.exr");
     let png = d.path().join("cb.png");
     let stats = d.path().join("stats.json");
-    for (out, extra) in [
-        (&exr, vec!["--stats", stats.to_str().unwrap()]),
-        (&png, vec![]),
-    ] {
+    for (out, extra) in [(&exr, vec!["--stats", stats.to_str().unwrap()]), (&png, vec![])] {
         let mut args = vec![
             "render",
             scene.to_str().unwrap(),
@@ -200,24 +153,15 @@ fn render_writes_image_and_stats_and_compare_reads_them() {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(out.exists());
     }
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     assert_eq!(s["render"]["spp"], 4);
     assert_eq!(s["render"]["width"], 32);
     assert!(s["render"]["counters"]["shadow_rays"].as_u64().unwrap() > 0);
     let err_png = d.path().join("err.png");
-    let o = pcbpt(&[
-        "compare",
-        exr.to_str().unwrap(),
-        exr.to_str().unwrap(),
-        "--error-image",
-        err_png.to_str().unwrap(),
-    ]);
+    let o =
+        pcbpt(&["compare", exr.to_str().unwrap(), exr.to_str().unwrap(), "--error-image", err_png.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success() && text.contains("relMSE     0.0"),
-        "{text}"
-    );
+    assert!(o.status.success() && text.contains("relMSE     0.0"), "{text}");
     assert!(err_png.exists());
 }
 
@@ -225,20 +169,9 @@ fn render_writes_image_and_stats_and_compare_reads_them() {
 fn version_06_scene_is_upgraded() {
     // The door-ajar room in Mitsuba 0.6 syntax parses (camelCase names, uscale/vscale):
     // loading proceeds past the XML stage to the first plugin this renderer lacks.
-    let doc = pcbpt::scene::xml::parse_file(&root().join("scenes/veach-ajar/scene_v0.6.xml"), &[])
-        .unwrap();
-    let names: Vec<&str> = doc
-        .nodes
-        .iter()
-        .flat_map(|n| n.props.iter().map(|p| p.name.as_str()))
-        .collect();
-    assert!(
-        names.contains(&"to_world") && names.contains(&"sample_count") && names.contains(&"to_uv")
-    );
-    assert!(
-        !names
-            .iter()
-            .any(|n| n.chars().any(|c| c.is_ascii_uppercase()))
-    );
+    let doc = pcbpt::scene::xml::parse_file(&root().join("scenes/veach-ajar/scene_v0.6.xml"), &[]).unwrap();
+    let names: Vec<&str> = doc.nodes.iter().flat_map(|n| n.props.iter().map(|p| p.name.as_str())).collect();
+    assert!(names.contains(&"to_world") && names.contains(&"sample_count") && names.contains(&"to_uv"));
+    assert!(!names.iter().any(|n| n.chars().any(|c| c.is_ascii_uppercase())));
     assert_eq!(doc.params.get("max_depth").map(String::as_str), Some("13"));
 }

@@ -8,18 +8,11 @@ use pcbpt::integrator::IntegratorKind;
 
 #[test]
 fn path_tracer_is_bit_identical_with_1_and_2_threads() {
-    let scene = load(
-        &root().join("scenes/cornell-box/scene.xml"),
-        &[("resx", "48"), ("resy", "40")],
-        Backend::Embree,
-    );
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     let one = render(&scene, IntegratorKind::Path, 8, 42, 1);
     let two = render(&scene, IntegratorKind::Path, 8, 42, 2);
     assert!(
-        one.image
-            .iter()
-            .zip(&two.image)
-            .all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits))
+        one.image.iter().zip(&two.image).all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits))
     );
     let other = render(&scene, IntegratorKind::Path, 8, 43, 2);
     assert_ne!(one.image, other.image, "the seed must change the image");

@@ -9,37 +9,23 @@ use pcbpt::integrator::IntegratorKind;
 
 #[test]
 fn cornell_ply_matches_mitsuba() {
-    let scene = load(
-        &root().join("scenes/cornell-ply/cornell_mi.xml"),
-        &[],
-        Backend::Embree,
-    );
+    let scene = load(&root().join("scenes/cornell-ply/cornell_mi.xml"), &[], Backend::Embree);
     let reference = reference("cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr");
     let a = image(render(&scene, IntegratorKind::Path, 64, 1, 0));
     let b = image(render(&scene, IntegratorKind::Path, 64, 2, 0));
-    Verdict::new(&reference, &a, &b, 64, 4096)
-        .check("cornell-ply, path, 64 spp", 0.005, 1.3)
-        .unwrap();
+    Verdict::new(&reference, &a, &b, 64, 4096).check("cornell-ply, path, 64 spp", 0.005, 1.3).unwrap();
 }
 
 #[test]
 fn cornell_ply_missing_bounce_is_caught() {
     // Negative control: one bounce fewer than the reference must fail the same check.
-    let mut scene = load(
-        &root().join("scenes/cornell-ply/cornell_mi.xml"),
-        &[],
-        Backend::Embree,
-    );
+    let mut scene = load(&root().join("scenes/cornell-ply/cornell_mi.xml"), &[], Backend::Embree);
     scene.integrator.max_depth = 7;
     let reference = reference("cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr");
     let a = image(render(&scene, IntegratorKind::Path, 64, 1, 0));
     let b = image(render(&scene, IntegratorKind::Path, 64, 2, 0));
     let v = Verdict::new(&reference, &a, &b, 64, 4096);
-    assert!(
-        v.check("cornell-ply, path, max_depth 7", 0.005, 1.3)
-            .is_err(),
-        "a missing bounce went unnoticed"
-    );
+    assert!(v.check("cornell-ply, path, max_depth 7", 0.005, 1.3).is_err(), "a missing bounce went unnoticed");
 }
 
 #[test]
@@ -52,7 +38,5 @@ fn cornell_box_matches_mitsuba() {
     let reference = reference("cornell-box.exr");
     let a = image(render(&scene, IntegratorKind::Path, 128, 1, 0));
     let b = image(render(&scene, IntegratorKind::Path, 128, 2, 0));
-    Verdict::new(&reference, &a, &b, 128, 8192)
-        .check("cornell-box, path, 128 spp", 0.005, 1.3)
-        .unwrap();
+    Verdict::new(&reference, &a, &b, 128, 8192).check("cornell-box, path, 128 spp", 0.005, 1.3).unwrap();
 }

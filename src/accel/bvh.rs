@@ -28,17 +28,12 @@ impl ObvhsScene {
             match geom {
                 Geometry::Triangles { positions, indices } => {
                     for (i, t) in indices.iter().enumerate() {
-                        prims.push(Prim::Triangle {
-                            p: t.map(|k| positions[k as usize]),
-                        });
+                        prims.push(Prim::Triangle { p: t.map(|k| positions[k as usize]) });
                         ids.push((g as u32, i as u32));
                     }
                 }
                 Geometry::Sphere { center, radius } => {
-                    prims.push(Prim::Sphere {
-                        center: *center,
-                        radius: *radius,
-                    });
+                    prims.push(Prim::Sphere { center: *center, radius: *radius });
                     ids.push((g as u32, 0));
                 }
             }
@@ -47,10 +42,9 @@ impl ObvhsScene {
             .iter()
             .map(|p| match p {
                 Prim::Triangle { p } => Aabb::from_points(&p.map(Vec3A::from)),
-                Prim::Sphere { center, radius } => Aabb::new(
-                    Vec3A::from(*center - Vec3::splat(*radius)),
-                    Vec3A::from(*center + Vec3::splat(*radius)),
-                ),
+                Prim::Sphere { center, radius } => {
+                    Aabb::new(Vec3A::from(*center - Vec3::splat(*radius)), Vec3A::from(*center + Vec3::splat(*radius)))
+                }
             })
             .collect();
         let params = match options.quality {
@@ -59,26 +53,10 @@ impl ObvhsScene {
             BuildQuality::High => BvhBuildParams::slow_build(),
         };
         let mut build_time = std::time::Duration::ZERO;
-        let bvh = if aabbs.is_empty() {
-            CwBvh::default()
-        } else {
-            build_cwbvh(&aabbs, params, &mut build_time)
-        };
-        let ordered = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| prims[i as usize])
-            .collect();
-        let ordered_ids = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| ids[i as usize])
-            .collect();
-        ObvhsScene {
-            bvh,
-            prims: ordered,
-            ids: ordered_ids,
-        }
+        let bvh = if aabbs.is_empty() { CwBvh::default() } else { build_cwbvh(&aabbs, params, &mut build_time) };
+        let ordered = bvh.primitive_indices.iter().map(|&i| prims[i as usize]).collect();
+        let ordered_ids = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
+        ObvhsScene { bvh, prims: ordered, ids: ordered_ids }
     }
 
     fn bvh_ray(r: &Ray) -> obvhs::ray::Ray {
@@ -92,34 +70,27 @@ impl ObvhsScene {
         let mut best: Option<(f32, u32, f32, f32)> = None;
         let mut hit = RayHit::none();
         let mut ray = *r;
-        self.bvh
-            .ray_traverse(Self::bvh_ray(r), &mut hit, |_, id| match self.prims[id] {
-                Prim::Triangle { p } => match intersect_triangle(&ray, p[0], p[1], p[2]) {
-                    Some((t, u, v)) => {
-                        best = Some((t, id as u32, u, v));
-                        ray.tmax = t;
-                        t
-                    }
-                    None => f32::INFINITY,
-                },
-                Prim::Sphere { center, radius } => match intersect_sphere(&ray, center, radius) {
-                    Some(t) => {
-                        best = Some((t, id as u32, 0.0, 0.0));
-                        ray.tmax = t;
-                        t
-                    }
-                    None => f32::INFINITY,
-                },
-            });
+        self.bvh.ray_traverse(Self::bvh_ray(r), &mut hit, |_, id| match self.prims[id] {
+            Prim::Triangle { p } => match intersect_triangle(&ray, p[0], p[1], p[2]) {
+                Some((t, u, v)) => {
+                    best = Some((t, id as u32, u, v));
+                    ray.tmax = t;
+                    t
+                }
+                None => f32::INFINITY,
+            },
+            Prim::Sphere { center, radius } => match intersect_sphere(&ray, center, radius) {
+                Some(t) => {
+                    best = Some((t, id as u32, 0.0, 0.0));
+                    ray.tmax = t;
+                    t
+                }
+                None => f32::INFINITY,
+            },
+        });
         best.map(|(t, id, u, v)| {
             let (geom, prim) = self.ids[id as usize];
-            Hit {
-                t,
-                geom,
-                prim,
-                u,
-                v,
-            }
+            Hit { t, geom, prim, u, v }
         })
     }
 

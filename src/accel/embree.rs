@@ -31,21 +31,14 @@ const INVALID_ID: u32 = u32::MAX;
 /// Messages the device error callback has collected since the last check.
 type ErrorLog = Mutex<Vec<String>>;
 
-unsafe extern "C" fn error_callback(
-    user: *mut c_void,
-    code: ffi::RTCError,
-    message: *const c_char,
-) {
+unsafe extern "C" fn error_callback(user: *mut c_void, code: ffi::RTCError, message: *const c_char) {
     // SAFETY: `user` is the `ErrorLog` owned by the `Device` that registered this callback;
     // the device outlives every call Embree makes on it. `message` is a NUL-terminated
     // string owned by Embree for the duration of the call, or null.
     let (log, text) = unsafe {
         let log = &*(user as *const ErrorLog);
-        let text = if message.is_null() {
-            String::new()
-        } else {
-            CStr::from_ptr(message).to_string_lossy().into_owned()
-        };
+        let text =
+            if message.is_null() { String::new() } else { CStr::from_ptr(message).to_string_lossy().into_owned() };
         (log, text)
     };
     if let Ok(mut log) = log.lock() {
@@ -74,19 +67,13 @@ impl Device {
             // SAFETY: querying the error of a null device is allowed and returns the last
             // device-creation error.
             let code = unsafe { ffi::rtcGetDeviceError(ptr::null_mut()) };
-            return Err(AccelError::Embree(format!(
-                "rtcNewDevice failed ({code:?})"
-            )));
+            return Err(AccelError::Embree(format!("rtcNewDevice failed ({code:?})")));
         }
         let errors: Box<ErrorLog> = Box::new(Mutex::new(Vec::new()));
         // SAFETY: `raw` is a live device; the user pointer points into a Box that lives as
         // long as the `Device` (the box's heap address is stable when the struct moves).
         unsafe {
-            ffi::rtcSetDeviceErrorFunction(
-                raw,
-                Some(error_callback),
-                &*errors as *const ErrorLog as *mut c_void,
-            );
+            ffi::rtcSetDeviceErrorFunction(raw, Some(error_callback), &*errors as *const ErrorLog as *mut c_void);
         }
         Ok(Arc::new(Device { raw, errors }))
     }
@@ -95,19 +82,13 @@ impl Device {
     fn check(&self, what: &str) -> Result<(), AccelError> {
         // SAFETY: `self.raw` is a live device.
         let code = unsafe { ffi::rtcGetDeviceError(self.raw) };
-        let mut log = self
-            .errors
-            .lock()
-            .map_err(|_| AccelError::Embree("error log poisoned".into()))?;
+        let mut log = self.errors.lock().map_err(|_| AccelError::Embree("error log poisoned".into()))?;
         if !log.is_empty() || code != ffi::RTCError::RTC_ERROR_NONE {
             let mut messages: Vec<String> = log.drain(..).collect();
             if messages.is_empty() {
                 messages.push(format!("{code:?}"));
             }
-            return Err(AccelError::Embree(format!(
-                "{what}: {}",
-                messages.join("; ")
-            )));
+            return Err(AccelError::Embree(format!("{what}: {}", messages.join("; "))));
         }
         Ok(())
     }
@@ -165,10 +146,7 @@ fn quality(q: BuildQuality) -> ffi::RTCBuildQuality {
 
 impl EmbreeScene {
     /// Builds and commits a scene; geometry `i` gets geometry id `i`.
-    pub fn build(
-        geometry: &[Geometry<'_>],
-        options: BuildOptions,
-    ) -> Result<EmbreeScene, AccelError> {
+    pub fn build(geometry: &[Geometry<'_>], options: BuildOptions) -> Result<EmbreeScene, AccelError> {
         let device = Device::new()?;
         // SAFETY: `device.raw` is a live device.
         let raw = unsafe { ffi::rtcNewScene(device.raw) };
@@ -201,11 +179,7 @@ impl EmbreeScene {
         Ok(scene)
     }
 
-    fn new_geometry(
-        &self,
-        g: &Geometry<'_>,
-        q: BuildQuality,
-    ) -> Result<GeometryHandle, AccelError> {
+    fn new_geometry(&self, g: &Geometry<'_>, q: BuildQuality) -> Result<GeometryHandle, AccelError> {
         let kind = match g {
             Geometry::Triangles { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_TRIANGLE,
             Geometry::Sphere { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_SPHERE_POINT,
@@ -268,13 +242,10 @@ impl EmbreeScene {
     ) -> Result<&'g mut [T], AccelError> {
         // SAFETY: the geometry is live and not committed; slot 0 is valid for both buffer
         // types used here; the stride is the item size.
-        let ptr =
-            unsafe { ffi::rtcSetNewGeometryBuffer(geom.0, kind, 0, format, size_of::<T>(), count) };
+        let ptr = unsafe { ffi::rtcSetNewGeometryBuffer(geom.0, kind, 0, format, size_of::<T>(), count) };
         self.device.check("rtcSetNewGeometryBuffer")?;
         if ptr.is_null() {
-            return Err(AccelError::Embree(
-                "rtcSetNewGeometryBuffer returned null".into(),
-            ));
+            return Err(AccelError::Embree("rtcSetNewGeometryBuffer returned null".into()));
         }
         // SAFETY: Embree allocated `count * size_of::<T>()` bytes (plus padding), aligned to
         // at least 16 bytes, owned by the geometry, which lives as long as `'g` and is only
@@ -332,7 +303,7 @@ impl EmbreeScene {
     }
 
     fn hit(rh: &ffi::RTCRayHit) -> Option<Hit> {
-        (rh.hit.geomID != INVALID_ID).then(|| Hit {
+        (rh.hit.geomID != INVALID_ID).then_some(Hit {
             t: rh.ray.tfar,
             geom: rh.hit.geomID,
             prim: rh.hit.primID,
@@ -383,13 +354,7 @@ impl EmbreeScene {
             // SAFETY: `buf` holds `buf.len()` initialised ray/hit structs laid out with the
             // given stride; the scene is committed.
             unsafe {
-                ffi::rtcIntersect1M(
-                    self.raw,
-                    &mut ctx,
-                    buf.as_mut_ptr(),
-                    buf.len() as u32,
-                    size_of::<ffi::RTCRayHit>(),
-                )
+                ffi::rtcIntersect1M(self.raw, &mut ctx, buf.as_mut_ptr(), buf.len() as u32, size_of::<ffi::RTCRayHit>())
             };
         }
         #[cfg(embree4)]
@@ -408,13 +373,7 @@ impl EmbreeScene {
             let mut ctx = Self::context(coherent);
             // SAFETY: `buf` holds `buf.len()` initialised rays with the given stride.
             unsafe {
-                ffi::rtcOccluded1M(
-                    self.raw,
-                    &mut ctx,
-                    buf.as_mut_ptr(),
-                    buf.len() as u32,
-                    size_of::<ffi::RTCRay>(),
-                )
+                ffi::rtcOccluded1M(self.raw, &mut ctx, buf.as_mut_ptr(), buf.len() as u32, size_of::<ffi::RTCRay>())
             };
         }
         #[cfg(embree4)]

@@ -24,21 +24,11 @@ pub struct Ray {
 
 impl Ray {
     pub fn new(o: Vec3, d: Vec3) -> Ray {
-        Ray {
-            o,
-            d,
-            tmin: 0.0,
-            tmax: f32::INFINITY,
-        }
+        Ray { o, d, tmin: 0.0, tmax: f32::INFINITY }
     }
 
     pub fn segment(o: Vec3, d: Vec3, tmax: f32) -> Ray {
-        Ray {
-            o,
-            d,
-            tmin: 0.0,
-            tmax,
-        }
+        Ray { o, d, tmin: 0.0, tmax }
     }
 
     #[inline]
@@ -62,14 +52,8 @@ pub struct Hit {
 /// geometry id of a hit is the shape index.
 #[derive(Clone, Copy, Debug)]
 pub enum Geometry<'a> {
-    Triangles {
-        positions: &'a [Vec3],
-        indices: &'a [[u32; 3]],
-    },
-    Sphere {
-        center: Vec3,
-        radius: f32,
-    },
+    Triangles { positions: &'a [Vec3], indices: &'a [[u32; 3]] },
+    Sphere { center: Vec3, radius: f32 },
 }
 
 /// Build quality of the acceleration structure (Embree's `RTCBuildQuality`; for obvhs the
@@ -128,16 +112,10 @@ pub enum Accel {
 }
 
 impl Accel {
-    pub fn build(
-        backend: Backend,
-        geometry: &[Geometry<'_>],
-        options: BuildOptions,
-    ) -> Result<Accel, AccelError> {
+    pub fn build(backend: Backend, geometry: &[Geometry<'_>], options: BuildOptions) -> Result<Accel, AccelError> {
         validate(geometry)?;
         match backend {
-            Backend::Embree => Ok(Accel::Embree(embree::EmbreeScene::build(
-                geometry, options,
-            )?)),
+            Backend::Embree => Ok(Accel::Embree(embree::EmbreeScene::build(geometry, options)?)),
             #[cfg(feature = "obvhs")]
             Backend::Obvhs => Ok(Accel::Obvhs(bvh::ObvhsScene::build(geometry, options))),
             #[cfg(not(feature = "obvhs"))]
@@ -209,7 +187,7 @@ fn validate(geometry: &[Geometry<'_>]) -> Result<(), AccelError> {
                 }
             }
             Geometry::Sphere { center, radius } => {
-                if !center.is_finite() || !(radius.is_finite() && *radius > 0.0) {
+                if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
                     return bad(format!("sphere at {center} with radius {radius}"));
                 }
             }
@@ -264,8 +242,5 @@ pub fn intersect_sphere(ray: &Ray, center: Vec3, radius: f32) -> Option<f32> {
         std::mem::swap(&mut t0, &mut t1);
     }
     let (tmin, tmax) = (ray.tmin as f64, ray.tmax as f64);
-    [t0, t1]
-        .into_iter()
-        .find(|&t| t > tmin && t <= tmax)
-        .map(|t| t as f32)
+    [t0, t1].into_iter().find(|&t| t > tmin && t <= tmax).map(|t| t as f32)
 }

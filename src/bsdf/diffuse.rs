@@ -8,20 +8,12 @@ use std::f32::consts::FRAC_1_PI;
 
 #[inline]
 pub fn eval(reflectance: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
-    if wo.z <= 0.0 || wi.z <= 0.0 {
-        Rgb::ZERO
-    } else {
-        reflectance * FRAC_1_PI
-    }
+    if wo.z <= 0.0 || wi.z <= 0.0 { Rgb::ZERO } else { reflectance * FRAC_1_PI }
 }
 
 #[inline]
 pub fn pdf(wo: Vec3, wi: Vec3) -> f32 {
-    if wo.z <= 0.0 {
-        0.0
-    } else {
-        square_to_cosine_hemisphere_pdf(wi)
-    }
+    if wo.z <= 0.0 { 0.0 } else { square_to_cosine_hemisphere_pdf(wi) }
 }
 
 pub fn sample(reflectance: Rgb, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
@@ -34,11 +26,5 @@ pub fn sample(reflectance: Rgb, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
         return None;
     }
     // f cos / pdf = (ρ/π) cos / (cos/π) = ρ.
-    Some(BsdfSample {
-        wi,
-        f: reflectance * FRAC_1_PI,
-        pdf,
-        weight: reflectance,
-        delta: false,
-    })
+    Some(BsdfSample { wi, f: reflectance * FRAC_1_PI, pdf, weight: reflectance, delta: false })
 }

@@ -59,10 +59,7 @@ pub fn cos_theta(w: Vec3) -> f32 {
 
 impl Bsdf {
     pub fn diffuse(reflectance: Texture) -> Bsdf {
-        Bsdf {
-            model: BsdfModel::Diffuse { reflectance },
-            two_sided: false,
-        }
+        Bsdf { model: BsdfModel::Diffuse { reflectance }, two_sided: false }
     }
 
     /// `true` when every lobe is a Dirac delta (no light sampling possible).
@@ -100,20 +97,9 @@ impl Bsdf {
     }
 
     /// Samples `wi` given `wo` with the random numbers `u1` (lobe choice) and `u2`.
-    pub fn sample(
-        &self,
-        wo: Vec3,
-        uv: Vec2,
-        u1: f32,
-        u2: Vec2,
-        _mode: TransportMode,
-    ) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, uv: Vec2, u1: f32, u2: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
         let flip = self.two_sided && wo.z < 0.0;
-        let wo_f = if flip {
-            Vec3::new(wo.x, wo.y, -wo.z)
-        } else {
-            wo
-        };
+        let wo_f = if flip { Vec3::new(wo.x, wo.y, -wo.z) } else { wo };
         let _ = u1;
         let mut s = match &self.model {
             BsdfModel::Diffuse { reflectance } => diffuse::sample(reflectance.eval(uv), wo_f, u2)?,
@@ -134,10 +120,7 @@ mod tests {
         let t = Chi2Test::new(SphereDomain::default());
         let mut u1 = crate::sampling::Sampler::new(&[99]);
         t.run(
-            |u| {
-                b.sample(wo, Vec2::ZERO, u1.next_1d(), u, TransportMode::Radiance)
-                    .map(|s| s.wi)
-            },
+            |u| b.sample(wo, Vec2::ZERO, u1.next_1d(), u, TransportMode::Radiance).map(|s| s.wi),
             |wi| b.pdf(wo, wi, Vec2::ZERO, TransportMode::Radiance),
         )
         .assert_pass();
@@ -146,17 +129,10 @@ mod tests {
     #[test]
     fn diffuse_chi2_front_and_two_sided_back() {
         let d = Bsdf::diffuse(Texture::Constant(Vec3::splat(0.5)));
-        for wo in [
-            Vec3::Z,
-            Vec3::new(0.6, 0.0, 0.8),
-            Vec3::new(0.999, 0.0, 0.0447).normalize(),
-        ] {
+        for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.999, 0.0, 0.0447).normalize()] {
             check_bsdf(&d, wo);
         }
-        let two = Bsdf {
-            two_sided: true,
-            ..d.clone()
-        };
+        let two = Bsdf { two_sided: true, ..d.clone() };
         check_bsdf(&two, Vec3::new(0.3, 0.4, -0.866).normalize());
     }
 
@@ -166,15 +142,7 @@ mod tests {
         let wo = Vec3::new(0.1, 0.2, 0.97).normalize();
         let mut s = crate::sampling::Sampler::new(&[5]);
         for _ in 0..100 {
-            let bs = d
-                .sample(
-                    wo,
-                    Vec2::ZERO,
-                    s.next_1d(),
-                    s.next_2d(),
-                    TransportMode::Radiance,
-                )
-                .unwrap();
+            let bs = d.sample(wo, Vec2::ZERO, s.next_1d(), s.next_2d(), TransportMode::Radiance).unwrap();
             let f = d.eval(wo, bs.wi, Vec2::ZERO, TransportMode::Radiance);
             let pdf = d.pdf(wo, bs.wi, Vec2::ZERO, TransportMode::Radiance);
             assert!((bs.pdf - pdf).abs() < 1e-4 * pdf.max(1.0));
@@ -186,28 +154,9 @@ mod tests {
     fn one_sided_diffuse_is_black_from_behind() {
         let d = Bsdf::diffuse(Texture::Constant(Vec3::ONE));
         let below = Vec3::new(0.0, 0.6, -0.8);
-        assert_eq!(
-            d.eval(below, Vec3::Z, Vec2::ZERO, TransportMode::Radiance),
-            Vec3::ZERO
-        );
-        assert!(
-            d.sample(
-                below,
-                Vec2::ZERO,
-                0.5,
-                Vec2::splat(0.3),
-                TransportMode::Radiance
-            )
-            .is_none()
-        );
-        let two = Bsdf {
-            two_sided: true,
-            ..d
-        };
-        assert!(
-            two.eval(below, -Vec3::Z, Vec2::ZERO, TransportMode::Radiance)
-                .x
-                > 0.0
-        );
+        assert_eq!(d.eval(below, Vec3::Z, Vec2::ZERO, TransportMode::Radiance), Vec3::ZERO);
+        assert!(d.sample(below, Vec2::ZERO, 0.5, Vec2::splat(0.3), TransportMode::Radiance).is_none());
+        let two = Bsdf { two_sided: true, ..d };
+        assert!(two.eval(below, -Vec3::Z, Vec2::ZERO, TransportMode::Radiance).x > 0.0);
     }
 }

@@ -80,15 +80,7 @@ pub struct RenderOptions {
 
 impl RenderOptions {
     pub fn new(integrator: IntegratorKind, budget: Budget) -> RenderOptions {
-        RenderOptions {
-            integrator,
-            budget,
-            seed: 0,
-            threads: 0,
-            tile_size: 32,
-            progress: false,
-            stop: None,
-        }
+        RenderOptions { integrator, budget, seed: 0, threads: 0, tile_size: 32, progress: false, stop: None }
     }
 }
 
@@ -133,13 +125,7 @@ impl Estimator {
     }
 
     #[inline]
-    fn sample(
-        &self,
-        scene: &Scene,
-        pixel: (u32, u32),
-        sampler: &mut Sampler,
-        counters: &mut Counters,
-    ) -> (Vec2, Rgb) {
+    fn sample(&self, scene: &Scene, pixel: (u32, u32), sampler: &mut Sampler, counters: &mut Counters) -> (Vec2, Rgb) {
         let pos = Vec2::new(pixel.0 as f32, pixel.1 as f32) + sampler.next_2d();
         let ray = scene.camera.generate_ray(pos);
         counters.camera_rays += 1;
@@ -180,9 +166,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
         .build()
-        .map_err(|e| {
-            crate::error::Error::Usage(format!("cannot start {} threads: {e}", opts.threads))
-        })?;
+        .map_err(|e| crate::error::Error::Usage(format!("cannot start {} threads: {e}", opts.threads)))?;
     let threads = pool.current_num_threads();
     let (w, h) = (scene.film.width, scene.film.height);
     let est = Estimator::new(opts.integrator, scene);
@@ -207,10 +191,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 Budget::Spp(spp) => pass_spp.min(spp - done),
                 Budget::Time(_) => 1,
             };
-            let blocks: Vec<(ImageBlock, Counters)> = tile_list
-                .par_iter()
-                .map(|&t| render_tile(scene, &est, t, opts.seed, done, count))
-                .collect();
+            let blocks: Vec<(ImageBlock, Counters)> =
+                tile_list.par_iter().map(|&t| render_tile(scene, &est, t, opts.seed, done, count)).collect();
             for (b, c) in &blocks {
                 film.merge(b);
                 counters += *c;
@@ -220,24 +202,21 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             if let Some(bar) = &bar {
                 match opts.budget {
                     Budget::Spp(_) => bar.set_position(done as u64),
-                    Budget::Time(t) => bar.set_position(
-                        (start.elapsed().as_secs_f64() / t * 1000.0).min(1000.0) as u64,
-                    ),
+                    Budget::Time(t) => {
+                        bar.set_position((start.elapsed().as_secs_f64() / t * 1000.0).min(1000.0) as u64)
+                    }
                 }
                 let secs = start.elapsed().as_secs_f64().max(1e-9);
-                bar.set_message(format!(
-                    "{done} spp, {:.2} M samples/s",
-                    counters.samples as f64 / secs / 1e6
-                ));
+                bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
             }
             if opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst)) {
                 interrupted = true;
                 break;
             }
-            if let Budget::Time(t) = opts.budget {
-                if start.elapsed() >= Duration::from_secs_f64(t) {
-                    break;
-                }
+            if let Budget::Time(t) = opts.budget
+                && start.elapsed() >= Duration::from_secs_f64(t)
+            {
+                break;
             }
         }
     });
@@ -261,12 +240,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         invalid_samples: film.invalid_samples,
         interrupted,
     };
-    Ok(RenderOutput {
-        image: film.develop(),
-        width: w,
-        height: h,
-        stats,
-    })
+    Ok(RenderOutput { image: film.develop(), width: w, height: h, stats })
 }
 
 fn progress_bar(opts: &RenderOptions, w: u32, h: u32) -> Option<indicatif::ProgressBar> {
@@ -275,10 +249,7 @@ fn progress_bar(opts: &RenderOptions, w: u32, h: u32) -> Option<indicatif::Progr
         return None;
     }
     let (len, template) = match opts.budget {
-        Budget::Spp(spp) => (
-            spp as u64,
-            format!("{w}×{h} {{bar:40}} {{pos}}/{{len}} spp, ETA {{eta}} — {{msg}}"),
-        ),
+        Budget::Spp(spp) => (spp as u64, format!("{w}×{h} {{bar:40}} {{pos}}/{{len}} spp, ETA {{eta}} — {{msg}}")),
         Budget::Time(_) => (1000, format!("{w}×{h} {{bar:40}} {{elapsed}} — {{msg}}")),
     };
     let bar = indicatif::ProgressBar::new(len);

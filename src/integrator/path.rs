@@ -20,24 +20,14 @@ pub struct PathTracer {
 impl PathTracer {
     pub fn new(spec: &IntegratorSpec) -> PathTracer {
         PathTracer {
-            max_depth: if spec.max_depth < 0 {
-                u32::MAX
-            } else {
-                spec.max_depth as u32
-            },
+            max_depth: if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 },
             rr_depth: spec.rr_depth,
             hide_emitters: spec.hide_emitters,
         }
     }
 
     /// Radiance arriving along a camera ray.
-    pub fn li(
-        &self,
-        scene: &Scene,
-        mut ray: Ray,
-        sampler: &mut Sampler,
-        counters: &mut Counters,
-    ) -> Rgb {
+    pub fn li(&self, scene: &Scene, mut ray: Ray, sampler: &mut Sampler, counters: &mut Counters) -> Rgb {
         let mut l = Rgb::ZERO;
         let mut beta = Rgb::ONE;
         let mut depth = 0u32;
@@ -65,8 +55,7 @@ impl PathTracer {
                     } else if prev_delta {
                         l += beta * le;
                     } else {
-                        let pdf_light = scene.light_sampler.pmf(light_index)
-                            * light.pdf_li(&scene.shapes, prev_p, &si);
+                        let pdf_light = scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, prev_p, &si);
                         l += beta * le * power_heuristic(prev_pdf, pdf_light);
                     }
                 }
@@ -82,26 +71,23 @@ impl PathTracer {
             let u_light = sampler.next_1d();
             let u_light1 = sampler.next_1d();
             let u_light2 = sampler.next_2d();
-            if !bsdf.is_delta() {
-                if let Some((light_index, pmf, _)) = scene.light_sampler.sample(u_light) {
-                    let light = &scene.lights[light_index];
-                    if let Some(ls) = light.sample_li(&scene.shapes, si.p, u_light1, u_light2) {
-                        let wi = si.shading.to_local(ls.wi);
-                        let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance) * wi.z.abs();
-                        if f != Rgb::ZERO {
-                            counters.shadow_rays += 1;
-                            if !scene.occluded(&si.spawn_ray_to(ls.p)) {
-                                let pdf_light = pmf * ls.pdf;
-                                let w = if ls.delta {
-                                    1.0
-                                } else {
-                                    power_heuristic(
-                                        pdf_light,
-                                        bsdf.pdf(wo, wi, si.uv, TransportMode::Radiance),
-                                    )
-                                };
-                                l += beta * f * ls.li * (w / pdf_light);
-                            }
+            if !bsdf.is_delta()
+                && let Some((light_index, pmf, _)) = scene.light_sampler.sample(u_light)
+            {
+                let light = &scene.lights[light_index];
+                if let Some(ls) = light.sample_li(&scene.shapes, si.p, u_light1, u_light2) {
+                    let wi = si.shading.to_local(ls.wi);
+                    let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance) * wi.z.abs();
+                    if f != Rgb::ZERO {
+                        counters.shadow_rays += 1;
+                        if !scene.occluded(&si.spawn_ray_to(ls.p)) {
+                            let pdf_light = pmf * ls.pdf;
+                            let w = if ls.delta {
+                                1.0
+                            } else {
+                                power_heuristic(pdf_light, bsdf.pdf(wo, wi, si.uv, TransportMode::Radiance))
+                            };
+                            l += beta * f * ls.li * (w / pdf_light);
                         }
                     }
                 }

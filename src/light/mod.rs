@@ -36,9 +36,7 @@ impl Light {
     /// Emitted power (luminance), used for light selection.
     pub fn power(&self, shapes: &[Shape]) -> f32 {
         match self {
-            Light::Area { shape, radiance } => {
-                PI * shapes[*shape].area() * luminance(radiance.mean())
-            }
+            Light::Area { shape, radiance } => PI * shapes[*shape].area() * luminance(radiance.mean()),
             Light::Point { intensity, .. } => 4.0 * PI * luminance(*intensity),
         }
     }
@@ -59,19 +57,13 @@ impl Light {
     }
 
     /// Samples incident light at `reference`.
-    pub fn sample_li(
-        &self,
-        shapes: &[Shape],
-        reference: Vec3,
-        u1: f32,
-        u: Vec2,
-    ) -> Option<LightSample> {
+    pub fn sample_li(&self, shapes: &[Shape], reference: Vec3, u1: f32, u: Vec2) -> Option<LightSample> {
         match self {
             Light::Area { shape, .. } => {
                 let (ps, pdf) = shapes[*shape].sample_direction(reference, u1, u)?;
                 let d = ps.p - reference;
                 let dist = d.length();
-                if !(dist > 0.0) || !(pdf > 0.0) || !pdf.is_finite() {
+                if dist.is_nan() || dist <= 0.0 || !(pdf.is_finite() && pdf > 0.0) {
                     return None;
                 }
                 let wi = d / dist;
@@ -79,19 +71,9 @@ impl Light {
                 if li == Rgb::ZERO {
                     return None;
                 }
-                Some(LightSample {
-                    wi,
-                    p: ps.p,
-                    n: ps.n,
-                    li,
-                    pdf,
-                    delta: false,
-                })
+                Some(LightSample { wi, p: ps.p, n: ps.n, li, pdf, delta: false })
             }
-            Light::Point {
-                position,
-                intensity,
-            } => {
+            Light::Point { position, intensity } => {
                 let d = *position - reference;
                 let dist2 = d.length_squared();
                 if dist2 <= 0.0 {
@@ -134,9 +116,7 @@ impl LightSampler {
             return LightSampler { distribution: None };
         }
         let powers: Vec<f32> = lights.iter().map(|l| l.power(shapes)).collect();
-        LightSampler {
-            distribution: Some(Distribution1D::new(&powers)),
-        }
+        LightSampler { distribution: Some(Distribution1D::new(&powers)) }
     }
 
     /// Picks a light: its index, its probability, and `u` rescaled for reuse.
@@ -164,10 +144,7 @@ mod tests {
     /// χ² test of `sample_li` directions from `reference` against `pdf_li`, finding the
     /// point a direction sees with the shape's own ray test.
     fn check(shape: Shape, reference: Vec3) -> crate::sampling::chi2::Chi2Result {
-        let light = Light::Area {
-            shape: 0,
-            radiance: Texture::Constant(Vec3::ONE),
-        };
+        let light = Light::Area { shape: 0, radiance: Texture::Constant(Vec3::ONE) };
         let shapes = vec![shape];
         let accel = crate::accel::Accel::build(
             crate::accel::Backend::Embree,
@@ -178,11 +155,7 @@ mod tests {
         let mut u1 = crate::sampling::Sampler::new(&[17]);
         let t = Chi2Test::new(SphereDomain::default());
         t.run(
-            |u| {
-                light
-                    .sample_li(&shapes, reference, u1.next_1d(), u)
-                    .map(|s| s.wi)
-            },
+            |u| light.sample_li(&shapes, reference, u1.next_1d(), u).map(|s| s.wi),
             |w| {
                 let ray = Ray::new(reference, w);
                 match accel.intersect(&ray) {
@@ -223,8 +196,7 @@ mod tests {
         // A cube has triangles facing every way: only those facing the point emit towards it.
         let s = mesh_shape(
             mesh::cube(),
-            glam::Mat4::from_translation(Vec3::new(0.5, -2.0, 1.0))
-                * glam::Mat4::from_scale(Vec3::new(0.5, 1.0, 0.3)),
+            glam::Mat4::from_translation(Vec3::new(0.5, -2.0, 1.0)) * glam::Mat4::from_scale(Vec3::new(0.5, 1.0, 0.3)),
         );
         check(s, Vec3::ZERO).assert_pass();
     }
@@ -232,10 +204,7 @@ mod tests {
     #[test]
     fn sphere_light_sampling_chi2() {
         let mut s = Shape::new(
-            ShapeGeometry::Sphere {
-                center: Vec3::new(0.0, 1.0, 2.0),
-                radius: 0.8,
-            },
+            ShapeGeometry::Sphere { center: Vec3::new(0.0, 1.0, 2.0), radius: 0.8 },
             0,
             false,
             "sphere".into(),
@@ -253,22 +222,14 @@ mod tests {
         // Negative control: claim the area density without the cosine term.
         let s = mesh_shape(
             mesh::rectangle(),
-            glam::Mat4::from_translation(Vec3::new(0.0, 0.0, 1.0))
-                * glam::Mat4::from_rotation_x(PI),
+            glam::Mat4::from_translation(Vec3::new(0.0, 0.0, 1.0)) * glam::Mat4::from_rotation_x(PI),
         );
-        let light = Light::Area {
-            shape: 0,
-            radiance: Texture::Constant(Vec3::ONE),
-        };
+        let light = Light::Area { shape: 0, radiance: Texture::Constant(Vec3::ONE) };
         let shapes = vec![s];
         let mut u1 = crate::sampling::Sampler::new(&[3]);
         let t = Chi2Test::new(SphereDomain::default());
         let r = t.run(
-            |u| {
-                light
-                    .sample_li(&shapes, Vec3::ZERO, u1.next_1d(), u)
-                    .map(|s| s.wi)
-            },
+            |u| light.sample_li(&shapes, Vec3::ZERO, u1.next_1d(), u).map(|s| s.wi),
             |w| {
                 if w.z <= 0.0 {
                     return 0.0;

@@ -23,10 +23,7 @@ pub struct SphereDomain {
 
 impl Default for SphereDomain {
     fn default() -> Self {
-        SphereDomain {
-            res_z: 24,
-            res_phi: 48,
-        }
+        SphereDomain { res_z: 24, res_phi: 48 }
     }
 }
 
@@ -97,38 +94,18 @@ fn grid(f: &mut dyn FnMut(f64, f64) -> f64, z0: f64, z1: f64, p0: f64, p1: f64) 
     v
 }
 
-fn adaptive(
-    f: &mut dyn FnMut(f64, f64) -> f64,
-    z0: f64,
-    z1: f64,
-    p0: f64,
-    p1: f64,
-    depth: u32,
-) -> f64 {
+fn adaptive(f: &mut dyn FnMut(f64, f64) -> f64, z0: f64, z1: f64, p0: f64, p1: f64, depth: u32) -> f64 {
     const MAX_DEPTH: u32 = 6;
     let area = (z1 - z0) * (p1 - p0);
     let whole = simpson(&grid(f, z0, z1, p0, p1), area);
     let (zm, pm) = (0.5 * (z0 + z1), 0.5 * (p0 + p1));
-    let quarters = [
-        (z0, zm, p0, pm),
-        (z0, zm, pm, p1),
-        (zm, z1, p0, pm),
-        (zm, z1, pm, p1),
-    ];
-    let parts: Vec<f64> = quarters
-        .iter()
-        .map(|&(a, b, c, d)| simpson(&grid(f, a, b, c, d), area / 4.0))
-        .collect();
+    let quarters = [(z0, zm, p0, pm), (z0, zm, pm, p1), (zm, z1, p0, pm), (zm, z1, pm, p1)];
+    let parts: Vec<f64> = quarters.iter().map(|&(a, b, c, d)| simpson(&grid(f, a, b, c, d), area / 4.0)).collect();
     let sum: f64 = parts.iter().sum();
-    if depth >= MAX_DEPTH
-        || (sum - whole).abs() <= 1e-5 * area.max(1e-12) * 4f64.powi(depth as i32).sqrt()
-    {
+    if depth >= MAX_DEPTH || (sum - whole).abs() <= 1e-5 * area.max(1e-12) * 4f64.powi(depth as i32).sqrt() {
         return sum;
     }
-    quarters
-        .iter()
-        .map(|&(a, b, c, d)| adaptive(f, a, b, c, d, depth + 1))
-        .sum()
+    quarters.iter().map(|&(a, b, c, d)| adaptive(f, a, b, c, d, depth + 1)).sum()
 }
 
 /// The outcome of one χ² test.
@@ -160,12 +137,7 @@ impl fmt::Display for Chi2Result {
         write!(
             f,
             "χ² = {:.1} with {} dof, p = {:.3e} (significance {:.1e}), ∫pdf = {:.4}, {:.4} of samples valid",
-            self.statistic,
-            self.dof,
-            self.p_value,
-            self.significance,
-            self.pdf_integral,
-            self.success_fraction
+            self.statistic, self.dof, self.p_value, self.significance, self.pdf_integral, self.success_fraction
         )?;
         if let Some(m) = &self.message {
             write!(f, "; {m}")?;
@@ -186,13 +158,7 @@ pub struct Chi2Test {
 
 impl Chi2Test {
     pub fn new(domain: SphereDomain) -> Chi2Test {
-        Chi2Test {
-            domain,
-            samples: 400_000,
-            seed: 1,
-            significance: 0.01,
-            tests: 1,
-        }
+        Chi2Test { domain, samples: 400_000, seed: 1, significance: 0.01, tests: 1 }
     }
 
     /// Runs the test: `sample` maps a uniform point of the unit square to a direction (or
@@ -229,9 +195,7 @@ impl Chi2Test {
             r.message = Some(format!("{outside} samples were not unit vectors"));
         } else if pdf_integral > 1.0 + 1e-3 {
             r.message = Some(format!("the pdf integrates to {pdf_integral:.4} > 1"));
-        } else if (pdf_integral - success_fraction).abs()
-            > 2e-3 + 5.0 / (self.samples as f64).sqrt()
-        {
+        } else if (pdf_integral - success_fraction).abs() > 2e-3 + 5.0 / (self.samples as f64).sqrt() {
             r.message = Some(format!(
                 "the pdf integrates to {pdf_integral:.4} but {success_fraction:.4} of the samples succeeded"
             ));
@@ -252,9 +216,7 @@ fn pearson(counts: &[u64], expected: &[f64], significance: f64, tests: usize) ->
     for &i in &order {
         let (o, e) = (counts[i] as f64, expected[i]);
         if e <= 0.0 && o > 0.0 {
-            message = Some(format!(
-                "cell {i} received {o} samples where the pdf is zero"
-            ));
+            message = Some(format!("cell {i} received {o} samples where the pdf is zero"));
         }
         if e < 5.0 {
             pool_obs += o;

@@ -15,39 +15,19 @@ impl Distribution1D {
         let mut sum = 0.0f64;
         let mut cmf = Vec::with_capacity(weights.len());
         for &w in weights {
-            sum += if w.is_finite() && w > 0.0 {
-                w as f64
-            } else {
-                0.0
-            };
+            sum += if w.is_finite() && w > 0.0 { w as f64 } else { 0.0 };
             cmf.push(sum);
         }
         let n = weights.len();
         if sum > 0.0 && sum.is_finite() {
-            let pmf = weights
-                .iter()
-                .map(|&w| {
-                    if w.is_finite() && w > 0.0 {
-                        (w as f64 / sum) as f32
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
+            let pmf =
+                weights.iter().map(|&w| if w.is_finite() && w > 0.0 { (w as f64 / sum) as f32 } else { 0.0 }).collect();
             let cmf = cmf.iter().map(|&c| (c / sum) as f32).collect();
-            Distribution1D {
-                pmf,
-                cmf,
-                total: sum,
-            }
+            Distribution1D { pmf, cmf, total: sum }
         } else {
             let pmf = vec![1.0 / n.max(1) as f32; n];
             let cmf = (1..=n).map(|i| i as f32 / n as f32).collect();
-            Distribution1D {
-                pmf,
-                cmf,
-                total: 0.0,
-            }
+            Distribution1D { pmf, cmf, total: 0.0 }
         }
     }
 
@@ -81,11 +61,7 @@ impl Distribution1D {
         }
         let lo = if i == 0 { 0.0 } else { self.cmf[i - 1] };
         let p = self.pmf[i];
-        let rescaled = if p > 0.0 {
-            ((u - lo) / p).clamp(0.0, 1.0 - f32::EPSILON)
-        } else {
-            0.0
-        };
+        let rescaled = if p > 0.0 { ((u - lo) / p).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 };
         (i, rescaled)
     }
 }

@@ -23,9 +23,7 @@ pub fn mix64(mut z: u64) -> u64 {
 /// Hash of several 64-bit words, order-sensitive.
 #[inline]
 pub fn hash_words(words: &[u64]) -> u64 {
-    words.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, &w| {
-        mix64(h ^ mix64(w.wrapping_add(0x632b_e59b_d9b4_e019)))
-    })
+    words.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, &w| mix64(h ^ mix64(w.wrapping_add(0x632b_e59b_d9b4_e019))))
 }
 
 /// The `independent` sampler: a PCG32 stream seeded from a hash of (seed, pass, pixel),
@@ -38,9 +36,7 @@ impl Sampler {
     /// A sampler for one stream identified by `key` (e.g. `[seed, pass, pixel]`).
     pub fn new(key: &[u64]) -> Sampler {
         let h = hash_words(key);
-        Sampler {
-            rng: Pcg32::new(h, mix64(h ^ 0xda3e_39cb_94b9_5bdb)),
-        }
+        Sampler { rng: Pcg32::new(h, mix64(h ^ 0xda3e_39cb_94b9_5bdb)) }
     }
 
     /// A uniform number in `[0, 1)`.
@@ -68,11 +64,8 @@ pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
     if a == Vec2::ZERO {
         return Vec2::ZERO;
     }
-    let (r, theta) = if a.x.abs() > a.y.abs() {
-        (a.x, PI / 4.0 * (a.y / a.x))
-    } else {
-        (a.y, PI / 2.0 - PI / 4.0 * (a.x / a.y))
-    };
+    let (r, theta) =
+        if a.x.abs() > a.y.abs() { (a.x, PI / 4.0 * (a.y / a.x)) } else { (a.y, PI / 2.0 - PI / 4.0 * (a.x / a.y)) };
     Vec2::new(r * theta.cos(), r * theta.sin())
 }
 
@@ -158,18 +151,13 @@ mod tests {
     #[test]
     fn cosine_hemisphere_chi2() {
         let t = Chi2Test::new(SphereDomain::default());
-        t.run(
-            |u| square_to_cosine_hemisphere(u),
-            square_to_cosine_hemisphere_pdf,
-        )
-        .assert_pass();
+        t.run(square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf).assert_pass();
     }
 
     #[test]
     fn uniform_sphere_chi2() {
         let t = Chi2Test::new(SphereDomain::default());
-        t.run(square_to_uniform_sphere, |_| UNIFORM_SPHERE_PDF)
-            .assert_pass();
+        t.run(square_to_uniform_sphere, |_| UNIFORM_SPHERE_PDF).assert_pass();
     }
 
     #[test]
@@ -179,11 +167,7 @@ mod tests {
         t.run(
             |u| square_to_uniform_cone(u, cos_max),
             |v| {
-                if v.z >= cos_max {
-                    square_to_uniform_cone_pdf(cos_max)
-                } else {
-                    0.0
-                }
+                if v.z >= cos_max { square_to_uniform_cone_pdf(cos_max) } else { 0.0 }
             },
         )
         .assert_pass();
@@ -194,19 +178,13 @@ mod tests {
         // Negative control: cosine-weighted samples tested against the uniform-hemisphere
         // pdf must be rejected, or the harness cannot tell a wrong sampler from a right one.
         let t = Chi2Test::new(SphereDomain::default());
-        let r = t.run(square_to_cosine_hemisphere, |v| {
-            if v.z > 0.0 { 1.0 / (2.0 * PI) } else { 0.0 }
-        });
+        let r = t.run(square_to_cosine_hemisphere, |v| if v.z > 0.0 { 1.0 / (2.0 * PI) } else { 0.0 });
         assert!(!r.passed(), "{r}");
         // ... and a subtly wrong sampler (a cone slightly wider than its pdf says).
         let r = t.run(
             |u| square_to_uniform_cone(u, 0.69),
             |v| {
-                if v.z >= 0.7 {
-                    square_to_uniform_cone_pdf(0.7)
-                } else {
-                    0.0
-                }
+                if v.z >= 0.7 { square_to_uniform_cone_pdf(0.7) } else { 0.0 }
             },
         );
         assert!(!r.passed(), "{r}");
@@ -231,10 +209,7 @@ mod tests {
             };
             cells[idx] += 1;
         }
-        let chi: f64 = cells
-            .iter()
-            .map(|&c| (c as f64 - 10000.0).powi(2) / 10000.0)
-            .sum();
+        let chi: f64 = cells.iter().map(|&c| (c as f64 - 10000.0).powi(2) / 10000.0).sum();
         assert!(chi < 16.27, "chi2 {chi} for {cells:?}"); // p = 0.001 with 3 dof
     }
 }

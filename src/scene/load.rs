@@ -72,16 +72,12 @@ impl Scene {
                     b.texture_node(child.node)?;
                 }
                 t => {
-                    return Err(Error::input(
-                        &node.loc,
-                        format!("<{t}> plugins are not supported by this renderer"),
-                    ));
+                    return Err(Error::input(&node.loc, format!("<{t}> plugins are not supported by this renderer")));
                 }
             }
         }
         doc.check_unused(doc.root)?;
-        let (camera, film, sampler) =
-            sensor.ok_or_else(|| Error::input(&root.loc, "the scene has no <sensor>"))?;
+        let (camera, film, sampler) = sensor.ok_or_else(|| Error::input(&root.loc, "the scene has no <sensor>"))?;
         let integrator = integrator.unwrap_or(IntegratorSpec {
             plugin: "path".into(),
             max_depth: -1,
@@ -89,14 +85,13 @@ impl Scene {
             hide_emitters: false,
         });
         if b.lights.is_empty() {
-            return Err(Error::input(
-                &root.loc,
-                "the scene has no emitters: the image would be black",
-            ));
+            return Err(Error::input(&root.loc, "the scene has no emitters: the image would be black"));
         }
         for (o, _) in &options.overrides {
             if !doc.params.contains_key(o) {
-                b.stats.warnings.push(format!("parameter -D {o}=… is not declared by a <default> in the scene and was used only where referenced"));
+                b.stats.warnings.push(format!(
+                    "parameter -D {o}=… is not declared by a <default> in the scene and was used only where referenced"
+                ));
             }
         }
         for s in &mut b.shapes {
@@ -138,10 +133,7 @@ fn positive(node: &Node, name: &str, v: f32) -> Result<f32> {
     if v > 0.0 && v.is_finite() {
         Ok(v)
     } else {
-        Err(Error::input(
-            &node.prop_loc(name),
-            format!("\"{name}\" must be positive, got {v}"),
-        ))
+        Err(Error::input(&node.prop_loc(name), format!("\"{name}\" must be positive, got {v}")))
     }
 }
 
@@ -149,10 +141,7 @@ fn non_negative_rgb(node: &Node, name: &str, v: Vec3) -> Result<Vec3> {
     if v.is_finite() && v.min_element() >= 0.0 {
         Ok(v)
     } else {
-        Err(Error::input(
-            &node.prop_loc(name),
-            format!("\"{name}\" must be finite and non-negative, got {v}"),
-        ))
+        Err(Error::input(&node.prop_loc(name), format!("\"{name}\" must be finite and non-negative, got {v}")))
     }
 }
 
@@ -161,17 +150,19 @@ impl<'d> Builder<'d> {
         self.doc.node(id)
     }
 
+    /// The one nested object of `tag` in `id`, if any; two are an error (`what` names them).
+    fn single_child(&self, id: NodeId, tag: &str, what: &str) -> Result<Option<NodeId>> {
+        let nodes: Vec<NodeId> = self.doc.children(id, tag).map(|c| c.node).collect();
+        match nodes.as_slice() {
+            [] => Ok(None),
+            [one] => Ok(Some(*one)),
+            [_, second, ..] => Err(Error::input(&self.node(*second).loc, format!("{what} can have only one <{tag}>"))),
+        }
+    }
+
     fn unknown_plugin(&self, id: NodeId, known: &[&str]) -> Error {
         let n = self.node(id);
-        Error::input(
-            &n.loc,
-            format!(
-                "unknown {} plugin \"{}\" (supported: {})",
-                n.tag,
-                n.plugin,
-                known.join(", ")
-            ),
-        )
+        Error::input(&n.loc, format!("unknown {} plugin \"{}\" (supported: {})", n.tag, n.plugin, known.join(", ")))
     }
 
     /// A colour property that Mitsuba would also accept as a texture.
@@ -187,17 +178,13 @@ impl<'d> Builder<'d> {
             })
             .collect();
         match (node.rgb(name)?, nested.as_slice()) {
-            (Some(_), [t, ..]) => Err(Error::input(
-                &self.node(*t).loc,
-                format!("\"{name}\" is given both as a value and as a texture"),
-            )),
+            (Some(_), [t, ..]) => {
+                Err(Error::input(&self.node(*t).loc, format!("\"{name}\" is given both as a value and as a texture")))
+            }
             (Some(v), []) => Ok(Texture::Constant(non_negative_rgb(node, name, v)?)),
             (None, []) => Ok(Texture::Constant(default)),
             (None, [t]) => self.texture_node(*t),
-            (None, [_, t, ..]) => Err(Error::input(
-                &self.node(*t).loc,
-                format!("\"{name}\" is given twice"),
-            )),
+            (None, [_, t, ..]) => Err(Error::input(&self.node(*t).loc, format!("\"{name}\" is given twice"))),
         }
     }
 
@@ -229,10 +216,7 @@ impl<'d> Builder<'d> {
                         b
                     }
                     [] => {
-                        return Err(Error::input(
-                            &self.node(id).loc,
-                            "twosided needs a nested <bsdf>",
-                        ));
+                        return Err(Error::input(&self.node(id).loc, "twosided needs a nested <bsdf>"));
                     }
                     _ => {
                         return Err(Error::input(
@@ -250,20 +234,13 @@ impl<'d> Builder<'d> {
     }
 
     fn resolve_path(&self, node: &Node, name: &str) -> Result<PathBuf> {
-        let f = node.string(name)?.ok_or_else(|| {
-            Error::input(
-                &node.loc,
-                format!("{} \"{}\" needs a \"{name}\"", node.tag, node.plugin),
-            )
-        })?;
+        let f = node
+            .string(name)?
+            .ok_or_else(|| Error::input(&node.loc, format!("{} \"{}\" needs a \"{name}\"", node.tag, node.plugin)))?;
         Ok(self.base.join(f))
     }
 
-    fn load_mesh(
-        &self,
-        node: &Node,
-        loader: fn(&Path) -> Result<TriangleMesh>,
-    ) -> Result<TriangleMesh> {
+    fn load_mesh(&self, node: &Node, loader: fn(&Path) -> Result<TriangleMesh>) -> Result<TriangleMesh> {
         let path = self.resolve_path(node, "filename")?;
         if !path.is_file() {
             return Err(Error::input(
@@ -281,23 +258,16 @@ impl<'d> Builder<'d> {
         let name = node.id.clone().unwrap_or_else(|| node.plugin.clone());
         let geometry = match node.plugin.as_str() {
             "obj" | "ply" => {
-                let mut m = self.load_mesh(
-                    node,
-                    if node.plugin == "obj" {
-                        mesh::load_obj
-                    } else {
-                        mesh::load_ply
-                    },
-                )?;
+                let mut m = self.load_mesh(node, if node.plugin == "obj" { mesh::load_obj } else { mesh::load_ply })?;
                 if node.boolean_or("face_normals", false)? {
                     m.normals = None;
                 }
                 // Mitsuba flips OBJ texture coordinates by default (`flip_tex_coords`).
                 let flip_default = node.plugin == "obj";
-                if node.boolean_or("flip_tex_coords", flip_default)? {
-                    if let Some(uv) = &mut m.uvs {
-                        uv.iter_mut().for_each(|t| t.y = 1.0 - t.y);
-                    }
+                if node.boolean_or("flip_tex_coords", flip_default)?
+                    && let Some(uv) = &mut m.uvs
+                {
+                    uv.iter_mut().for_each(|t| t.y = 1.0 - t.y);
                 }
                 m.transform(&to_world);
                 ShapeGeometry::Mesh(m)
@@ -321,39 +291,21 @@ impl<'d> Builder<'d> {
                 let radius = positive(node, "radius", node.float_or("radius", 1.0)?)?;
                 let c = to_world.point(center);
                 let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| to_world.vector(a).length());
-                if (axes[0] - axes[1]).abs() > 1e-4 * axes[0]
-                    || (axes[0] - axes[2]).abs() > 1e-4 * axes[0]
-                {
-                    return Err(Error::input(
-                        &node.prop_loc("to_world"),
-                        "a sphere's to_world must scale uniformly",
-                    ));
+                if (axes[0] - axes[1]).abs() > 1e-4 * axes[0] || (axes[0] - axes[2]).abs() > 1e-4 * axes[0] {
+                    return Err(Error::input(&node.prop_loc("to_world"), "a sphere's to_world must scale uniformly"));
                 }
-                ShapeGeometry::Sphere {
-                    center: c,
-                    radius: radius * axes[0],
-                }
+                ShapeGeometry::Sphere { center: c, radius: radius * axes[0] }
             }
             _ => {
-                return Err(
-                    self.unknown_plugin(id, &["obj", "ply", "rectangle", "cube", "disk", "sphere"])
-                );
+                return Err(self.unknown_plugin(id, &["obj", "ply", "rectangle", "cube", "disk", "sphere"]));
             }
         };
-        let bsdfs: Vec<NodeId> = self.doc.children(id, "bsdf").map(|c| c.node).collect();
-        let bsdf = match bsdfs.as_slice() {
-            [] => {
-                self.bsdfs
-                    .push(Bsdf::diffuse(Texture::Constant(Vec3::splat(0.5))));
+        let bsdf = match self.single_child(id, "bsdf", "a shape")? {
+            None => {
+                self.bsdfs.push(Bsdf::diffuse(Texture::Constant(Vec3::splat(0.5))));
                 self.bsdfs.len() - 1
             }
-            [b] => self.bsdf(*b)?,
-            [_, b, ..] => {
-                return Err(Error::input(
-                    &self.node(*b).loc,
-                    "a shape can have only one BSDF",
-                ));
-            }
+            Some(b) => self.bsdf(b)?,
         };
         let mut shape = Shape::new(geometry, bsdf, flip_normals, name);
         if let ShapeGeometry::Mesh(m) = &shape.geometry {
@@ -361,31 +313,24 @@ impl<'d> Builder<'d> {
             let degenerate = m.degenerate_count();
             if degenerate > 0 {
                 self.stats.degenerate_triangles += degenerate;
-                self.stats.warnings.push(format!("{}: shape \"{}\" has {degenerate} degenerate (zero-area) triangles; they are never hit", node.loc, shape.name));
+                self.stats.warnings.push(format!(
+                    "{}: shape \"{}\" has {degenerate} degenerate (zero-area) triangles; they are never hit",
+                    node.loc, shape.name
+                ));
             }
         } else {
             self.stats.spheres += 1;
         }
-        let emitters: Vec<NodeId> = self.doc.children(id, "emitter").map(|c| c.node).collect();
-        match emitters.as_slice() {
-            [] => {}
-            [e] => {
-                if !(shape.area() > 0.0) {
-                    return Err(Error::input(
-                        &self.node(*e).loc,
-                        format!("the emitting shape \"{}\" has zero area", shape.name),
-                    ));
-                }
-                let light = self.emitter(*e, Some(self.shapes.len()))?;
-                shape.light = Some(self.lights.len());
-                self.lights.push(light);
-            }
-            [_, e, ..] => {
+        if let Some(e) = self.single_child(id, "emitter", "a shape")? {
+            if shape.area().is_nan() || shape.area() <= 0.0 {
                 return Err(Error::input(
-                    &self.node(*e).loc,
-                    "a shape can have only one emitter",
+                    &self.node(e).loc,
+                    format!("the emitting shape \"{}\" has zero area", shape.name),
                 ));
             }
+            let light = self.emitter(e, Some(self.shapes.len()))?;
+            shape.light = Some(self.lights.len());
+            self.lights.push(light);
         }
         self.doc.check_unused(id)?;
         self.shapes.push(shape);
@@ -395,43 +340,24 @@ impl<'d> Builder<'d> {
     fn emitter(&mut self, id: NodeId, shape: Option<usize>) -> Result<Light> {
         let node = self.doc.node(id);
         let light = match (node.plugin.as_str(), shape) {
-            ("area", Some(shape)) => Light::Area {
-                shape,
-                radiance: self.texture_prop(id, "radiance", Vec3::ONE)?,
-            },
+            ("area", Some(shape)) => Light::Area { shape, radiance: self.texture_prop(id, "radiance", Vec3::ONE)? },
             ("area", None) => {
-                return Err(Error::input(
-                    &node.loc,
-                    "an area emitter must be nested in a <shape>",
-                ));
+                return Err(Error::input(&node.loc, "an area emitter must be nested in a <shape>"));
             }
             ("point", None) => {
                 let pos = match (node.vector("position")?, node.transform("to_world")?) {
                     (Some(_), Some(_)) => {
-                        return Err(Error::input(
-                            &node.loc,
-                            "give either \"position\" or \"to_world\", not both",
-                        ));
+                        return Err(Error::input(&node.loc, "give either \"position\" or \"to_world\", not both"));
                     }
                     (Some(p), None) => p,
                     (None, Some(m)) => m.transform_point3(Vec3::ZERO),
                     (None, None) => Vec3::ZERO,
                 };
-                let intensity = non_negative_rgb(
-                    node,
-                    "intensity",
-                    node.rgb("intensity")?.unwrap_or(Vec3::ONE),
-                )?;
-                Light::Point {
-                    position: pos,
-                    intensity,
-                }
+                let intensity = non_negative_rgb(node, "intensity", node.rgb("intensity")?.unwrap_or(Vec3::ONE))?;
+                Light::Point { position: pos, intensity }
             }
             ("point", Some(_)) => {
-                return Err(Error::input(
-                    &node.loc,
-                    "a point emitter cannot be attached to a shape",
-                ));
+                return Err(Error::input(&node.loc, "a point emitter cannot be attached to a shape"));
             }
             _ => return Err(self.unknown_plugin(id, &["area", "point"])),
         };
@@ -445,40 +371,28 @@ impl<'d> Builder<'d> {
             return Err(self.unknown_plugin(id, &["perspective"]));
         }
         let to_world = node.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
-        if !(to_world.determinant().abs() > 1e-12) {
-            return Err(Error::input(
-                &node.prop_loc("to_world"),
-                "the sensor's to_world is singular",
-            ));
+        let det = to_world.determinant();
+        if det.is_nan() || det.abs() <= 1e-12 {
+            return Err(Error::input(&node.prop_loc("to_world"), "the sensor's to_world is singular"));
         }
         let fov = match (node.float("fov")?, node.string("focal_length")?) {
             (Some(_), Some(_)) => {
-                return Err(Error::input(
-                    &node.loc,
-                    "give either \"fov\" or \"focal_length\", not both",
-                ));
+                return Err(Error::input(&node.loc, "give either \"fov\" or \"focal_length\", not both"));
             }
             (Some(f), None) => f,
             (None, Some(fl)) => {
                 let mm: f32 = fl.trim_end_matches("mm").trim().parse().map_err(|_| {
-                    Error::input(
-                        &node.prop_loc("focal_length"),
-                        format!("focal length \"{fl}\" is not like \"50mm\""),
-                    )
+                    Error::input(&node.prop_loc("focal_length"), format!("focal length \"{fl}\" is not like \"50mm\""))
                 })?;
                 // Mitsuba: the focal length of a 35 mm film (36 mm wide), along the diagonal.
                 let fov = 2.0
-                    * ((36.0f32 * 36.0 + 24.0 * 24.0).sqrt()
-                        / (2.0 * positive(node, "focal_length", mm)?))
-                    .atan()
-                    .to_degrees();
+                    * ((36.0f32 * 36.0 + 24.0 * 24.0).sqrt() / (2.0 * positive(node, "focal_length", mm)?))
+                        .atan()
+                        .to_degrees();
                 return self.finish_sensor(id, to_world, fov, Some(FovAxis::Diagonal));
             }
             (None, None) => {
-                return Err(Error::input(
-                    &node.loc,
-                    "the perspective sensor needs a \"fov\"",
-                ));
+                return Err(Error::input(&node.loc, "the perspective sensor needs a \"fov\""));
             }
         };
         self.finish_sensor(id, to_world, fov, None)
@@ -513,46 +427,18 @@ impl<'d> Builder<'d> {
         let near = positive(node, "near_clip", node.float_or("near_clip", 0.01)?)?;
         let far = positive(node, "far_clip", node.float_or("far_clip", 10000.0)?)?;
         if far <= near {
-            return Err(Error::input(
-                &node.prop_loc("far_clip"),
-                "far_clip must exceed near_clip",
-            ));
+            return Err(Error::input(&node.prop_loc("far_clip"), "far_clip must exceed near_clip"));
         }
-        let films: Vec<NodeId> = self.doc.children(id, "film").map(|c| c.node).collect();
-        let film = match films.as_slice() {
-            [] => FilmSpec {
-                width: 768,
-                height: 576,
-                filter: Filter::Gaussian { stddev: 0.5 },
-            },
-            [f] => self.film(*f)?,
-            [_, f, ..] => {
-                return Err(Error::input(
-                    &self.node(*f).loc,
-                    "a sensor can have only one film",
-                ));
-            }
+        let film = match self.single_child(id, "film", "a sensor")? {
+            None => FilmSpec { width: 768, height: 576, filter: Filter::Gaussian { stddev: 0.5 } },
+            Some(n) => self.film(n)?,
         };
-        let samplers: Vec<NodeId> = self.doc.children(id, "sampler").map(|c| c.node).collect();
-        let sampler = match samplers.as_slice() {
-            [] => SamplerSpec { spp: 4, seed: 0 },
-            [s] => self.sampler(*s)?,
-            [_, s, ..] => {
-                return Err(Error::input(
-                    &self.node(*s).loc,
-                    "a sensor can have only one sampler",
-                ));
-            }
+        let sampler = match self.single_child(id, "sampler", "a sensor")? {
+            None => SamplerSpec { spp: 4, seed: 0 },
+            Some(n) => self.sampler(n)?,
         };
         self.doc.check_unused(id)?;
-        let camera = Camera::new(
-            Transform::new(to_world),
-            fov,
-            axis,
-            (film.width, film.height),
-            near,
-            far,
-        );
+        let camera = Camera::new(Transform::new(to_world), fov, axis, (film.width, film.height), near, far);
         Ok((camera, film, sampler))
     }
 
@@ -586,62 +472,36 @@ impl<'d> Builder<'d> {
             ("pixel_format", &["rgb", "rgba"][..]),
             ("component_format", &["float16", "float32"][..]),
         ] {
-            if let Some(v) = node.string(name)? {
-                if !allowed.contains(&v.to_ascii_lowercase().as_str()) {
-                    return Err(Error::input(
-                        &node.prop_loc(name),
-                        format!(
-                            "{name} \"{v}\" is not supported (supported: {})",
-                            allowed.join(", ")
-                        ),
-                    ));
-                }
+            if let Some(v) = node.string(name)?
+                && !allowed.contains(&v.to_ascii_lowercase().as_str())
+            {
+                return Err(Error::input(
+                    &node.prop_loc(name),
+                    format!("{name} \"{v}\" is not supported (supported: {})", allowed.join(", ")),
+                ));
             }
         }
         if node.boolean_or("sample_border", false)? {
-            return Err(Error::input(
-                &node.prop_loc("sample_border"),
-                "sample_border = true is not supported",
-            ));
+            return Err(Error::input(&node.prop_loc("sample_border"), "sample_border = true is not supported"));
         }
-        let filters: Vec<NodeId> = self.doc.children(id, "rfilter").map(|c| c.node).collect();
-        let filter = match filters.as_slice() {
-            [] => Filter::Gaussian { stddev: 0.5 },
-            [f] => self.rfilter(*f)?,
-            [_, f, ..] => {
-                return Err(Error::input(
-                    &self.node(*f).loc,
-                    "a film can have only one rfilter",
-                ));
-            }
+        let filter = match self.single_child(id, "rfilter", "a film")? {
+            None => Filter::Gaussian { stddev: 0.5 },
+            Some(n) => self.rfilter(n)?,
         };
         self.doc.check_unused(id)?;
-        Ok(FilmSpec {
-            width,
-            height,
-            filter,
-        })
+        Ok(FilmSpec { width, height, filter })
     }
 
     fn rfilter(&mut self, id: NodeId) -> Result<Filter> {
         let node = self.doc.node(id);
         let f = match node.plugin.as_str() {
-            "box" => Filter::Box {
-                radius: positive(node, "radius", node.float_or("radius", 0.5)?)?,
-            },
-            "tent" => Filter::Tent {
-                radius: positive(node, "radius", node.float_or("radius", 1.0)?)?,
-            },
-            "gaussian" => Filter::Gaussian {
-                stddev: positive(node, "stddev", node.float_or("stddev", 0.5)?)?,
-            },
+            "box" => Filter::Box { radius: positive(node, "radius", node.float_or("radius", 0.5)?)? },
+            "tent" => Filter::Tent { radius: positive(node, "radius", node.float_or("radius", 1.0)?)? },
+            "gaussian" => Filter::Gaussian { stddev: positive(node, "stddev", node.float_or("stddev", 0.5)?)? },
             _ => return Err(self.unknown_plugin(id, &["box", "tent", "gaussian"])),
         };
         if f.radius() > 7.5 {
-            return Err(Error::input(
-                &node.loc,
-                "the filter radius may be at most 7.5 pixels",
-            ));
+            return Err(Error::input(&node.loc, "the filter radius may be at most 7.5 pixels"));
         }
         self.doc.check_unused(id)?;
         Ok(f)
@@ -661,16 +521,10 @@ impl<'d> Builder<'d> {
         }
         let seed = node.integer("seed")?.unwrap_or(0);
         if seed < 0 {
-            return Err(Error::input(
-                &node.prop_loc("seed"),
-                "seed must be non-negative",
-            ));
+            return Err(Error::input(&node.prop_loc("seed"), "seed must be non-negative"));
         }
         self.doc.check_unused(id)?;
-        Ok(SamplerSpec {
-            spp: spp as u32,
-            seed: seed as u64,
-        })
+        Ok(SamplerSpec { spp: spp as u32, seed: seed as u64 })
     }
 
     fn integrator(&mut self, id: NodeId) -> Result<IntegratorSpec> {
@@ -679,7 +533,7 @@ impl<'d> Builder<'d> {
             return Err(self.unknown_plugin(id, INTEGRATOR_PLUGINS));
         }
         let max_depth = node.integer("max_depth")?.unwrap_or(-1);
-        if max_depth < -1 || max_depth > 1 << 16 {
+        if !(-1..=1 << 16).contains(&max_depth) {
             return Err(Error::input(
                 &node.prop_loc("max_depth"),
                 format!("max_depth must be -1 (unlimited) or between 0 and 65536, got {max_depth}"),
@@ -687,10 +541,7 @@ impl<'d> Builder<'d> {
         }
         let rr_depth = node.integer("rr_depth")?.unwrap_or(3);
         if rr_depth < 1 {
-            return Err(Error::input(
-                &node.prop_loc("rr_depth"),
-                "rr_depth must be at least 1",
-            ));
+            return Err(Error::input(&node.prop_loc("rr_depth"), "rr_depth must be at least 1"));
         }
         let hide_emitters = node.boolean_or("hide_emitters", false)?;
         self.doc.check_unused(id)?;

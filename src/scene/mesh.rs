@@ -49,7 +49,10 @@ impl TriangleMesh {
     /// Number of triangles with zero area or non-finite vertices.
     pub fn degenerate_count(&self) -> usize {
         (0..self.indices.len())
-            .filter(|&i| !(self.triangle_area(i) > 0.0))
+            .filter(|&i| {
+                let a = self.triangle_area(i);
+                a.is_nan() || a <= 0.0
+            })
             .count()
     }
 
@@ -58,12 +61,7 @@ impl TriangleMesh {
             return Err(Error::in_file(file, "the mesh has no triangles"));
         }
         let n = self.positions.len();
-        if let Some((i, t)) = self
-            .indices
-            .iter()
-            .enumerate()
-            .find(|(_, t)| t.iter().any(|&k| k as usize >= n))
-        {
+        if let Some((i, t)) = self.indices.iter().enumerate().find(|(_, t)| t.iter().any(|&k| k as usize >= n)) {
             return Err(Error::in_file(
                 file,
                 format!(
@@ -73,26 +71,17 @@ impl TriangleMesh {
             ));
         }
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(Error::in_file(
-                file,
-                format!("vertex {i} is not finite ({})", self.positions[i]),
-            ));
+            return Err(Error::in_file(file, format!("vertex {i} is not finite ({})", self.positions[i])));
         }
-        if let Some(ns) = &self.normals {
-            if ns.len() != n {
-                return Err(Error::in_file(
-                    file,
-                    format!("{} normals for {n} vertices", ns.len()),
-                ));
-            }
+        if let Some(ns) = &self.normals
+            && ns.len() != n
+        {
+            return Err(Error::in_file(file, format!("{} normals for {n} vertices", ns.len())));
         }
-        if let Some(uv) = &self.uvs {
-            if uv.len() != n {
-                return Err(Error::in_file(
-                    file,
-                    format!("{} texture coordinates for {n} vertices", uv.len()),
-                ));
-            }
+        if let Some(uv) = &self.uvs
+            && uv.len() != n
+        {
+            return Err(Error::in_file(file, format!("{} texture coordinates for {n} vertices", uv.len())));
         }
         Ok(())
     }
@@ -100,14 +89,9 @@ impl TriangleMesh {
 
 /// Loads a Wavefront OBJ file (all its objects merged into one mesh).
 pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
-    let opts = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let (models, _materials) = tobj::load_obj(path, &opts)
-        .map_err(|e| Error::in_file(path, format!("cannot load OBJ: {e}")))?;
+    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true };
+    let (models, _materials) =
+        tobj::load_obj(path, &opts).map_err(|e| Error::in_file(path, format!("cannot load OBJ: {e}")))?;
     let mut mesh = TriangleMesh::default();
     let all_normals = models.iter().all(|m| !m.mesh.normals.is_empty());
     let all_uvs = models.iter().all(|m| !m.mesh.texcoords.is_empty());
@@ -115,32 +99,17 @@ pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
     for m in &models {
         let base = mesh.positions.len() as u32;
         let mm = &m.mesh;
-        mesh.positions.extend(
-            mm.positions
-                .chunks_exact(3)
-                .map(|c| Vec3::new(c[0], c[1], c[2])),
-        );
+        mesh.positions.extend(mm.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
         if all_normals {
-            normals.extend(
-                mm.normals
-                    .chunks_exact(3)
-                    .map(|c| Vec3::new(c[0], c[1], c[2]).normalize_or_zero()),
-            );
+            normals.extend(mm.normals.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2]).normalize_or_zero()));
         }
         if all_uvs {
             uvs.extend(mm.texcoords.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])));
         }
         if mm.indices.len() % 3 != 0 {
-            return Err(Error::in_file(
-                path,
-                format!("object \"{}\" has an incomplete triangle", m.name),
-            ));
+            return Err(Error::in_file(path, format!("object \"{}\" has an incomplete triangle", m.name)));
         }
-        mesh.indices.extend(
-            mm.indices
-                .chunks_exact(3)
-                .map(|c| [base + c[0], base + c[1], base + c[2]]),
-        );
+        mesh.indices.extend(mm.indices.chunks_exact(3).map(|c| [base + c[0], base + c[1], base + c[2]]));
     }
     if all_normals && !normals.is_empty() {
         mesh.normals = Some(normals);
@@ -157,44 +126,24 @@ pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
 /// `vertex_indices` (or `vertex_index`) list, polygons fanned into triangles.
 pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
     use ply_rs_bw::{parser::Parser, ply::DefaultElement, ply::Property};
-    let file = std::fs::File::open(path)
-        .map_err(|e| Error::in_file(path, format!("cannot open PLY file: {e}")))?;
+    let file = std::fs::File::open(path).map_err(|e| Error::in_file(path, format!("cannot open PLY file: {e}")))?;
     let mut reader = std::io::BufReader::new(file);
     let ply = Parser::<DefaultElement>::new()
         .read_ply(&mut reader)
         .map_err(|e| Error::in_file(path, format!("cannot parse PLY: {e}")))?;
-    let verts = ply
-        .payload
-        .get("vertex")
-        .ok_or_else(|| Error::in_file(path, "PLY file has no \"vertex\" element"))?;
-    let faces = ply
-        .payload
-        .get("face")
-        .ok_or_else(|| Error::in_file(path, "PLY file has no \"face\" element"))?;
+    let verts = ply.payload.get("vertex").ok_or_else(|| Error::in_file(path, "PLY file has no \"vertex\" element"))?;
+    let faces = ply.payload.get("face").ok_or_else(|| Error::in_file(path, "PLY file has no \"face\" element"))?;
     let scalar = |e: &DefaultElement, k: &str| e.get(k).and_then(|p| p.to_f32_lossy());
     let mut mesh = TriangleMesh::default();
-    let has_normals = verts
-        .first()
-        .is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
-    let uv_keys = [
-        ("u", "v"),
-        ("s", "t"),
-        ("texture_u", "texture_v"),
-        ("texture_s", "texture_t"),
-    ];
-    let uv_key = verts.first().and_then(|v| {
-        uv_keys
-            .iter()
-            .find(|(a, b)| v.contains_key(*a) && v.contains_key(*b))
-            .copied()
-    });
+    let has_normals =
+        verts.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
+    let uv_keys = [("u", "v"), ("s", "t"), ("texture_u", "texture_v"), ("texture_s", "texture_t")];
+    let uv_key =
+        verts.first().and_then(|v| uv_keys.iter().find(|(a, b)| v.contains_key(*a) && v.contains_key(*b)).copied());
     let (mut normals, mut uvs) = (Vec::new(), Vec::new());
     for (i, v) in verts.iter().enumerate() {
         let (Some(x), Some(y), Some(z)) = (scalar(v, "x"), scalar(v, "y"), scalar(v, "z")) else {
-            return Err(Error::in_file(
-                path,
-                format!("vertex {i} lacks a numeric x, y or z"),
-            ));
+            return Err(Error::in_file(path, format!("vertex {i} lacks a numeric x, y or z")));
         };
         mesh.positions.push(Vec3::new(x, y, z));
         if has_normals {
@@ -206,10 +155,7 @@ pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
             normals.push(n.normalize_or_zero());
         }
         if let Some((a, b)) = uv_key {
-            uvs.push(Vec2::new(
-                scalar(v, a).unwrap_or(0.0),
-                scalar(v, b).unwrap_or(0.0),
-            ));
+            uvs.push(Vec2::new(scalar(v, a).unwrap_or(0.0), scalar(v, b).unwrap_or(0.0)));
         }
     }
     for (i, f) in faces.iter().enumerate() {
@@ -225,33 +171,20 @@ pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
             Property::ListInt(l) => l.iter().map(|&x| x as i64).collect(),
             Property::ListUInt(l) => l.iter().map(|&x| x as i64).collect(),
             _ => {
-                return Err(Error::in_file(
-                    path,
-                    format!("face {i}: vertex_indices is not an integer list"),
-                ));
+                return Err(Error::in_file(path, format!("face {i}: vertex_indices is not an integer list")));
             }
         };
         if idx.len() < 3 {
-            return Err(Error::in_file(
-                path,
-                format!("face {i} has {} vertices", idx.len()),
-            ));
+            return Err(Error::in_file(path, format!("face {i} has {} vertices", idx.len())));
         }
-        if let Some(bad) = idx
-            .iter()
-            .find(|&&k| k < 0 || k as usize >= mesh.positions.len())
-        {
+        if let Some(bad) = idx.iter().find(|&&k| k < 0 || k as usize >= mesh.positions.len()) {
             return Err(Error::in_file(
                 path,
-                format!(
-                    "face {i} references vertex {bad} but the mesh has {} vertices",
-                    mesh.positions.len()
-                ),
+                format!("face {i} references vertex {bad} but the mesh has {} vertices", mesh.positions.len()),
             ));
         }
         for k in 1..idx.len() - 1 {
-            mesh.indices
-                .push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
+            mesh.indices.push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
         }
     }
     if has_normals {
@@ -274,23 +207,14 @@ pub fn rectangle() -> TriangleMesh {
             Vec3::new(-1.0, 1.0, 0.0),
         ],
         normals: Some(vec![Vec3::Z; 4]),
-        uvs: Some(vec![
-            Vec2::new(0.0, 0.0),
-            Vec2::new(1.0, 0.0),
-            Vec2::new(1.0, 1.0),
-            Vec2::new(0.0, 1.0),
-        ]),
+        uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
         indices: vec![[0, 1, 2], [0, 2, 3]],
     }
 }
 
 /// Mitsuba's `cube`: `[-1,1]³`, outward normals, 24 vertices (flat faces).
 pub fn cube() -> TriangleMesh {
-    let mut m = TriangleMesh {
-        normals: Some(Vec::new()),
-        uvs: Some(Vec::new()),
-        ..Default::default()
-    };
+    let mut m = TriangleMesh { normals: Some(Vec::new()), uvs: Some(Vec::new()), ..Default::default() };
     for axis in 0..3 {
         for sign in [-1.0f32, 1.0] {
             let mut n = Vec3::ZERO;
@@ -305,18 +229,18 @@ pub fn cube() -> TriangleMesh {
             let base = m.positions.len() as u32;
             for (a, b) in [(-1.0f32, -1.0f32), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
                 m.positions.push(n + u * a + v * b);
-                m.normals.as_mut().map(|x| x.push(n));
-                m.uvs
-                    .as_mut()
-                    .map(|x| x.push(Vec2::new((a + 1.0) * 0.5, (b + 1.0) * 0.5)));
+                if let Some(x) = m.normals.as_mut() {
+                    x.push(n)
+                }
+                if let Some(x) = m.uvs.as_mut() {
+                    x.push(Vec2::new((a + 1.0) * 0.5, (b + 1.0) * 0.5))
+                }
             }
             // u × v = n for sign +1; reverse the winding for the negative face.
             if sign > 0.0 {
-                m.indices
-                    .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
+                m.indices.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
             } else {
-                m.indices
-                    .extend([[base, base + 2, base + 1], [base, base + 3, base + 2]]);
+                m.indices.extend([[base, base + 2, base + 1], [base, base + 3, base + 2]]);
             }
         }
     }
@@ -336,10 +260,12 @@ pub fn disk(segments: u32) -> TriangleMesh {
         let phi = 2.0 * PI * i as f32 / segments as f32;
         let p = Vec3::new(phi.cos(), phi.sin(), 0.0);
         m.positions.push(p);
-        m.normals.as_mut().map(|x| x.push(Vec3::Z));
-        m.uvs
-            .as_mut()
-            .map(|x| x.push(Vec2::new(0.5 + 0.5 * p.x, 0.5 + 0.5 * p.y)));
+        if let Some(x) = m.normals.as_mut() {
+            x.push(Vec3::Z)
+        }
+        if let Some(x) = m.uvs.as_mut() {
+            x.push(Vec2::new(0.5 + 0.5 * p.x, 0.5 + 0.5 * p.y))
+        }
         let a = 1 + i;
         let b = 1 + (i + 1) % segments;
         m.indices.push([0, a, b]);

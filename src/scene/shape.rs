@@ -76,20 +76,10 @@ pub struct PositionSample {
 impl Shape {
     pub fn new(geometry: ShapeGeometry, bsdf: usize, flip_normals: bool, name: String) -> Shape {
         let area = match &geometry {
-            ShapeGeometry::Mesh(m) => (0..m.indices.len())
-                .map(|i| m.triangle_area(i) as f64)
-                .sum::<f64>() as f32,
+            ShapeGeometry::Mesh(m) => (0..m.indices.len()).map(|i| m.triangle_area(i) as f64).sum::<f64>() as f32,
             ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
         };
-        Shape {
-            geometry,
-            bsdf,
-            light: None,
-            flip_normals,
-            name,
-            area,
-            area_distribution: None,
-        }
+        Shape { geometry, bsdf, light: None, flip_normals, name, area, area_distribution: None }
     }
 
     /// Prepares area sampling (called for emitting shapes).
@@ -106,14 +96,8 @@ impl Shape {
 
     pub fn accel_geometry(&self) -> Geometry<'_> {
         match &self.geometry {
-            ShapeGeometry::Mesh(m) => Geometry::Triangles {
-                positions: &m.positions,
-                indices: &m.indices,
-            },
-            ShapeGeometry::Sphere { center, radius } => Geometry::Sphere {
-                center: *center,
-                radius: *radius,
-            },
+            ShapeGeometry::Mesh(m) => Geometry::Triangles { positions: &m.positions, indices: &m.indices },
+            ShapeGeometry::Sphere { center, radius } => Geometry::Sphere { center: *center, radius: *radius },
         }
     }
 
@@ -183,10 +167,7 @@ impl Shape {
                     .area_distribution
                     .as_ref()
                     .map(|d| d.sample(u1))
-                    .unwrap_or((
-                        (u1 * m.indices.len() as f32) as usize % m.indices.len().max(1),
-                        0.0,
-                    ));
+                    .unwrap_or(((u1 * m.indices.len() as f32) as usize % m.indices.len().max(1), 0.0));
                 let tri = m.indices[i];
                 let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
                 let b = square_to_uniform_triangle(u);
@@ -203,11 +184,7 @@ impl Shape {
             }
             ShapeGeometry::Sphere { center, radius } => {
                 let d = square_to_uniform_sphere(u);
-                PositionSample {
-                    p: *center + d * *radius,
-                    n: d * sign,
-                    uv: sphere_uv(d),
-                }
+                PositionSample { p: *center + d * *radius, n: d * sign, uv: sphere_uv(d) }
             }
         }
     }
@@ -215,12 +192,7 @@ impl Shape {
     /// Samples a point on the shape as seen from `reference`, returning it with the
     /// solid-angle density at `reference`. Spheres sample the cone they subtend (when
     /// `reference` is outside); other shapes sample by area.
-    pub fn sample_direction(
-        &self,
-        reference: Vec3,
-        u1: f32,
-        u: Vec2,
-    ) -> Option<(PositionSample, f32)> {
+    pub fn sample_direction(&self, reference: Vec3, u1: f32, u: Vec2) -> Option<(PositionSample, f32)> {
         if let ShapeGeometry::Sphere { center, radius } = &self.geometry {
             let dc = *center - reference;
             let dist2 = dc.length_squared();
@@ -236,11 +208,7 @@ impl Shape {
                 let t = b - disc.sqrt();
                 let local = (reference + w * t - *center).normalize_or_zero();
                 let sign = if self.flip_normals { -1.0 } else { 1.0 };
-                let ps = PositionSample {
-                    p: *center + local * *radius,
-                    n: local * sign,
-                    uv: sphere_uv(local),
-                };
+                let ps = PositionSample { p: *center + local * *radius, n: local * sign, uv: sphere_uv(local) };
                 return Some((ps, square_to_uniform_cone_pdf(cos_max)));
             }
         }
@@ -267,11 +235,7 @@ impl Shape {
         let d = p - reference;
         let dist2 = d.length_squared();
         let cos = n.dot(d).abs() / dist2.sqrt();
-        if cos <= 0.0 {
-            0.0
-        } else {
-            dist2 / (cos * self.area)
-        }
+        if cos <= 0.0 { 0.0 } else { dist2 / (cos * self.area) }
     }
 }
 

@@ -194,11 +194,7 @@ impl Node {
 
     /// The location of a property (for errors about its value).
     pub fn prop_loc(&self, name: &str) -> Location {
-        self.props
-            .iter()
-            .find(|p| p.name == name)
-            .map(|p| p.loc.clone())
-            .unwrap_or_else(|| self.loc.clone())
+        self.props.iter().find(|p| p.name == name).map(|p| p.loc.clone()).unwrap_or_else(|| self.loc.clone())
     }
 
     /// Marks a property as consumed without reading it (accepted and without effect).
@@ -223,16 +219,8 @@ impl Document {
     }
 
     /// Children of `id` with the given tag, marking them used.
-    pub fn children<'a>(
-        &'a self,
-        id: NodeId,
-        tag: &'a str,
-    ) -> impl Iterator<Item = &'a Child> + 'a {
-        self.nodes[id]
-            .children
-            .iter()
-            .filter(move |c| self.nodes[c.node].tag == tag)
-            .inspect(|c| c.used.set(true))
+    pub fn children<'a>(&'a self, id: NodeId, tag: &'a str) -> impl Iterator<Item = &'a Child> + 'a {
+        self.nodes[id].children.iter().filter(move |c| self.nodes[c.node].tag == tag).inspect(|c| c.used.set(true))
     }
 
     /// Fails on the first property or nested object of `id` that nothing used.
@@ -241,20 +229,14 @@ impl Document {
         if let Some(p) = n.props.iter().find(|p| !p.used.get()) {
             return Err(Error::input(
                 &p.loc,
-                format!(
-                    "unused property \"{}\" in {} plugin \"{}\"",
-                    p.name, n.tag, n.plugin
-                ),
+                format!("unused property \"{}\" in {} plugin \"{}\"", p.name, n.tag, n.plugin),
             ));
         }
         if let Some(c) = n.children.iter().find(|c| !c.used.get()) {
             let child = &self.nodes[c.node];
             return Err(Error::input(
                 &c.loc,
-                format!(
-                    "unexpected nested {} \"{}\" in {} plugin \"{}\"",
-                    child.tag, child.plugin, n.tag, n.plugin
-                ),
+                format!("unexpected nested {} \"{}\" in {} plugin \"{}\"", child.tag, child.plugin, n.tag, n.plugin),
             ));
         }
         Ok(())
@@ -273,12 +255,7 @@ pub fn parse_file(path: &Path, overrides: &[(String, String)]) -> Result<Documen
     };
     let root = p.parse_root(path)?;
     p.resolve_refs()?;
-    Ok(Document {
-        nodes: p.nodes,
-        root,
-        path: path.to_path_buf(),
-        params: p.params,
-    })
+    Ok(Document { nodes: p.nodes, root, path: path.to_path_buf(), params: p.params })
 }
 
 struct PendingRef {
@@ -302,10 +279,7 @@ pub fn camel_to_snake(s: &str) -> String {
     let mut out = String::with_capacity(s.len() + 4);
     let chars: Vec<char> = s.chars().collect();
     for (i, &c) in chars.iter().enumerate() {
-        if c.is_ascii_uppercase()
-            && i > 0
-            && (chars[i - 1].is_ascii_lowercase() || chars[i - 1].is_ascii_digit())
-        {
+        if c.is_ascii_uppercase() && i > 0 && (chars[i - 1].is_ascii_lowercase() || chars[i - 1].is_ascii_digit()) {
             out.push('_');
         }
         out.push(c.to_ascii_lowercase());
@@ -321,11 +295,7 @@ struct FileCtx {
 impl FileCtx {
     fn loc(&self, doc: &roxmltree::Document, node: roxmltree::Node) -> Location {
         let pos = doc.text_pos_at(node.range().start);
-        Location {
-            file: self.path.clone(),
-            line: Some(pos.row),
-            col: Some(pos.col),
-        }
+        Location { file: self.path.clone(), line: Some(pos.row), col: Some(pos.col) }
     }
 }
 
@@ -339,15 +309,11 @@ fn parse_version(s: &str) -> Option<(u32, u32, u32)> {
 
 impl Parser {
     fn read(path: &Path) -> Result<String> {
-        let bytes = std::fs::read(path)
-            .map_err(|e| Error::in_file(path, format!("cannot read scene file: {e}")))?;
+        let bytes = std::fs::read(path).map_err(|e| Error::in_file(path, format!("cannot read scene file: {e}")))?;
         String::from_utf8(bytes).map_err(|e| {
             Error::in_file(
                 path,
-                format!(
-                    "scene file is not UTF-8 text (invalid byte at offset {})",
-                    e.utf8_error().valid_up_to()
-                ),
+                format!("scene file is not UTF-8 text (invalid byte at offset {})", e.utf8_error().valid_up_to()),
             )
         })
     }
@@ -356,49 +322,29 @@ impl Parser {
         let text = Self::read(path)?;
         let doc = roxmltree::Document::parse(&text).map_err(|e| xml_error(path, &e))?;
         let root = doc.root_element();
-        let ctx0 = FileCtx {
-            path: Arc::new(path.to_path_buf()),
-            upgrade: false,
-        };
+        let ctx0 = FileCtx { path: Arc::new(path.to_path_buf()), upgrade: false };
         let loc = ctx0.loc(&doc, root);
         if root.tag_name().name() != "scene" {
             return Err(Error::input(
                 &loc,
-                format!(
-                    "the root element is <{}>, expected <scene>",
-                    root.tag_name().name()
-                ),
+                format!("the root element is <{}>, expected <scene>", root.tag_name().name()),
             ));
         }
-        let version = root
-            .attribute("version")
-            .ok_or_else(|| Error::input(&loc, "<scene> has no \"version\" attribute"))?;
-        let (major, _, _) = parse_version(version)
-            .ok_or_else(|| Error::input(&loc, format!("invalid version \"{version}\"")))?;
+        let version =
+            root.attribute("version").ok_or_else(|| Error::input(&loc, "<scene> has no \"version\" attribute"))?;
+        let (major, _, _) =
+            parse_version(version).ok_or_else(|| Error::input(&loc, format!("invalid version \"{version}\"")))?;
         if major > 3 {
-            return Err(Error::input(
-                &loc,
-                format!("scene version {version} is newer than this loader (3.x)"),
-            ));
+            return Err(Error::input(&loc, format!("scene version {version} is newer than this loader (3.x)")));
         }
-        let ctx = FileCtx {
-            path: ctx0.path,
-            upgrade: major < 2,
-        };
+        let ctx = FileCtx { path: ctx0.path, upgrade: major < 2 };
         let id = self.new_node("scene", String::new(), None, loc);
         self.parse_children(&doc, root, id, &ctx)?;
         Ok(id)
     }
 
     fn new_node(&mut self, tag: &str, plugin: String, id: Option<String>, loc: Location) -> NodeId {
-        self.nodes.push(Node {
-            tag: tag.to_string(),
-            plugin,
-            id,
-            loc,
-            props: Vec::new(),
-            children: Vec::new(),
-        });
+        self.nodes.push(Node { tag: tag.to_string(), plugin, id, loc, props: Vec::new(), children: Vec::new() });
         self.nodes.len() - 1
     }
 
@@ -414,14 +360,9 @@ impl Parser {
             while let Some(pos) = rest.find('$') {
                 out.push_str(&rest[..pos]);
                 let after = &rest[pos + 1..];
-                let len = after
-                    .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-                    .unwrap_or(after.len());
+                let len = after.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).unwrap_or(after.len());
                 if len == 0 {
-                    return Err(Error::input(
-                        loc,
-                        format!("\"$\" without a parameter name in \"{value}\""),
-                    ));
+                    return Err(Error::input(loc, format!("\"$\" without a parameter name in \"{value}\"")));
                 }
                 let name = &after[..len];
                 let v = self.overrides.get(name).or_else(|| self.params.get(name)).ok_or_else(|| Error::input(loc, format!("undefined parameter \"${name}\" (declare it with <default name=\"{name}\" …/> or pass -D {name}=…)")))?;
@@ -431,10 +372,7 @@ impl Parser {
             out.push_str(rest);
             s = out;
         }
-        Err(Error::input(
-            loc,
-            format!("parameter substitution in \"{value}\" does not terminate (cyclic <default>s)"),
-        ))
+        Err(Error::input(loc, format!("parameter substitution in \"{value}\" does not terminate (cyclic <default>s)")))
     }
 
     fn attr(&self, node: roxmltree::Node, name: &str, loc: &Location) -> Result<Option<String>> {
@@ -445,12 +383,8 @@ impl Parser {
     }
 
     fn req_attr(&self, node: roxmltree::Node, name: &str, loc: &Location) -> Result<String> {
-        self.attr(node, name, loc)?.ok_or_else(|| {
-            Error::input(
-                loc,
-                format!("<{}> needs a \"{name}\" attribute", node.tag_name().name()),
-            )
-        })
+        self.attr(node, name, loc)?
+            .ok_or_else(|| Error::input(loc, format!("<{}> needs a \"{name}\" attribute", node.tag_name().name())))
     }
 
     fn check_attrs(node: roxmltree::Node, allowed: &[&str], loc: &Location) -> Result<()> {
@@ -458,11 +392,7 @@ impl Parser {
             if !allowed.contains(&a.name()) {
                 return Err(Error::input(
                     loc,
-                    format!(
-                        "unexpected attribute \"{}\" on <{}>",
-                        a.name(),
-                        node.tag_name().name()
-                    ),
+                    format!("unexpected attribute \"{}\" on <{}>", a.name(), node.tag_name().name()),
                 ));
             }
         }
@@ -493,17 +423,12 @@ impl Parser {
             match tag.as_str() {
                 "default" => {
                     Self::check_attrs(child, &["name", "value"], &loc)?;
-                    let name = name.ok_or_else(|| {
-                        Error::input(&loc, "<default> needs a \"name\" attribute")
-                    })?;
-                    let value = child.attribute("value").ok_or_else(|| {
-                        Error::input(&loc, "<default> needs a \"value\" attribute")
-                    })?;
+                    let name = name.ok_or_else(|| Error::input(&loc, "<default> needs a \"name\" attribute"))?;
+                    let value = child
+                        .attribute("value")
+                        .ok_or_else(|| Error::input(&loc, "<default> needs a \"value\" attribute"))?;
                     if self.params.contains_key(&name) {
-                        return Err(Error::input(
-                            &loc,
-                            format!("<default> \"{name}\" is declared twice"),
-                        ));
+                        return Err(Error::input(&loc, format!("<default> \"{name}\" is declared twice")));
                     }
                     let value = self.subst(value, &loc)?;
                     self.params.insert(name, value);
@@ -516,32 +441,18 @@ impl Parser {
                     if self.include_depth > 16 {
                         return Err(Error::input(&loc, "includes nested too deeply (a cycle?)"));
                     }
-                    let text = Self::read(&path)
-                        .map_err(|e| Error::input(&loc, format!("in <include>: {e}")))?;
-                    let inc =
-                        roxmltree::Document::parse(&text).map_err(|e| xml_error(&path, &e))?;
+                    let text = Self::read(&path).map_err(|e| Error::input(&loc, format!("in <include>: {e}")))?;
+                    let inc = roxmltree::Document::parse(&text).map_err(|e| xml_error(&path, &e))?;
                     let r = inc.root_element();
-                    let rloc = FileCtx {
-                        path: Arc::new(path.clone()),
-                        upgrade: false,
-                    }
-                    .loc(&inc, r);
+                    let rloc = FileCtx { path: Arc::new(path.clone()), upgrade: false }.loc(&inc, r);
                     if r.tag_name().name() != "scene" {
-                        return Err(Error::input(
-                            &rloc,
-                            "an included file must have a <scene> root",
-                        ));
+                        return Err(Error::input(&rloc, "an included file must have a <scene> root"));
                     }
                     let v = r
                         .attribute("version")
                         .and_then(parse_version)
-                        .ok_or_else(|| {
-                            Error::input(&rloc, "<scene> needs a valid \"version\" attribute")
-                        })?;
-                    let ictx = FileCtx {
-                        path: Arc::new(path),
-                        upgrade: v.0 < 2,
-                    };
+                        .ok_or_else(|| Error::input(&rloc, "<scene> needs a valid \"version\" attribute"))?;
+                    let ictx = FileCtx { path: Arc::new(path), upgrade: v.0 < 2 };
                     self.include_depth += 1;
                     self.parse_children(&inc, r, parent, &ictx)?;
                     self.include_depth -= 1;
@@ -556,12 +467,7 @@ impl Parser {
                         loc: loc.clone(),
                         used: Cell::new(false),
                     });
-                    self.pending_refs.push(PendingRef {
-                        parent,
-                        slot,
-                        id,
-                        loc,
-                    });
+                    self.pending_refs.push(PendingRef { parent, slot, id, loc });
                 }
                 t if OBJECT_TAGS.contains(&t) => {
                     if t == "scene" {
@@ -581,27 +487,18 @@ impl Parser {
                         self.ids.insert(id, (node, loc.clone()));
                     }
                     self.parse_children(doc, child, node, ctx)?;
-                    self.nodes[parent].children.push(Child {
-                        name,
-                        node,
-                        loc,
-                        used: Cell::new(false),
-                    });
+                    self.nodes[parent].children.push(Child { name, node, loc, used: Cell::new(false) });
                 }
                 _ => {
-                    let name = name.ok_or_else(|| {
-                        Error::input(&loc, format!("<{tag}> needs a \"name\" attribute"))
-                    })?;
+                    let name = name.ok_or_else(|| Error::input(&loc, format!("<{tag}> needs a \"name\" attribute")))?;
                     if ctx.upgrade
                         && self.nodes[parent].tag != "scene"
                         && matches!(name.as_str(), "uoffset" | "voffset" | "uscale" | "vscale")
                         && tag == "float"
                     {
                         let v = self.number(&self.req_attr(child, "value", &loc)?, &loc)?;
-                        uv[["uoffset", "voffset", "uscale", "vscale"]
-                            .iter()
-                            .position(|n| *n == name)
-                            .unwrap_or(0)] = Some(v);
+                        uv[["uoffset", "voffset", "uscale", "vscale"].iter().position(|n| *n == name).unwrap_or(0)] =
+                            Some(v);
                         uv_loc.get_or_insert(loc.clone());
                         continue;
                     }
@@ -611,31 +508,16 @@ impl Parser {
                     }
                     let value = self.parse_value(doc, child, &tag, &loc, ctx)?;
                     if self.nodes[parent].props.iter().any(|p| p.name == name) {
-                        return Err(Error::input(
-                            &loc,
-                            format!("property \"{name}\" is specified twice"),
-                        ));
+                        return Err(Error::input(&loc, format!("property \"{name}\" is specified twice")));
                     }
-                    self.nodes[parent].props.push(Property {
-                        name,
-                        value,
-                        loc,
-                        used: Cell::new(false),
-                    });
+                    self.nodes[parent].props.push(Property { name, value, loc, used: Cell::new(false) });
                 }
             }
         }
         if let Some(loc) = uv_loc {
             let [uo, vo, us, vs] = uv;
-            let m = Mat4::from_translation(Vec3::new(
-                uo.unwrap_or(0.0) as f32,
-                vo.unwrap_or(0.0) as f32,
-                0.0,
-            )) * Mat4::from_scale(Vec3::new(
-                us.unwrap_or(1.0) as f32,
-                vs.unwrap_or(1.0) as f32,
-                1.0,
-            ));
+            let m = Mat4::from_translation(Vec3::new(uo.unwrap_or(0.0) as f32, vo.unwrap_or(0.0) as f32, 0.0))
+                * Mat4::from_scale(Vec3::new(us.unwrap_or(1.0) as f32, vs.unwrap_or(1.0) as f32, 1.0));
             self.nodes[parent].props.push(Property {
                 name: "to_uv".into(),
                 value: Value::Transform(m),
@@ -647,10 +529,7 @@ impl Parser {
     }
 
     fn number(&self, s: &str, loc: &Location) -> Result<f64> {
-        let v: f64 = s
-            .trim()
-            .parse()
-            .map_err(|_| Error::input(loc, format!("\"{s}\" is not a number")))?;
+        let v: f64 = s.trim().parse().map_err(|_| Error::input(loc, format!("\"{s}\" is not a number")))?;
         if !v.is_finite() {
             return Err(Error::input(loc, format!("\"{s}\" is not a finite number")));
         }
@@ -670,10 +549,7 @@ impl Parser {
             return match n.len() {
                 1 => Ok(Vec3::splat(n[0] as f32)),
                 3 => Ok(Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32)),
-                k => Err(Error::input(
-                    loc,
-                    format!("expected 3 numbers in \"{v}\", found {k}"),
-                )),
+                k => Err(Error::input(loc, format!("expected 3 numbers in \"{v}\", found {k}"))),
             };
         }
         let mut out = [default; 3];
@@ -714,10 +590,7 @@ impl Parser {
                     "true" => Value::Boolean(true),
                     "false" => Value::Boolean(false),
                     v => {
-                        return Err(Error::input(
-                            loc,
-                            format!("\"{v}\" is not a boolean (true or false)"),
-                        ));
+                        return Err(Error::input(loc, format!("\"{v}\" is not a boolean (true or false)")));
                     }
                 }
             }
@@ -733,10 +606,7 @@ impl Parser {
                     1 => Value::Rgb(Vec3::splat(n[0] as f32)),
                     3 => Value::Rgb(Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32)),
                     k => {
-                        return Err(Error::input(
-                            loc,
-                            format!("<{tag}> needs 1 or 3 numbers, found {k} in \"{v}\""),
-                        ));
+                        return Err(Error::input(loc, format!("<{tag}> needs 1 or 3 numbers, found {k} in \"{v}\"")));
                     }
                 }
             }
@@ -753,10 +623,7 @@ impl Parser {
                 match n.len() {
                     1 => Value::Rgb(Vec3::splat(n[0] as f32)),
                     k => {
-                        return Err(Error::input(
-                            loc,
-                            format!("<spectrum> needs one value, found {k}"),
-                        ));
+                        return Err(Error::input(loc, format!("<spectrum> needs one value, found {k}")));
                     }
                 }
             }
@@ -772,12 +639,7 @@ impl Parser {
         })
     }
 
-    fn parse_transform(
-        &self,
-        doc: &roxmltree::Document,
-        node: roxmltree::Node,
-        ctx: &FileCtx,
-    ) -> Result<Mat4> {
+    fn parse_transform(&self, doc: &roxmltree::Document, node: roxmltree::Node, ctx: &FileCtx) -> Result<Mat4> {
         let mut m = Mat4::IDENTITY;
         for op in node.children().filter(|c| c.is_element()) {
             let loc = ctx.loc(doc, op);
@@ -811,18 +673,14 @@ impl Parser {
                     match n.len() {
                         // Mitsuba writes matrices row by row; glam stores columns.
                         16 => Mat4::from_cols_array(&[
-                            n[0], n[4], n[8], n[12], n[1], n[5], n[9], n[13], n[2], n[6], n[10],
-                            n[14], n[3], n[7], n[11], n[15],
+                            n[0], n[4], n[8], n[12], n[1], n[5], n[9], n[13], n[2], n[6], n[10], n[14], n[3], n[7],
+                            n[11], n[15],
                         ]),
                         9 => Mat4::from_cols_array(&[
-                            n[0], n[3], n[6], 0.0, n[1], n[4], n[7], 0.0, n[2], n[5], n[8], 0.0,
-                            0.0, 0.0, 0.0, 1.0,
+                            n[0], n[3], n[6], 0.0, n[1], n[4], n[7], 0.0, n[2], n[5], n[8], 0.0, 0.0, 0.0, 0.0, 1.0,
                         ]),
                         k => {
-                            return Err(Error::input(
-                                &loc,
-                                format!("<matrix> needs 16 (or 9) numbers, found {k}"),
-                            ));
+                            return Err(Error::input(&loc, format!("<matrix> needs 16 (or 9) numbers, found {k}")));
                         }
                     }
                 }
@@ -843,10 +701,8 @@ impl Parser {
                             }
                         }
                     };
-                    let origin = p("origin")?
-                        .ok_or_else(|| Error::input(&loc, "<lookat> needs \"origin\""))?;
-                    let target = p("target")?
-                        .ok_or_else(|| Error::input(&loc, "<lookat> needs \"target\""))?;
+                    let origin = p("origin")?.ok_or_else(|| Error::input(&loc, "<lookat> needs \"origin\""))?;
+                    let target = p("target")?.ok_or_else(|| Error::input(&loc, "<lookat> needs \"target\""))?;
                     let dir = target - origin;
                     if dir.length_squared() == 0.0 {
                         return Err(Error::input(&loc, "<lookat> origin and target coincide"));
@@ -858,43 +714,30 @@ impl Parser {
                     };
                     let left = up.cross(dir);
                     if left.length_squared() < 1e-12 {
-                        return Err(Error::input(
-                            &loc,
-                            "<lookat> \"up\" is parallel to the viewing direction",
-                        ));
+                        return Err(Error::input(&loc, "<lookat> \"up\" is parallel to the viewing direction"));
                     }
                     let left = left.normalize();
                     let new_up = dir.cross(left);
-                    Mat4::from_cols(
-                        left.extend(0.0),
-                        new_up.extend(0.0),
-                        dir.extend(0.0),
-                        origin.extend(1.0),
-                    )
+                    Mat4::from_cols(left.extend(0.0), new_up.extend(0.0), dir.extend(0.0), origin.extend(1.0))
                 }
                 t => {
-                    return Err(Error::input(
-                        &loc,
-                        format!("unknown transform operation <{t}>"),
-                    ));
+                    return Err(Error::input(&loc, format!("unknown transform operation <{t}>")));
                 }
             };
             m = step * m;
         }
         if !m.is_finite() {
-            return Err(Error::input(
-                &ctx.loc(doc, node),
-                "the transform is not finite",
-            ));
+            return Err(Error::input(&ctx.loc(doc, node), "the transform is not finite"));
         }
         Ok(m)
     }
 
     fn resolve_refs(&mut self) -> Result<()> {
         for r in std::mem::take(&mut self.pending_refs) {
-            let (node, _) = self.ids.get(&r.id).ok_or_else(|| {
-                Error::input(&r.loc, format!("reference to undefined id \"{}\"", r.id))
-            })?;
+            let (node, _) = self
+                .ids
+                .get(&r.id)
+                .ok_or_else(|| Error::input(&r.loc, format!("reference to undefined id \"{}\"", r.id)))?;
             self.nodes[r.parent].children[r.slot].node = *node;
         }
         Ok(())
@@ -904,11 +747,7 @@ impl Parser {
 fn xml_error(path: &Path, e: &roxmltree::Error) -> Error {
     let pos = e.pos();
     Error::Input {
-        loc: Location {
-            file: Arc::new(path.to_path_buf()),
-            line: Some(pos.row),
-            col: Some(pos.col),
-        },
+        loc: Location { file: Arc::new(path.to_path_buf()), line: Some(pos.row), col: Some(pos.col) },
         msg: format!("malformed XML: {e}"),
     }
 }
@@ -924,9 +763,6 @@ mod tests {
         assert_eq!(camel_to_snake("maxDepth"), "max_depth");
         assert_eq!(camel_to_snake("sampleCount"), "sample_count");
         assert_eq!(camel_to_snake("fov"), "fov");
-        assert_eq!(
-            camel_to_snake("specularReflectance"),
-            "specular_reflectance"
-        );
+        assert_eq!(camel_to_snake("specularReflectance"), "specular_reflectance");
     }
 }

@@ -13,28 +13,11 @@ pub fn root() -> PathBuf {
 }
 
 pub fn load(path: &Path, defines: &[(&str, &str)], backend: Backend) -> Scene {
-    let overrides = defines
-        .iter()
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
-    Scene::load(
-        path,
-        &LoadOptions {
-            overrides,
-            backend,
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"))
+    let overrides = defines.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+    Scene::load(path, &LoadOptions { overrides, backend, ..Default::default() }).unwrap_or_else(|e| panic!("{e}"))
 }
 
-pub fn render(
-    scene: &Scene,
-    kind: IntegratorKind,
-    spp: u32,
-    seed: u64,
-    threads: usize,
-) -> RenderOutput {
+pub fn render(scene: &Scene, kind: IntegratorKind, spp: u32, seed: u64, threads: usize) -> RenderOutput {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
     o.seed = seed;
     o.threads = threads;
@@ -71,19 +54,13 @@ impl Verdict {
             .zip(&b.pixels)
             .zip(&reference.pixels)
             .map(|((x, y), r)| {
-                (0..3)
-                    .map(|c| ((x[c] - y[c]) as f64).powi(2) / ((r[c] as f64).powi(2) + 0.01))
-                    .sum::<f64>()
+                (0..3).map(|c| ((x[c] - y[c]) as f64).powi(2) / ((r[c] as f64).powi(2) + 0.01)).sum::<f64>()
             })
             .sum::<f64>()
             / (3.0 * a.pixels.len() as f64)
             / 2.0;
         let expected = noise * (1.0 + spp as f64 / ref_spp as f64);
-        Verdict {
-            metrics,
-            noise,
-            expected,
-        }
+        Verdict { metrics, noise, expected }
     }
 
     pub fn check(&self, what: &str, mean_tol: f64, excess_tol: f64) -> Result<(), String> {
@@ -94,15 +71,10 @@ impl Verdict {
         );
         eprintln!("{msg}");
         if (m.mean_ratio - 1.0).abs() > mean_tol {
-            return Err(format!(
-                "image mean off by more than {:.2}%: {msg}",
-                mean_tol * 100.0
-            ));
+            return Err(format!("image mean off by more than {:.2}%: {msg}", mean_tol * 100.0));
         }
         if m.relmse > self.expected * excess_tol {
-            return Err(format!(
-                "relMSE exceeds {excess_tol}× what noise explains: {msg}"
-            ));
+            return Err(format!("relMSE exceeds {excess_tol}× what noise explains: {msg}"));
         }
         Ok(())
     }
