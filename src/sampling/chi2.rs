@@ -14,7 +14,8 @@ use std::fmt;
 
 use super::Sampler;
 
-/// The sphere of directions, binned `res_z × res_phi`.
+/// The sphere of directions, binned `res_z × res_phi` uniformly in `θ` and `φ` (so cells
+/// near the poles are small and peaked lobes there are resolved).
 #[derive(Clone, Copy, Debug)]
 pub struct SphereDomain {
     pub res_z: usize,
@@ -35,32 +36,32 @@ impl SphereDomain {
             return None;
         }
         let v = v / len;
-        let z = v.z.clamp(-1.0, 1.0);
+        let theta = v.z.clamp(-1.0, 1.0).acos();
         let mut phi = v.y.atan2(v.x);
         if phi < 0.0 {
             phi += 2.0 * PI;
         }
-        let iz = (((z + 1.0) * 0.5 * self.res_z as f64) as usize).min(self.res_z - 1);
+        let iz = ((theta / PI * self.res_z as f64) as usize).min(self.res_z - 1);
         let ip = ((phi / (2.0 * PI) * self.res_phi as f64) as usize).min(self.res_phi - 1);
         Some(iz * self.res_phi + ip)
     }
 
-    fn direction(z: f64, phi: f64) -> Vec3 {
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32)
+    fn direction(theta: f64, phi: f64) -> Vec3 {
+        let (s, c) = theta.sin_cos();
+        Vec3::new((s * phi.cos()) as f32, (s * phi.sin()) as f32, c as f32)
     }
 
-    /// ∫ pdf over each cell (solid angle = dz dφ), by adaptive Simpson quadrature: a
-    /// cell is split in four until the Simpson estimate agrees with the sum over its
-    /// quarters, so discontinuities (the edge of a light, of a cone) are resolved.
+    /// ∫ pdf sin θ dθ dφ over each cell, by adaptive Simpson quadrature: a cell is split
+    /// in four until the Simpson estimate agrees with the sum over its quarters, so
+    /// discontinuities (the edge of a light, of a cone) and narrow lobes are resolved.
     fn integrate(&self, pdf: &mut dyn FnMut(Vec3) -> f32) -> Vec<f64> {
-        let dz = 2.0 / self.res_z as f64;
+        let dz = PI / self.res_z as f64;
         let dp = 2.0 * PI / self.res_phi as f64;
         let mut out = vec![0.0; self.res_z * self.res_phi];
-        let mut f = |z: f64, p: f64| pdf(Self::direction(z.clamp(-1.0, 1.0), p)) as f64;
+        let mut f = |t: f64, p: f64| pdf(Self::direction(t, p)) as f64 * t.sin();
         for iz in 0..self.res_z {
             for ip in 0..self.res_phi {
-                let (z0, p0) = (-1.0 + iz as f64 * dz, ip as f64 * dp);
+                let (z0, p0) = (iz as f64 * dz, ip as f64 * dp);
                 out[iz * self.res_phi + ip] = adaptive(&mut f, z0, z0 + dz, p0, p0 + dp, 0);
             }
         }
@@ -95,14 +96,15 @@ fn grid(f: &mut dyn FnMut(f64, f64) -> f64, z0: f64, z1: f64, p0: f64, p1: f64) 
 }
 
 fn adaptive(f: &mut dyn FnMut(f64, f64) -> f64, z0: f64, z1: f64, p0: f64, p1: f64, depth: u32) -> f64 {
-    const MAX_DEPTH: u32 = 6;
+    const MIN_DEPTH: u32 = 2;
+    const MAX_DEPTH: u32 = 7;
     let area = (z1 - z0) * (p1 - p0);
     let whole = simpson(&grid(f, z0, z1, p0, p1), area);
     let (zm, pm) = (0.5 * (z0 + z1), 0.5 * (p0 + p1));
     let quarters = [(z0, zm, p0, pm), (z0, zm, pm, p1), (zm, z1, p0, pm), (zm, z1, pm, p1)];
     let parts: Vec<f64> = quarters.iter().map(|&(a, b, c, d)| simpson(&grid(f, a, b, c, d), area / 4.0)).collect();
     let sum: f64 = parts.iter().sum();
-    if depth >= MAX_DEPTH || (sum - whole).abs() <= 1e-5 * area.max(1e-12) * 4f64.powi(depth as i32).sqrt() {
+    if depth >= MAX_DEPTH || (depth >= MIN_DEPTH && (sum - whole).abs() <= 1e-6 + 1e-4 * sum.abs()) {
         return sum;
     }
     quarters.iter().map(|&(a, b, c, d)| adaptive(f, a, b, c, d, depth + 1)).sum()

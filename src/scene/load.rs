@@ -228,7 +228,6 @@ impl<'d> Builder<'d> {
             }
             _ => return Err(self.unknown_plugin(id, &["diffuse", "twosided"])),
         };
-        debug_assert!(matches!(bsdf.model, BsdfModel::Diffuse { .. }));
         self.doc.check_unused(id)?;
         Ok(bsdf)
     }
