@@ -17,6 +17,8 @@ import time
 # name -> (scene file relative to the repository root, parameter overrides, total spp)
 REFERENCES = {
     "cornell-box": ("scenes/cornell-box/scene.xml", {"resx": 128, "resy": 128, "max_depth": 30}, 8192),
+    "veach-mis": ("scenes/veach-mis/scene.xml", {"resx": 192, "resy": 108}, 8192),
+    "veach-ajar": ("scenes/veach-ajar/scene.xml", {"resx": 160, "resy": 90, "max_depth": -1}, 16384),
 }
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -97,3 +97,70 @@ fn point_light_over_a_diffuse_plane() {
     let expected = glam::Vec3::new(0.5 * 4.0, 0.25 * 2.0, 0.8 * 1.0) / std::f32::consts::PI / 4.0;
     assert!((c - expected).abs().max_element() < 1e-4 * expected.max_element(), "{c} vs {expected}");
 }
+
+/// A sphere filling the view, under a uniform environment of radiance 1.
+fn sphere_in_constant_environment(bsdf: &str, max_depth: i32) -> pcbpt::image_io::Image {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = format!(
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="10"/>
+        <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/><rfilter type="box"/></film>
+    </sensor>
+    <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+    <shape type="sphere"><float name="radius" value="1"/>{bsdf}</shape>
+</scene>"#
+    );
+    let path = dir.path().join("env.xml");
+    std::fs::write(&path, xml).unwrap();
+    let scene = load(&path, &[], Backend::Embree);
+    image(render(&scene, IntegratorKind::Path, 64, 3, 0))
+}
+
+#[test]
+fn convex_diffuse_object_in_a_uniform_environment_reflects_rho() {
+    // Nothing occludes a convex object's view of the sky: every point sees radiance ρ L.
+    let img = sphere_in_constant_environment(
+        r#"<bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.5, 0.7"/></bsdf>"#,
+        -1,
+    );
+    let m = img.pixels.iter().fold(glam::Vec3::ZERO, |a, p| a + *p) / img.pixels.len() as f32;
+    assert!((m - glam::Vec3::new(0.3, 0.5, 0.7)).abs().max_element() < 0.01, "{m}");
+}
+
+#[test]
+fn glass_sphere_vanishes_in_a_uniform_environment() {
+    // A lossless dielectric in a uniform field of radiance: everything seen is radiance 1.
+    for bsdf in [r#"<bsdf type="dielectric"/>"#, r#"<bsdf type="thindielectric"/>"#] {
+        let img = sphere_in_constant_environment(bsdf, -1);
+        let mean = img.mean();
+        assert!((mean - 1.0).abs() < 0.01, "{bsdf}: {mean}");
+    }
+    // Negative control: with too few bounces, light is lost inside the glass.
+    let img = sphere_in_constant_environment(r#"<bsdf type="dielectric"/>"#, 2);
+    assert!(img.mean() < 0.9, "{}", img.mean());
+}
+
+#[test]
+fn white_rough_conductor_sphere_reflects_at_most_what_it_receives() {
+    // A white rough mirror under a uniform sky: single-scattering microfacets lose energy
+    // (more as roughness grows) but never create it; a nearly smooth one loses almost none.
+    let mut previous = f64::INFINITY;
+    for alpha in ["0.01", "0.3", "0.8"] {
+        let img = sphere_in_constant_environment(
+            &format!(
+                r#"<bsdf type="roughconductor"><float name="alpha" value="{alpha}"/><string name="distribution" value="ggx"/></bsdf>"#
+            ),
+            -1,
+        );
+        let mean = img.mean();
+        eprintln!("alpha {alpha}: {mean}");
+        assert!(mean <= 1.0 + 0.005 && mean < previous + 0.005, "alpha {alpha}: {mean}");
+        if alpha == "0.01" {
+            assert!(mean > 0.98, "{mean}");
+        }
+        previous = mean;
+    }
+}

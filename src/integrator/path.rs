@@ -41,6 +41,25 @@ impl PathTracer {
         loop {
             counters.extension_rays += 1;
             let Some(si) = scene.intersect(&ray) else {
+                // The ray leaves the scene: lights at infinity.
+                let d = ray.d.normalize();
+                for &light_index in &scene.infinite_lights {
+                    let light = &scene.lights[light_index];
+                    let le = light.eval_infinite(d);
+                    if le == Rgb::ZERO {
+                        continue;
+                    }
+                    if depth == 0 {
+                        if !self.hide_emitters {
+                            l += beta * le;
+                        }
+                    } else if prev_delta {
+                        l += beta * le;
+                    } else {
+                        let pdf_light = scene.light_sampler.pmf(light_index) * light.pdf_infinite(d);
+                        l += beta * le * power_heuristic(prev_pdf, pdf_light);
+                    }
+                }
                 break;
             };
             depth += 1;
@@ -75,7 +94,7 @@ impl PathTracer {
                 && let Some((light_index, pmf, _)) = scene.light_sampler.sample(u_light)
             {
                 let light = &scene.lights[light_index];
-                if let Some(ls) = light.sample_li(&scene.shapes, si.p, u_light1, u_light2) {
+                if let Some(ls) = light.sample_li(&scene.shapes, &scene.bounds, si.p, u_light1, u_light2) {
                     let wi = si.shading.to_local(ls.wi);
                     let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance) * wi.z.abs();
                     if f != Rgb::ZERO {

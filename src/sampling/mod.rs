@@ -10,7 +10,7 @@ use rand_core::Rng;
 use rand_pcg::Pcg32;
 use std::f32::consts::{FRAC_1_PI, PI};
 
-pub use distribution::Distribution1D;
+pub use distribution::{Distribution1D, Distribution2D};
 
 /// SplitMix64 finaliser: a well-mixed 64-bit hash.
 #[inline]

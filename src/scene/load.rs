@@ -5,19 +5,37 @@
 
 use super::mesh::{self, TriangleMesh};
 use super::shape::{Shape, ShapeGeometry};
+use super::xml::Value;
 use super::xml::{self, Document, Node, NodeId};
 use super::{FilmSpec, IntegratorSpec, LoadOptions, LoadStats, SamplerSpec, Scene};
 use crate::accel::Accel;
+use crate::bsdf::fresnel::{fresnel_diffuse_reflectance, lookup_conductor, lookup_ior};
+use crate::bsdf::microfacet::{Microfacet, MicrofacetType};
+use crate::bsdf::plastic::PlasticParams;
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::camera::{Camera, FovAxis};
 use crate::error::{Error, Result};
 use crate::film::Filter;
-use crate::light::{Light, LightSampler};
+use crate::light::{Bounds, EnvMap, Light, LightSampler};
+use crate::math::Frame;
 use crate::math::Transform;
-use crate::texture::Texture;
-use glam::{Mat4, Vec3};
+use crate::texture::{Bitmap, FilterType, Texture, WrapMode};
+use glam::{Mat3, Mat4, Vec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// BSDF plugins this renderer implements.
+pub const BSDF_PLUGINS: &[&str] = &[
+    "diffuse",
+    "twosided",
+    "conductor",
+    "roughconductor",
+    "dielectric",
+    "thindielectric",
+    "roughdielectric",
+    "plastic",
+];
 
 /// Integrator plugins a scene file may name.
 pub const INTEGRATOR_PLUGINS: &[&str] = &["path"];
@@ -34,6 +52,7 @@ impl Scene {
             base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
             bsdf_ids: HashMap::new(),
             bsdfs: Vec::new(),
+            textures: HashMap::new(),
             shapes: Vec::new(),
             lights: Vec::new(),
             stats: LoadStats::default(),
@@ -99,7 +118,9 @@ impl Scene {
                 s.prepare_sampling();
             }
         }
-        let light_sampler = LightSampler::new(&b.lights, &b.shapes);
+        let bounds = scene_bounds(&b.shapes, camera.position);
+        let light_sampler = LightSampler::new(&b.lights, &b.shapes, &bounds);
+        let infinite_lights = (0..b.lights.len()).filter(|&i| b.lights[i].is_infinite()).collect();
         let geometry: Vec<_> = b.shapes.iter().map(|s| s.accel_geometry()).collect();
         let accel = Accel::build(options.backend, &geometry, options.build)?;
         drop(geometry);
@@ -109,6 +130,8 @@ impl Scene {
             bsdfs: b.bsdfs,
             lights: b.lights,
             light_sampler,
+            infinite_lights,
+            bounds,
             camera,
             film,
             integrator,
@@ -124,6 +147,7 @@ struct Builder<'d> {
     base: PathBuf,
     bsdf_ids: HashMap<NodeId, usize>,
     bsdfs: Vec<Bsdf>,
+    textures: HashMap<NodeId, Texture>,
     shapes: Vec<Shape>,
     lights: Vec<Light>,
     stats: LoadStats,
@@ -189,7 +213,106 @@ impl<'d> Builder<'d> {
     }
 
     fn texture_node(&mut self, id: NodeId) -> Result<Texture> {
-        Err(self.unknown_plugin(id, &[]))
+        if let Some(t) = self.textures.get(&id) {
+            return Ok(t.clone());
+        }
+        let node = self.doc.node(id);
+        let to_uv = Mat3::from_mat4(node.transform("to_uv")?.unwrap_or(Mat4::IDENTITY));
+        let t = match node.plugin.as_str() {
+            "bitmap" => {
+                let path = self.resolve_path(node, "filename")?;
+                let filter = match node.string("filter_type")?.unwrap_or("bilinear") {
+                    "bilinear" => FilterType::Bilinear,
+                    "nearest" => FilterType::Nearest,
+                    f => {
+                        return Err(Error::input(
+                            &node.prop_loc("filter_type"),
+                            format!("unknown filter_type \"{f}\" (bilinear, nearest)"),
+                        ));
+                    }
+                };
+                let wrap = match node.string("wrap_mode")?.unwrap_or("repeat") {
+                    "repeat" => WrapMode::Repeat,
+                    "mirror" => WrapMode::Mirror,
+                    "clamp" => WrapMode::Clamp,
+                    w => {
+                        return Err(Error::input(
+                            &node.prop_loc("wrap_mode"),
+                            format!("unknown wrap_mode \"{w}\" (repeat, mirror, clamp)"),
+                        ));
+                    }
+                };
+                let raw = node.boolean_or("raw", false)?;
+                let bitmap = load_bitmap(&path, raw, filter, wrap)
+                    .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
+                Texture::Bitmap { bitmap: Arc::new(bitmap), to_uv }
+            }
+            "checkerboard" => {
+                let color0 = non_negative_rgb(node, "color0", node.rgb("color0")?.unwrap_or(Vec3::splat(0.4)))?;
+                let color1 = non_negative_rgb(node, "color1", node.rgb("color1")?.unwrap_or(Vec3::splat(0.2)))?;
+                Texture::Checkerboard { color0, color1, to_uv }
+            }
+            _ => return Err(self.unknown_plugin(id, &["bitmap", "checkerboard"])),
+        };
+        self.doc.check_unused(id)?;
+        self.textures.insert(id, t.clone());
+        Ok(t)
+    }
+
+    /// An index of refraction given as a number or by name (`bk7`, `air`, …).
+    fn ior(&self, id: NodeId, name: &str, default: &str) -> Result<f32> {
+        let node = self.doc.node(id);
+        let v = match node.prop(name).map(|p| (&p.value, p.loc.clone())) {
+            None => lookup_ior(default).unwrap_or(1.0),
+            Some((Value::Float(f), _)) => *f as f32,
+            Some((Value::Integer(i), _)) => *i as f32,
+            Some((Value::String(s), loc)) => {
+                lookup_ior(s).ok_or_else(|| Error::input(&loc, format!("unknown index of refraction \"{s}\"")))?
+            }
+            Some((v, loc)) => {
+                return Err(Error::input(
+                    &loc,
+                    format!("\"{name}\" has type {}, expected a number or a material name", v.type_name()),
+                ));
+            }
+        };
+        positive(node, name, v)
+    }
+
+    /// Microfacet parameters: `distribution`, `alpha` or `alpha_u`/`alpha_v`, `sample_visible`.
+    fn microfacet(&self, id: NodeId) -> Result<Microfacet> {
+        let node = self.doc.node(id);
+        let kind = match node.string("distribution")?.unwrap_or("beckmann") {
+            "beckmann" => MicrofacetType::Beckmann,
+            "ggx" => MicrofacetType::Ggx,
+            d => {
+                return Err(Error::input(
+                    &node.prop_loc("distribution"),
+                    format!("unknown distribution \"{d}\" (beckmann, ggx)"),
+                ));
+            }
+        };
+        let (au, av) = match (node.float("alpha")?, node.float("alpha_u")?, node.float("alpha_v")?) {
+            (Some(a), None, None) => (positive(node, "alpha", a)?, a),
+            (None, Some(u), Some(v)) => (positive(node, "alpha_u", u)?, positive(node, "alpha_v", v)?),
+            (None, None, None) => (0.1, 0.1),
+            _ => return Err(Error::input(&node.loc, "give either \"alpha\" or both \"alpha_u\" and \"alpha_v\"")),
+        };
+        let sample_visible = node.boolean_or("sample_visible", true)?;
+        // As Mitsuba, keep the roughness at least 1e-4 so the distribution stays finite.
+        Ok(Microfacet { kind, alpha_u: au.max(1e-4), alpha_v: av.max(1e-4), sample_visible })
+    }
+
+    /// Conductor parameters: a named `material` or `eta` and `k` (default: a perfect mirror).
+    fn conductor(&self, id: NodeId) -> Result<(Vec3, Vec3)> {
+        let node = self.doc.node(id);
+        match (node.string("material")?, node.rgb("eta")?, node.rgb("k")?) {
+            (Some(m), None, None) => lookup_conductor(m)
+                .ok_or_else(|| Error::input(&node.prop_loc("material"), format!("unknown conductor material \"{m}\""))),
+            (None, Some(eta), Some(k)) => Ok((non_negative_rgb(node, "eta", eta)?, non_negative_rgb(node, "k", k)?)),
+            (None, None, None) => Ok((Vec3::ZERO, Vec3::ONE)),
+            _ => Err(Error::input(&node.loc, "give either \"material\" or both \"eta\" and \"k\"")),
+        }
     }
 
     /// Instantiates a BSDF once per node (shared through `ref`).
@@ -205,31 +328,68 @@ impl<'d> Builder<'d> {
 
     fn bsdf_value(&mut self, id: NodeId) -> Result<Bsdf> {
         let plugin = self.node(id).plugin.clone();
-        let bsdf = match plugin.as_str() {
-            "diffuse" => Bsdf::diffuse(self.texture_prop(id, "reflectance", Vec3::splat(0.5))?),
+        let one = Vec3::ONE;
+        let model = match plugin.as_str() {
+            "diffuse" => BsdfModel::Diffuse { reflectance: self.texture_prop(id, "reflectance", Vec3::splat(0.5))? },
             "twosided" => {
                 let inner: Vec<NodeId> = self.doc.children(id, "bsdf").map(|c| c.node).collect();
-                match inner.as_slice() {
+                return match inner.as_slice() {
                     [one] => {
                         let mut b = self.bsdf_value(*one)?;
                         b.two_sided = true;
-                        b
+                        self.doc.check_unused(id)?;
+                        Ok(b)
                     }
-                    [] => {
-                        return Err(Error::input(&self.node(id).loc, "twosided needs a nested <bsdf>"));
-                    }
+                    [] => Err(Error::input(&self.node(id).loc, "twosided needs a nested <bsdf>")),
+                    _ => Err(Error::input(
+                        &self.node(id).loc,
+                        "twosided with different front and back BSDFs is not supported",
+                    )),
+                };
+            }
+            "conductor" => {
+                let (eta, k) = self.conductor(id)?;
+                BsdfModel::Conductor {
+                    eta,
+                    k,
+                    specular_reflectance: self.texture_prop(id, "specular_reflectance", one)?,
+                }
+            }
+            "roughconductor" => {
+                let (eta, k) = self.conductor(id)?;
+                let distribution = self.microfacet(id)?;
+                let specular_reflectance = self.texture_prop(id, "specular_reflectance", one)?;
+                BsdfModel::RoughConductor { distribution, eta, k, specular_reflectance }
+            }
+            "dielectric" | "thindielectric" | "roughdielectric" => {
+                let eta = self.ior(id, "int_ior", "bk7")? / self.ior(id, "ext_ior", "air")?;
+                let specular_reflectance = self.texture_prop(id, "specular_reflectance", one)?;
+                let specular_transmittance = self.texture_prop(id, "specular_transmittance", one)?;
+                match plugin.as_str() {
+                    "dielectric" => BsdfModel::Dielectric { eta, specular_reflectance, specular_transmittance },
+                    "thindielectric" => BsdfModel::ThinDielectric { eta, specular_reflectance, specular_transmittance },
                     _ => {
-                        return Err(Error::input(
-                            &self.node(id).loc,
-                            "twosided with different front and back BSDFs is not supported",
-                        ));
+                        let distribution = self.microfacet(id)?;
+                        BsdfModel::RoughDielectric { distribution, eta, specular_reflectance, specular_transmittance }
                     }
                 }
             }
-            _ => return Err(self.unknown_plugin(id, &["diffuse", "twosided"])),
+            "plastic" => {
+                let eta = self.ior(id, "int_ior", "polypropylene")? / self.ior(id, "ext_ior", "air")?;
+                let diffuse_reflectance = self.texture_prop(id, "diffuse_reflectance", Vec3::splat(0.5))?;
+                let specular_reflectance = self.texture_prop(id, "specular_reflectance", one)?;
+                let nonlinear = self.node(id).boolean_or("nonlinear", false)?;
+                let d = diffuse_reflectance.mean().element_sum() / 3.0;
+                let s = specular_reflectance.mean().element_sum() / 3.0;
+                let weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
+                let fdr_int = fresnel_diffuse_reflectance(1.0 / eta);
+                let params = PlasticParams { eta, nonlinear, fdr_int, specular_sampling_weight: weight };
+                BsdfModel::Plastic { params, diffuse_reflectance, specular_reflectance }
+            }
+            _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),
         };
         self.doc.check_unused(id)?;
-        Ok(bsdf)
+        Ok(Bsdf { model, two_sided: false })
     }
 
     fn resolve_path(&self, node: &Node, name: &str) -> Result<PathBuf> {
@@ -355,10 +515,71 @@ impl<'d> Builder<'d> {
                 let intensity = non_negative_rgb(node, "intensity", node.rgb("intensity")?.unwrap_or(Vec3::ONE))?;
                 Light::Point { position: pos, intensity }
             }
-            ("point", Some(_)) => {
-                return Err(Error::input(&node.loc, "a point emitter cannot be attached to a shape"));
+            ("spot", None) => {
+                let m = node.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+                let axis = m.transform_vector3(Vec3::Z).normalize_or_zero();
+                if axis == Vec3::ZERO {
+                    return Err(Error::input(&node.prop_loc("to_world"), "the spot light's to_world is singular"));
+                }
+                let intensity = non_negative_rgb(node, "intensity", node.rgb("intensity")?.unwrap_or(Vec3::ONE))?;
+                let cutoff = node.float_or("cutoff_angle", 20.0)?;
+                let beam = node.float_or("beam_width", cutoff * 0.75)?;
+                if !(cutoff > 0.0 && cutoff <= 180.0) || !(beam > 0.0 && beam <= cutoff) {
+                    return Err(Error::input(
+                        &node.loc,
+                        format!("need 0 < beam_width ≤ cutoff_angle ≤ 180, got {beam} and {cutoff}"),
+                    ));
+                }
+                Light::Spot {
+                    position: m.transform_point3(Vec3::ZERO),
+                    frame: Frame::from_normal(axis),
+                    intensity,
+                    cutoff: cutoff.to_radians(),
+                    beam_width: beam.to_radians(),
+                }
             }
-            _ => return Err(self.unknown_plugin(id, &["area", "point"])),
+            ("directional", None) => {
+                let dir = match (node.vector("direction")?, node.transform("to_world")?) {
+                    (Some(_), Some(_)) => {
+                        return Err(Error::input(&node.loc, "give either \"direction\" or \"to_world\", not both"));
+                    }
+                    (Some(d), None) => d,
+                    (None, Some(m)) => m.transform_vector3(Vec3::Z),
+                    (None, None) => Vec3::Z,
+                };
+                if !(dir.length_squared() > 0.0) {
+                    return Err(Error::input(&node.prop_loc("direction"), "the direction must be non-zero"));
+                }
+                let irradiance = non_negative_rgb(node, "irradiance", node.rgb("irradiance")?.unwrap_or(Vec3::ONE))?;
+                Light::Directional { direction: dir.normalize(), irradiance }
+            }
+            ("constant", None) => Light::Constant {
+                radiance: non_negative_rgb(node, "radiance", node.rgb("radiance")?.unwrap_or(Vec3::ONE))?,
+            },
+            ("envmap", None) => {
+                let path = self.resolve_path(node, "filename")?;
+                let to_world = Mat3::from_mat4(node.transform("to_world")?.unwrap_or(Mat4::IDENTITY));
+                if !(to_world.determinant().abs() > 1e-6) {
+                    return Err(Error::input(&node.prop_loc("to_world"), "the envmap's to_world is singular"));
+                }
+                let scale = node.float_or("scale", 1.0)?;
+                if !(scale >= 0.0 && scale.is_finite()) {
+                    return Err(Error::input(&node.prop_loc("scale"), "scale must be finite and non-negative"));
+                }
+                let bitmap = load_bitmap(&path, false, FilterType::Bilinear, WrapMode::Repeat)
+                    .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
+                if bitmap.texels.iter().any(|t| !t.is_finite() || t.min_element() < 0.0) {
+                    return Err(Error::input(
+                        &node.prop_loc("filename"),
+                        format!("{}: the environment map has negative or non-finite texels", path.display()),
+                    ));
+                }
+                Light::Envmap(Arc::new(EnvMap::new(Arc::new(bitmap), to_world, scale)))
+            }
+            (p @ ("point" | "spot" | "directional" | "constant" | "envmap"), Some(_)) => {
+                return Err(Error::input(&node.loc, format!("a {p} emitter cannot be attached to a shape")));
+            }
+            _ => return Err(self.unknown_plugin(id, &["area", "point", "spot", "directional", "constant", "envmap"])),
         };
         self.doc.check_unused(id)?;
         Ok(light)
@@ -551,4 +772,47 @@ impl<'d> Builder<'d> {
             hide_emitters,
         })
     }
+}
+
+/// Loads an image texture: 8-bit PNG/JPEG decoded from sRGB unless `raw`, EXR as linear.
+fn load_bitmap(path: &Path, raw: bool, filter: FilterType, wrap: WrapMode) -> Result<Bitmap> {
+    if !path.is_file() {
+        return Err(Error::in_file(path, "texture file does not exist"));
+    }
+    let is_exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    if is_exr {
+        let img = crate::image_io::read_exr(path)?;
+        return Ok(Bitmap::new(img.width, img.height, img.pixels, filter, wrap));
+    }
+    let img = image::open(path).map_err(|e| Error::in_file(path, format!("cannot read texture: {e}")))?;
+    let float_data = matches!(img.color(), image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+    let rgb = img.to_rgb32f();
+    let (w, h) = rgb.dimensions();
+    if w == 0 || h == 0 {
+        return Err(Error::in_file(path, "texture has no pixels"));
+    }
+    let decode = |v: f32| if raw || float_data { v } else { crate::image_io::srgb_to_linear(v) };
+    let texels = rgb.pixels().map(|p| Vec3::new(decode(p[0]), decode(p[1]), decode(p[2]))).collect();
+    Ok(Bitmap::new(w, h, texels, filter, wrap))
+}
+
+/// A sphere around every shape and the camera position.
+fn scene_bounds(shapes: &[Shape], camera: Vec3) -> Bounds {
+    let (mut lo, mut hi) = (camera, camera);
+    for s in shapes {
+        match &s.geometry {
+            ShapeGeometry::Mesh(m) => {
+                for p in &m.positions {
+                    lo = lo.min(*p);
+                    hi = hi.max(*p);
+                }
+            }
+            ShapeGeometry::Sphere { center, radius } => {
+                lo = lo.min(*center - Vec3::splat(*radius));
+                hi = hi.max(*center + Vec3::splat(*radius));
+            }
+        }
+    }
+    let center = (lo + hi) * 0.5;
+    Bounds { center, radius: ((hi - lo).length() * 0.5).max(1e-3) }
 }

@@ -10,7 +10,7 @@ use crate::accel::{Accel, Backend, BuildOptions, Ray};
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::film::Filter;
-use crate::light::{Light, LightSampler};
+use crate::light::{Bounds, Light, LightSampler};
 use shape::{Shape, SurfaceInteraction};
 use std::path::PathBuf;
 
@@ -67,6 +67,10 @@ pub struct Scene {
     pub bsdfs: Vec<Bsdf>,
     pub lights: Vec<Light>,
     pub light_sampler: LightSampler,
+    /// Indices of the lights at infinity (`constant`, `envmap`).
+    pub infinite_lights: Vec<usize>,
+    /// A sphere around all shapes (and the camera).
+    pub bounds: Bounds,
     pub camera: Camera,
     pub film: FilmSpec,
     pub integrator: IntegratorSpec,

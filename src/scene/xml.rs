@@ -94,7 +94,8 @@ pub struct Node {
 }
 
 impl Node {
-    fn prop(&self, name: &str) -> Option<&Property> {
+    /// A property by name, marking it used.
+    pub fn prop(&self, name: &str) -> Option<&Property> {
         let p = self.props.iter().find(|p| p.name == name)?;
         p.used.set(true);
         Some(p)
@@ -516,8 +517,28 @@ impl Parser {
         }
         if let Some(loc) = uv_loc {
             let [uo, vo, us, vs] = uv;
-            let m = Mat4::from_translation(Vec3::new(uo.unwrap_or(0.0) as f32, vo.unwrap_or(0.0) as f32, 0.0))
-                * Mat4::from_scale(Vec3::new(us.unwrap_or(1.0) as f32, vs.unwrap_or(1.0) as f32, 1.0));
+            // Texture transforms act on (u, v, 1) through the upper-left 3×3 block (as in
+            // Mitsuba 3), so the offsets go in the third column.
+            let (us, vs) = (us.unwrap_or(1.0) as f32, vs.unwrap_or(1.0) as f32);
+            let (uo, vo) = (uo.unwrap_or(0.0) as f32, vo.unwrap_or(0.0) as f32);
+            let m = Mat4::from_cols_array(&[
+                us,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                vs,
+                0.0,
+                0.0,
+                uo * us,
+                vo * vs,
+                1.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+            ]);
             self.nodes[parent].props.push(Property {
                 name: "to_uv".into(),
                 value: Value::Transform(m),
