@@ -19,6 +19,7 @@ REFERENCES = {
     "cornell-box": ("scenes/cornell-box/scene.xml", {"resx": 128, "resy": 128, "max_depth": 30}, 8192),
     "veach-mis": ("scenes/veach-mis/scene.xml", {"resx": 192, "resy": 108}, 8192),
     "veach-ajar": ("scenes/veach-ajar/scene.xml", {"resx": 160, "resy": 90, "max_depth": -1}, 16384),
+    "materials": ("scenes/materials/scene.xml", {"resx": 160, "resy": 120}, 4096),
 }
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

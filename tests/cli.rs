@@ -166,12 +166,83 @@ fn render_writes_image_and_stats_and_compare_reads_them() {
 }
 
 #[test]
-fn version_06_scene_is_upgraded() {
-    // The door-ajar room in Mitsuba 0.6 syntax parses (camelCase names, uscale/vscale):
-    // loading proceeds past the XML stage to the first plugin this renderer lacks.
+fn version_06_scene_renders_like_version_3() {
+    // The door-ajar room in Mitsuba 0.6 syntax (camelCase names, `uscale`/`vscale`, the
+    // film banner) upgrades to exactly the scene of the version-3 file.
     let doc = pcbpt::scene::xml::parse_file(&root().join("scenes/veach-ajar/scene_v0.6.xml"), &[]).unwrap();
     let names: Vec<&str> = doc.nodes.iter().flat_map(|n| n.props.iter().map(|p| p.name.as_str())).collect();
     assert!(names.contains(&"to_world") && names.contains(&"sample_count") && names.contains(&"to_uv"));
     assert!(!names.iter().any(|n| n.chars().any(|c| c.is_ascii_uppercase())));
     assert_eq!(doc.params.get("max_depth").map(String::as_str), Some("13"));
+    let d = tempfile::tempdir().unwrap();
+    let mut images = Vec::new();
+    for file in ["scene.xml", "scene_v0.6.xml"] {
+        let out = d.path().join(format!("{file}.exr"));
+        let scene = root().join("scenes/veach-ajar").join(file);
+        let o = pcbpt(&[
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "-D",
+            "resx=48",
+            "-D",
+            "resy=27",
+            "--spp",
+            "4",
+            "--seed",
+            "9",
+            "--quiet",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        images.push(pcbpt::image_io::read_exr(&out).unwrap());
+    }
+    assert_eq!(images[0], images[1]);
+}
+
+#[test]
+fn material_parameter_errors() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let cases = [
+        (
+            "alpha.xml",
+            r#"<bsdf type="roughconductor" id="b"><float name="alpha" value="0"/></bsdf>"#,
+            "\"alpha\" must be positive",
+        ),
+        (
+            "ior.xml",
+            r#"<bsdf type="dielectric" id="b"><string name="int_ior" value="unobtainium"/></bsdf>"#,
+            "unknown index of refraction",
+        ),
+        (
+            "neg_ior.xml",
+            r#"<bsdf type="dielectric" id="b"><float name="int_ior" value="-1.5"/></bsdf>"#,
+            "\"int_ior\" must be positive",
+        ),
+        (
+            "metal.xml",
+            r#"<bsdf type="conductor" id="b"><string name="material" value="Xx"/></bsdf>"#,
+            "unknown conductor material",
+        ),
+        (
+            "distr.xml",
+            r#"<bsdf type="roughconductor" id="b"><string name="distribution" value="phong"/></bsdf>"#,
+            "unknown distribution",
+        ),
+        (
+            "texture.xml",
+            r#"<bsdf type="diffuse" id="b"><texture type="bitmap" name="reflectance"><string name="filename" value="none.png"/></texture></bsdf>"#,
+            "texture file does not exist",
+        ),
+        (
+            "radiance.xml",
+            r#"<shape type="cube"><emitter type="area"><rgb name="radiance" value="-1, 0, 0"/></emitter></shape>"#,
+            "\"radiance\" must be finite and non-negative",
+        ),
+    ];
+    for (name, body, msg) in cases {
+        let s = scene(dir, name, &format!("{LIGHT}\n    {body}"));
+        fails(&s, &[&format!("{name}:7:"), msg]);
+    }
 }
