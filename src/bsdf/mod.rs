@@ -19,7 +19,7 @@ use crate::math::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 use microfacet::Microfacet;
-use plastic::PlasticParams;
+use plastic::{PlasticParams, RoughPlasticParams};
 
 /// Which quantity a path carries: radiance (from the camera) or importance (from lights).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,6 +65,8 @@ pub enum BsdfModel {
     },
     /// Diffuse base under a smooth coating.
     Plastic { params: PlasticParams, diffuse_reflectance: Texture, specular_reflectance: Texture },
+    /// Diffuse base under a rough coating.
+    RoughPlastic { params: RoughPlasticParams, diffuse_reflectance: Texture, specular_reflectance: Texture },
 }
 
 /// A BSDF as attached to a shape: a model, one-sided (the front side of the shading
@@ -129,6 +131,9 @@ impl Bsdf {
             BsdfModel::Plastic { params, diffuse_reflectance, .. } => {
                 plastic::eval(params, diffuse_reflectance.eval(uv), wo, wi)
             }
+            BsdfModel::RoughPlastic { params, diffuse_reflectance, specular_reflectance } => {
+                plastic::eval_rough(params, diffuse_reflectance.eval(uv), specular_reflectance.eval(uv), wo, wi)
+            }
         }
     }
 
@@ -141,6 +146,7 @@ impl Bsdf {
             BsdfModel::RoughConductor { distribution, .. } => conductor::pdf_rough(distribution, wo, wi),
             BsdfModel::RoughDielectric { distribution, eta, .. } => dielectric::pdf_rough(distribution, *eta, wo, wi),
             BsdfModel::Plastic { params, .. } => plastic::pdf(params, wo, wi),
+            BsdfModel::RoughPlastic { params, .. } => plastic::pdf_rough(params, wo, wi),
         }
     }
 
@@ -176,6 +182,10 @@ impl Bsdf {
             }
             BsdfModel::Plastic { params, diffuse_reflectance, specular_reflectance } => {
                 plastic::sample(params, diffuse_reflectance.eval(uv), specular_reflectance.eval(uv), wo_f, u1, u2)?
+            }
+            BsdfModel::RoughPlastic { params, diffuse_reflectance, specular_reflectance } => {
+                let (d, sp) = (diffuse_reflectance.eval(uv), specular_reflectance.eval(uv));
+                plastic::sample_rough(params, d, sp, wo_f, u1, u2)?
             }
         };
         if flip {
@@ -242,6 +252,11 @@ mod tests {
                 two_sided: false,
             },
         ));
+        for (kind, alpha) in [(MicrofacetType::Beckmann, 0.1), (MicrofacetType::Ggx, 0.4)] {
+            let params = RoughPlasticParams::new(rough(kind, alpha, alpha), 1.5, false, 0.5);
+            let model = BsdfModel::RoughPlastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) };
+            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false }));
+        }
         v
     }
 

@@ -6,11 +6,13 @@
 
 use super::BsdfSample;
 use super::conductor::mirror;
-use super::fresnel::fresnel_dielectric;
+use super::fresnel::{fresnel_dielectric, refract};
+use super::microfacet::Microfacet;
 use crate::math::Rgb;
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
+use std::sync::Arc;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlasticParams {
@@ -62,5 +64,153 @@ pub fn sample(p: &PlasticParams, diffuse: Rgb, specular: Rgb, wo: Vec3, u1: f32,
         return None;
     }
     let f = eval(p, diffuse, wo, wi);
+    Some(BsdfSample { wi, f, pdf, weight: f * (wi.z / pdf), delta: false })
+}
+
+/// Mitsuba's `roughplastic`: the same diffuse base under a rough dielectric coating
+/// (Beckmann or GGX, isotropic). Light entering and leaving the coating is attenuated by
+/// the coating's directional transmittance `T(μ)` (the energy the rough interface
+/// refracts, shadowing included), tabulated over `μ = cos θ` when the BSDF is made; the
+/// internal reflectance is `2 mean(R_int(μ) μ)` over the same grid, with the inverted index.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RoughPlasticParams {
+    pub distribution: Microfacet,
+    pub eta: f32,
+    pub nonlinear: bool,
+    pub specular_sampling_weight: f32,
+    pub internal_reflectance: f32,
+    /// `T(μ)` at `μ = i / (n - 1)`.
+    pub external_transmittance: Arc<[f32]>,
+}
+
+/// Table size for the coating transmittance (as Mitsuba's `MI_ROUGH_TRANSMITTANCE_RES`).
+const TRANSMITTANCE_RES: usize = 64;
+
+impl RoughPlasticParams {
+    pub fn new(
+        distribution: Microfacet,
+        eta: f32,
+        nonlinear: bool,
+        specular_sampling_weight: f32,
+    ) -> RoughPlasticParams {
+        let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-4);
+        let external: Vec<f32> =
+            (0..TRANSMITTANCE_RES).map(|i| interface_energy(&distribution, mu(i), eta).1).collect();
+        let internal = 2.0
+            * (0..TRANSMITTANCE_RES).map(|i| interface_energy(&distribution, mu(i), 1.0 / eta).0 * mu(i)).sum::<f32>()
+            / TRANSMITTANCE_RES as f32;
+        RoughPlasticParams {
+            distribution,
+            eta,
+            nonlinear,
+            specular_sampling_weight,
+            internal_reflectance: internal,
+            external_transmittance: external.into(),
+        }
+    }
+
+    fn transmittance(&self, mu: f32) -> f32 {
+        let x = mu.clamp(0.0, 1.0) * (TRANSMITTANCE_RES - 1) as f32;
+        let i = (x as usize).min(TRANSMITTANCE_RES - 2);
+        let f = x - i as f32;
+        self.external_transmittance[i] * (1.0 - f) + self.external_transmittance[i + 1] * f
+    }
+
+    fn prob_specular(&self, wo: Vec3) -> f32 {
+        let t = self.transmittance(wo.z);
+        let ps = (1.0 - t) * self.specular_sampling_weight;
+        let pd = t * (1.0 - self.specular_sampling_weight);
+        if ps + pd > 0.0 { ps / (ps + pd) } else { 0.0 }
+    }
+}
+
+/// Energy a rough dielectric interface reflects and transmits for light arriving at
+/// `cos θ = mu`: the visible-normal averages of `F G1(reflected)` and `(1 - F) G1(refracted)`
+/// (as Mitsuba 3 defines them), by a deterministic stratified rule.
+fn interface_energy(d: &Microfacet, mu: f32, eta: f32) -> (f32, f32) {
+    let wi = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+    let visible = Microfacet { sample_visible: true, ..*d };
+    let n = 64;
+    let (mut r, mut t) = (0.0f64, 0.0f64);
+    for a in 0..n {
+        for b in 0..n {
+            let m = visible.sample(wi, Vec2::new((a as f32 + 0.5) / n as f32, (b as f32 + 0.5) / n as f32));
+            let c = wi.dot(m);
+            if c <= 0.0 {
+                continue;
+            }
+            let f = fresnel_dielectric(c, eta);
+            let wr = 2.0 * c * m - wi;
+            if wr.z > 0.0 {
+                r += (f * d.g1(wr, m)) as f64;
+            }
+            if let Some((wt, _)) = refract(wi, m, eta) {
+                if wt.z < 0.0 {
+                    t += ((1.0 - f) * d.g1(wt, m)) as f64;
+                }
+            }
+        }
+    }
+    let k = (n * n) as f64;
+    ((r / k) as f32, (t / k) as f32)
+}
+
+pub fn eval_rough(p: &RoughPlasticParams, diffuse: Rgb, specular: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return Rgb::ZERO;
+    }
+    let d = &p.distribution;
+    let m = (wo + wi).normalize_or_zero();
+    let spec = if m == Vec3::ZERO {
+        0.0
+    } else {
+        fresnel_dielectric(wo.dot(m), p.eta) * d.d(m) * d.g(wi, wo, m) / (4.0 * wo.z * wi.z)
+    };
+    let base = if p.nonlinear {
+        diffuse / (Rgb::ONE - diffuse * p.internal_reflectance)
+    } else {
+        diffuse / (1.0 - p.internal_reflectance)
+    };
+    specular * spec + base * (FRAC_1_PI / (p.eta * p.eta) * p.transmittance(wo.z) * p.transmittance(wi.z))
+}
+
+pub fn pdf_rough(p: &RoughPlasticParams, wo: Vec3, wi: Vec3) -> f32 {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return 0.0;
+    }
+    let ps = p.prob_specular(wo);
+    let m = (wo + wi).normalize_or_zero();
+    let spec = if m == Vec3::ZERO || wo.dot(m) <= 0.0 { 0.0 } else { p.distribution.pdf(wo, m) / (4.0 * wo.dot(m)) };
+    ps * spec + (1.0 - ps) * square_to_cosine_hemisphere_pdf(wi)
+}
+
+pub fn sample_rough(
+    p: &RoughPlasticParams,
+    diffuse: Rgb,
+    specular: Rgb,
+    wo: Vec3,
+    u1: f32,
+    u2: Vec2,
+) -> Option<BsdfSample> {
+    if wo.z <= 0.0 {
+        return None;
+    }
+    let wi = if u1 < p.prob_specular(wo) {
+        let m = p.distribution.sample(wo, u2);
+        if wo.dot(m) <= 0.0 {
+            return None;
+        }
+        2.0 * wo.dot(m) * m - wo
+    } else {
+        square_to_cosine_hemisphere(u2)
+    };
+    if wi.z <= 0.0 {
+        return None;
+    }
+    let pdf = pdf_rough(p, wo, wi);
+    if pdf <= 0.0 || !pdf.is_finite() {
+        return None;
+    }
+    let f = eval_rough(p, diffuse, specular, wo, wi);
     Some(BsdfSample { wi, f, pdf, weight: f * (wi.z / pdf), delta: false })
 }

@@ -11,7 +11,7 @@ use super::{FilmSpec, IntegratorSpec, LoadOptions, LoadStats, SamplerSpec, Scene
 use crate::accel::Accel;
 use crate::bsdf::fresnel::{fresnel_diffuse_reflectance, lookup_conductor, lookup_ior};
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType};
-use crate::bsdf::plastic::PlasticParams;
+use crate::bsdf::plastic::{PlasticParams, RoughPlasticParams};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::camera::{Camera, FovAxis};
 use crate::error::{Error, Result};
@@ -35,6 +35,7 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "thindielectric",
     "roughdielectric",
     "plastic",
+    "roughplastic",
 ];
 
 /// Integrator plugins a scene file may name.
@@ -374,7 +375,7 @@ impl<'d> Builder<'d> {
                     }
                 }
             }
-            "plastic" => {
+            "plastic" | "roughplastic" => {
                 let eta = self.ior(id, "int_ior", "polypropylene")? / self.ior(id, "ext_ior", "air")?;
                 let diffuse_reflectance = self.texture_prop(id, "diffuse_reflectance", Vec3::splat(0.5))?;
                 let specular_reflectance = self.texture_prop(id, "specular_reflectance", one)?;
@@ -382,9 +383,18 @@ impl<'d> Builder<'d> {
                 let d = diffuse_reflectance.mean().element_sum() / 3.0;
                 let s = specular_reflectance.mean().element_sum() / 3.0;
                 let weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
-                let fdr_int = fresnel_diffuse_reflectance(1.0 / eta);
-                let params = PlasticParams { eta, nonlinear, fdr_int, specular_sampling_weight: weight };
-                BsdfModel::Plastic { params, diffuse_reflectance, specular_reflectance }
+                if plugin == "plastic" {
+                    let fdr_int = fresnel_diffuse_reflectance(1.0 / eta);
+                    let params = PlasticParams { eta, nonlinear, fdr_int, specular_sampling_weight: weight };
+                    BsdfModel::Plastic { params, diffuse_reflectance, specular_reflectance }
+                } else {
+                    let distribution = self.microfacet(id)?;
+                    if distribution.alpha_u != distribution.alpha_v {
+                        return Err(Error::input(&self.node(id).loc, "roughplastic is isotropic: give \"alpha\""));
+                    }
+                    let params = RoughPlasticParams::new(distribution, eta, nonlinear, weight);
+                    BsdfModel::RoughPlastic { params, diffuse_reflectance, specular_reflectance }
+                }
             }
             _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),
         };
