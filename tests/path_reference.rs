@@ -60,9 +60,9 @@ fn veach_ajar_matches_mitsuba() {
         Backend::Embree,
     );
     let reference = reference("veach-ajar.exr");
-    let a = image(render(&scene, IntegratorKind::Path, 256, 1, 0));
-    let b = image(render(&scene, IntegratorKind::Path, 256, 2, 0));
-    Verdict::new(&reference, &a, &b, 256, 16384).check("veach-ajar, path, 256 spp", 0.005, 1.3).unwrap();
+    let a = image(render(&scene, IntegratorKind::Path, 1024, 1, 0));
+    let b = image(render(&scene, IntegratorKind::Path, 1024, 2, 0));
+    Verdict::new(&reference, &a, &b, 1024, 16384).check("veach-ajar, path, 1024 spp", 0.005, 1.3).unwrap();
 }
 
 #[test]

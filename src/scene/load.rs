@@ -471,7 +471,10 @@ impl<'d> Builder<'d> {
         };
         let bsdf = match self.single_child(id, "bsdf", "a shape")? {
             None => {
-                self.bsdfs.push(Bsdf::diffuse(Texture::Constant(Vec3::splat(0.5))));
+                // Mitsuba's defaults: grey diffuse, but black for a shape that emits.
+                let emits = self.doc.node(id).children.iter().any(|c| self.doc.node(c.node).tag == "emitter");
+                let reflectance = if emits { 0.0 } else { 0.5 };
+                self.bsdfs.push(Bsdf::diffuse(Texture::Constant(Vec3::splat(reflectance))));
                 self.bsdfs.len() - 1
             }
             Some(b) => self.bsdf(b)?,
