@@ -47,20 +47,25 @@ impl Microfacet {
         if v.dot(m) * v.z <= 0.0 {
             return 0.0;
         }
-        let xy2 = v.x * v.x + v.y * v.y;
-        if xy2 == 0.0 {
-            return 1.0;
-        }
-        // Projected roughness along v's azimuth.
-        let alpha2 = (self.alpha_u * self.alpha_u * v.x * v.x + self.alpha_v * self.alpha_v * v.y * v.y) / xy2;
-        let tan2 = xy2 / (v.z * v.z);
+        let Some(a2t2) = self.alpha2_tan2(v) else { return 1.0 };
         match self.kind {
             MicrofacetType::Beckmann => {
-                let a = 1.0 / (alpha2 * tan2).sqrt();
+                let a = 1.0 / a2t2.sqrt();
                 if a >= 1.6 { 1.0 } else { (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a) }
             }
-            MicrofacetType::Ggx => 2.0 / (1.0 + (1.0 + alpha2 * tan2).sqrt()),
+            MicrofacetType::Ggx => 2.0 / (1.0 + (1.0 + a2t2).sqrt()),
         }
+    }
+
+    /// `α(v)² tan² θv` with the roughness projected on v's azimuth; `None` along the normal.
+    #[inline]
+    fn alpha2_tan2(&self, v: Vec3) -> Option<f32> {
+        let xy2 = v.x * v.x + v.y * v.y;
+        if xy2 == 0.0 {
+            return None;
+        }
+        let alpha2 = (self.alpha_u * self.alpha_u * v.x * v.x + self.alpha_v * self.alpha_v * v.y * v.y) / xy2;
+        Some(alpha2 * xy2 / (v.z * v.z))
     }
 
     /// Separable shadowing–masking `G1(wi) G1(wo)`.
@@ -87,19 +92,14 @@ impl Microfacet {
     /// Smith masking `1 / (1 + Λ(v))` with the exact Λ of each distribution (for `v` on
     /// the visible side of the microfacet).
     fn g1_exact(&self, v: Vec3) -> f32 {
-        let xy2 = v.x * v.x + v.y * v.y;
-        if xy2 == 0.0 {
-            return 1.0;
-        }
-        let alpha2 = (self.alpha_u * self.alpha_u * v.x * v.x + self.alpha_v * self.alpha_v * v.y * v.y) / xy2;
-        let tan2 = xy2 / (v.z * v.z);
+        let Some(a2t2) = self.alpha2_tan2(v) else { return 1.0 };
         match self.kind {
             MicrofacetType::Beckmann => {
-                let a = 1.0 / (alpha2 as f64 * tan2 as f64).sqrt();
+                let a = 1.0 / (a2t2 as f64).sqrt();
                 let lambda = 0.5 * (erf(a) - 1.0) + (-a * a).exp() / (2.0 * a * std::f64::consts::PI.sqrt());
                 (1.0 / (1.0 + lambda)) as f32
             }
-            MicrofacetType::Ggx => 2.0 / (1.0 + (1.0 + alpha2 * tan2).sqrt()),
+            MicrofacetType::Ggx => 2.0 / (1.0 + (1.0 + a2t2).sqrt()),
         }
     }
 

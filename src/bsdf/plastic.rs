@@ -144,10 +144,8 @@ fn interface_energy(d: &Microfacet, mu: f32, eta: f32) -> (f32, f32) {
             if wr.z > 0.0 {
                 r += (f * d.g1(wr, m)) as f64;
             }
-            if let Some((wt, _)) = refract(wi, m, eta) {
-                if wt.z < 0.0 {
-                    t += ((1.0 - f) * d.g1(wt, m)) as f64;
-                }
+            if let Some((wt, _)) = refract(wi, m, eta).filter(|(wt, _)| wt.z < 0.0) {
+                t += ((1.0 - f) * d.g1(wt, m)) as f64;
             }
         }
     }

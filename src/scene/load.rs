@@ -537,7 +537,7 @@ impl<'d> Builder<'d> {
                 let intensity = non_negative_rgb(node, "intensity", node.rgb("intensity")?.unwrap_or(Vec3::ONE))?;
                 let cutoff = node.float_or("cutoff_angle", 20.0)?;
                 let beam = node.float_or("beam_width", cutoff * 0.75)?;
-                if !(cutoff > 0.0 && cutoff <= 180.0) || !(beam > 0.0 && beam <= cutoff) {
+                if !(cutoff > 0.0 && cutoff <= 180.0 && beam > 0.0 && beam <= cutoff) {
                     return Err(Error::input(
                         &node.loc,
                         format!("need 0 < beam_width ≤ cutoff_angle ≤ 180, got {beam} and {cutoff}"),
@@ -560,7 +560,7 @@ impl<'d> Builder<'d> {
                     (None, Some(m)) => m.transform_vector3(Vec3::Z),
                     (None, None) => Vec3::Z,
                 };
-                if !(dir.length_squared() > 0.0) {
+                if !dir.is_finite() || dir.length_squared() == 0.0 {
                     return Err(Error::input(&node.prop_loc("direction"), "the direction must be non-zero"));
                 }
                 let irradiance = non_negative_rgb(node, "irradiance", node.rgb("irradiance")?.unwrap_or(Vec3::ONE))?;
@@ -572,7 +572,8 @@ impl<'d> Builder<'d> {
             ("envmap", None) => {
                 let path = self.resolve_path(node, "filename")?;
                 let to_world = Mat3::from_mat4(node.transform("to_world")?.unwrap_or(Mat4::IDENTITY));
-                if !(to_world.determinant().abs() > 1e-6) {
+                let det = to_world.determinant();
+                if det.is_nan() || det.abs() <= 1e-6 {
                     return Err(Error::input(&node.prop_loc("to_world"), "the envmap's to_world is singular"));
                 }
                 let scale = node.float_or("scale", 1.0)?;
