@@ -144,6 +144,7 @@ fn render_tile(
     first: u32,
     count: u32,
 ) -> (ImageBlock, Counters) {
+    crate::accel::embree::set_flush_denormals();
     let mut block = ImageBlock::new(tile, scene.film.filter);
     let mut counters = Counters::default();
     let width = scene.film.width as u64;

@@ -300,6 +300,9 @@ impl LightSampler {
     #[inline]
     pub fn sample(&self, u: f32) -> Option<(usize, f32, f32)> {
         let d = self.distribution.as_ref()?;
+        if d.len() == 1 {
+            return Some((0, 1.0, u));
+        }
         let (i, rest) = d.sample(u);
         Some((i, d.pmf(i), rest))
     }
