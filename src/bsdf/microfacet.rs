@@ -12,6 +12,35 @@ pub enum MicrofacetType {
     Ggx,
 }
 
+/// A microfacet distribution whose roughness may vary over the surface (Mitsuba accepts a
+/// texture for `alpha`, `alpha_u`, `alpha_v`; its luminance is the roughness).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Roughness {
+    Fixed(Microfacet),
+    Textured { base: Microfacet, alpha_u: crate::texture::Texture, alpha_v: crate::texture::Texture },
+}
+
+impl Roughness {
+    /// The distribution at a surface point.
+    #[inline]
+    pub fn at(&self, uv: Vec2) -> Microfacet {
+        match self {
+            Roughness::Fixed(m) => *m,
+            Roughness::Textured { base, alpha_u, alpha_v } => Microfacet {
+                alpha_u: crate::math::luminance(alpha_u.eval(uv)).max(1e-4),
+                alpha_v: crate::math::luminance(alpha_v.eval(uv)).max(1e-4),
+                ..*base
+            },
+        }
+    }
+}
+
+impl From<Microfacet> for Roughness {
+    fn from(m: Microfacet) -> Roughness {
+        Roughness::Fixed(m)
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Microfacet {
     pub kind: MicrofacetType,

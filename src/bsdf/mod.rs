@@ -18,7 +18,7 @@ pub mod plastic;
 use crate::math::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
-use microfacet::Microfacet;
+use microfacet::Roughness;
 use plastic::{PlasticParams, RoughPlasticParams};
 
 /// Which quantity a path carries: radiance (from the camera) or importance (from lights).
@@ -51,14 +51,14 @@ pub enum BsdfModel {
     /// Smooth metal.
     Conductor { eta: Rgb, k: Rgb, specular_reflectance: Texture },
     /// Microfacet metal.
-    RoughConductor { distribution: Microfacet, eta: Rgb, k: Rgb, specular_reflectance: Texture },
+    RoughConductor { distribution: Roughness, eta: Rgb, k: Rgb, specular_reflectance: Texture },
     /// Smooth glass; `eta` = interior / exterior index.
     Dielectric { eta: f32, specular_reflectance: Texture, specular_transmittance: Texture },
     /// A thin pane of glass.
     ThinDielectric { eta: f32, specular_reflectance: Texture, specular_transmittance: Texture },
     /// Microfacet glass.
     RoughDielectric {
-        distribution: Microfacet,
+        distribution: Roughness,
         eta: f32,
         specular_reflectance: Texture,
         specular_transmittance: Texture,
@@ -122,11 +122,11 @@ impl Bsdf {
             BsdfModel::Diffuse { reflectance } => diffuse::eval(reflectance.eval(uv), wo, wi),
             BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => Rgb::ZERO,
             BsdfModel::RoughConductor { distribution, eta, k, specular_reflectance } => {
-                conductor::eval_rough(distribution, *eta, *k, specular_reflectance.eval(uv), wo, wi)
+                conductor::eval_rough(&distribution.at(uv), *eta, *k, specular_reflectance.eval(uv), wo, wi)
             }
             BsdfModel::RoughDielectric { distribution, eta, specular_reflectance, specular_transmittance } => {
                 let (r, t) = (specular_reflectance.eval(uv), specular_transmittance.eval(uv));
-                dielectric::eval_rough(distribution, *eta, r, t, wo, wi, mode)
+                dielectric::eval_rough(&distribution.at(uv), *eta, r, t, wo, wi, mode)
             }
             BsdfModel::Plastic { params, diffuse_reflectance, .. } => {
                 plastic::eval(params, diffuse_reflectance.eval(uv), wo, wi)
@@ -138,13 +138,15 @@ impl Bsdf {
     }
 
     /// Solid-angle density of sampling `wi` given `wo`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, _uv: Vec2, _mode: TransportMode) -> f32 {
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2, _mode: TransportMode) -> f32 {
         let (wo, wi) = self.orient(wo, wi);
         match &self.model {
             BsdfModel::Diffuse { .. } => diffuse::pdf(wo, wi),
             BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => 0.0,
-            BsdfModel::RoughConductor { distribution, .. } => conductor::pdf_rough(distribution, wo, wi),
-            BsdfModel::RoughDielectric { distribution, eta, .. } => dielectric::pdf_rough(distribution, *eta, wo, wi),
+            BsdfModel::RoughConductor { distribution, .. } => conductor::pdf_rough(&distribution.at(uv), wo, wi),
+            BsdfModel::RoughDielectric { distribution, eta, .. } => {
+                dielectric::pdf_rough(&distribution.at(uv), *eta, wo, wi)
+            }
             BsdfModel::Plastic { params, .. } => plastic::pdf(params, wo, wi),
             BsdfModel::RoughPlastic { params, .. } => plastic::pdf_rough(params, wo, wi),
         }
@@ -166,7 +168,7 @@ impl Bsdf {
                 conductor::sample_smooth(*eta, *k, specular_reflectance.eval(uv), wo_f)?
             }
             BsdfModel::RoughConductor { distribution, eta, k, specular_reflectance } => {
-                conductor::sample_rough(distribution, *eta, *k, specular_reflectance.eval(uv), wo_f, u2)?
+                conductor::sample_rough(&distribution.at(uv), *eta, *k, specular_reflectance.eval(uv), wo_f, u2)?
             }
             BsdfModel::Dielectric { eta, specular_reflectance, specular_transmittance } => {
                 let (r, t) = (specular_reflectance.eval(uv), specular_transmittance.eval(uv));
@@ -178,7 +180,7 @@ impl Bsdf {
             }
             BsdfModel::RoughDielectric { distribution, eta, specular_reflectance, specular_transmittance } => {
                 let (r, t) = (specular_reflectance.eval(uv), specular_transmittance.eval(uv));
-                dielectric::sample_rough(distribution, *eta, r, t, wo_f, u1, u2, mode)?
+                dielectric::sample_rough(&distribution.at(uv), *eta, r, t, wo_f, u1, u2, mode)?
             }
             BsdfModel::Plastic { params, diffuse_reflectance, specular_reflectance } => {
                 plastic::sample(params, diffuse_reflectance.eval(uv), specular_reflectance.eval(uv), wo_f, u1, u2)?
@@ -191,13 +193,14 @@ impl Bsdf {
         if flip {
             s.wi.z = -s.wi.z;
         }
+
         Some(s)
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::microfacet::MicrofacetType;
+    use super::microfacet::{Microfacet, MicrofacetType};
     use super::*;
     use crate::sampling::Sampler;
     use crate::sampling::chi2::{Chi2Test, SphereDomain};
@@ -221,7 +224,12 @@ mod tests {
                 v.push((
                     format!("roughconductor {name}"),
                     Bsdf {
-                        model: BsdfModel::RoughConductor { distribution, eta, k, specular_reflectance: c(1.0) },
+                        model: BsdfModel::RoughConductor {
+                            distribution: distribution.into(),
+                            eta,
+                            k,
+                            specular_reflectance: c(1.0),
+                        },
                         two_sided: false,
                     },
                 ));
@@ -229,7 +237,7 @@ mod tests {
                     format!("roughdielectric {name}"),
                     Bsdf {
                         model: BsdfModel::RoughDielectric {
-                            distribution,
+                            distribution: distribution.into(),
                             eta: 1.5,
                             specular_reflectance: c(1.0),
                             specular_transmittance: c(1.0),
@@ -328,6 +336,8 @@ mod tests {
                         "{name}: f {} vs {f}",
                         bs.f
                     );
+                    let (fwd, rev) = b.pdf_pair(wo, bs.wi, Vec2::ZERO, mode);
+                    assert!(fwd == pdf && rev == b.pdf(bs.wi, wo, Vec2::ZERO, mode), "{name}");
                     let w = f * bs.wi.z.abs() / pdf;
                     assert!((bs.weight - w).abs().max_element() <= 1e-3 * w.max_element().max(1.0), "{name}");
                 }
@@ -342,7 +352,7 @@ mod tests {
             for alpha in [0.01, 0.1, 0.3, 0.7, 1.0] {
                 let b = Bsdf {
                     model: BsdfModel::RoughConductor {
-                        distribution: rough(kind, alpha, alpha),
+                        distribution: rough(kind, alpha, alpha).into(),
                         eta: Vec3::ZERO,
                         k: Vec3::ONE,
                         specular_reflectance: c(1.0),

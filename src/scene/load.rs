@@ -10,7 +10,7 @@ use super::xml::{self, Document, Node, NodeId};
 use super::{FilmSpec, IntegratorSpec, LoadOptions, LoadStats, SamplerSpec, Scene};
 use crate::accel::Accel;
 use crate::bsdf::fresnel::{fresnel_diffuse_reflectance, lookup_conductor, lookup_ior};
-use crate::bsdf::microfacet::{Microfacet, MicrofacetType};
+use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::plastic::{PlasticParams, RoughPlasticParams};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::camera::{Camera, FovAxis};
@@ -280,28 +280,73 @@ impl<'d> Builder<'d> {
         positive(node, name, v)
     }
 
-    /// Microfacet parameters: `distribution`, `alpha` or `alpha_u`/`alpha_v`, `sample_visible`.
-    fn microfacet(&self, id: NodeId) -> Result<Microfacet> {
+    /// `distribution` and `sample_visible` of a microfacet BSDF.
+    fn microfacet_kind(&self, id: NodeId) -> Result<(MicrofacetType, bool)> {
         let node = self.doc.node(id);
         let kind = match node.string("distribution")?.unwrap_or("beckmann") {
             "beckmann" => MicrofacetType::Beckmann,
             "ggx" => MicrofacetType::Ggx,
             d => {
+                let msg = format!("unknown distribution \"{d}\" (beckmann, ggx)");
+                return Err(Error::input(&node.prop_loc("distribution"), msg));
+            }
+        };
+        Ok((kind, node.boolean_or("sample_visible", true)?))
+    }
+
+    /// A roughness given as a positive number or a texture (`alpha`, `alpha_u`, `alpha_v`).
+    fn alpha_texture(&mut self, id: NodeId, name: &str) -> Result<Option<Texture>> {
+        let node = self.doc.node(id);
+        let nested =
+            node.children.iter().find(|c| c.name.as_deref() == Some(name) && self.doc.node(c.node).tag == "texture");
+        if let Some(c) = nested {
+            c.used.set(true);
+        }
+        match (node.float(name)?, nested.map(|c| c.node)) {
+            (Some(_), Some(t)) => {
+                Err(Error::input(&self.node(t).loc, format!("\"{name}\" is given both as a value and as a texture")))
+            }
+            (Some(v), None) => Ok(Some(Texture::Constant(Vec3::splat(positive(node, name, v)?)))),
+            (None, Some(t)) => Ok(Some(self.texture_node(t)?)),
+            (None, None) => Ok(None),
+        }
+    }
+
+    /// Microfacet roughness: `alpha`, or `alpha_u` and `alpha_v`, each a number or a texture
+    /// (default 0.1). Roughness is kept at least 1e-4, as in Mitsuba.
+    fn roughness(&mut self, id: NodeId) -> Result<Roughness> {
+        let (kind, sample_visible) = self.microfacet_kind(id)?;
+        let a = self.alpha_texture(id, "alpha")?;
+        let au = self.alpha_texture(id, "alpha_u")?;
+        let av = self.alpha_texture(id, "alpha_v")?;
+        let (tu, tv) = match (a, au, av) {
+            (Some(a), None, None) => (a.clone(), a),
+            (None, Some(u), Some(v)) => (u, v),
+            (None, None, None) => (Texture::Constant(Vec3::splat(0.1)), Texture::Constant(Vec3::splat(0.1))),
+            _ => {
                 return Err(Error::input(
-                    &node.prop_loc("distribution"),
-                    format!("unknown distribution \"{d}\" (beckmann, ggx)"),
+                    &self.node(id).loc,
+                    "give either \"alpha\" or both \"alpha_u\" and \"alpha_v\"",
                 ));
             }
         };
-        let (au, av) = match (node.float("alpha")?, node.float("alpha_u")?, node.float("alpha_v")?) {
-            (Some(a), None, None) => (positive(node, "alpha", a)?, a),
-            (None, Some(u), Some(v)) => (positive(node, "alpha_u", u)?, positive(node, "alpha_v", v)?),
-            (None, None, None) => (0.1, 0.1),
-            _ => return Err(Error::input(&node.loc, "give either \"alpha\" or both \"alpha_u\" and \"alpha_v\"")),
-        };
-        let sample_visible = node.boolean_or("sample_visible", true)?;
-        // As Mitsuba, keep the roughness at least 1e-4 so the distribution stays finite.
-        Ok(Microfacet { kind, alpha_u: au.max(1e-4), alpha_v: av.max(1e-4), sample_visible })
+        let base = Microfacet { kind, alpha_u: 0.1, alpha_v: 0.1, sample_visible };
+        Ok(match (&tu, &tv) {
+            (Texture::Constant(u), Texture::Constant(v)) => {
+                Roughness::Fixed(Microfacet { alpha_u: u.x.max(1e-4), alpha_v: v.x.max(1e-4), ..base })
+            }
+            _ => Roughness::Textured { base, alpha_u: tu, alpha_v: tv },
+        })
+    }
+
+    /// A constant microfacet distribution (for plugins that precompute tables from it).
+    fn microfacet(&mut self, id: NodeId) -> Result<Microfacet> {
+        match self.roughness(id)? {
+            Roughness::Fixed(m) => Ok(m),
+            Roughness::Textured { .. } => {
+                Err(Error::input(&self.node(id).loc, format!("{} needs a constant roughness", self.node(id).plugin)))
+            }
+        }
     }
 
     /// Conductor parameters: a named `material` or `eta` and `k` (default: a perfect mirror).
@@ -358,7 +403,7 @@ impl<'d> Builder<'d> {
             }
             "roughconductor" => {
                 let (eta, k) = self.conductor(id)?;
-                let distribution = self.microfacet(id)?;
+                let distribution = self.roughness(id)?;
                 let specular_reflectance = self.texture_prop(id, "specular_reflectance", one)?;
                 BsdfModel::RoughConductor { distribution, eta, k, specular_reflectance }
             }
@@ -370,7 +415,7 @@ impl<'d> Builder<'d> {
                     "dielectric" => BsdfModel::Dielectric { eta, specular_reflectance, specular_transmittance },
                     "thindielectric" => BsdfModel::ThinDielectric { eta, specular_reflectance, specular_transmittance },
                     _ => {
-                        let distribution = self.microfacet(id)?;
+                        let distribution = self.roughness(id)?;
                         BsdfModel::RoughDielectric { distribution, eta, specular_reflectance, specular_transmittance }
                     }
                 }
