@@ -177,7 +177,10 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let start = Instant::now();
     let (pass_spp, total_passes) = match opts.budget {
         Budget::Spp(spp) => {
-            let per = spp.div_ceil(32).max(1);
+            // About 32 passes, each of at most ~1 M samples so that progress and Ctrl-C
+            // stay responsive; the split depends only on spp and resolution.
+            let cap = ((1u64 << 20) / (w as u64 * h as u64)).max(1) as u32;
+            let per = spp.div_ceil(32).clamp(1, cap);
             (per, spp.div_ceil(per))
         }
         Budget::Time(_) => (1, u32::MAX),
@@ -192,8 +195,17 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 Budget::Spp(spp) => pass_spp.min(spp - done),
                 Budget::Time(_) => 1,
             };
-            let blocks: Vec<(ImageBlock, Counters)> =
-                tile_list.par_iter().map(|&t| render_tile(scene, &est, t, opts.seed, done, count)).collect();
+            let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+            // A pass interrupted part-way is discarded whole, so every pixel keeps the same
+            // number of samples.
+            let blocks: Option<Vec<(ImageBlock, Counters)>> = tile_list
+                .par_iter()
+                .map(|&t| (!stopped()).then(|| render_tile(scene, &est, t, opts.seed, done, count)))
+                .collect();
+            let Some(blocks) = blocks else {
+                interrupted = true;
+                break;
+            };
             for (b, c) in &blocks {
                 film.merge(b);
                 counters += *c;
@@ -210,7 +222,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 let secs = start.elapsed().as_secs_f64().max(1e-9);
                 bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
             }
-            if opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst)) {
+            if stopped() {
                 interrupted = true;
                 break;
             }
