@@ -2,7 +2,7 @@
 //!
 //! [`Accel`] answers closest-hit and occlusion queries, for single rays and batches, over
 //! the scene's primitives: triangle meshes and exact spheres. The default backend is the
-//! system Embree bound by our own bindgen layer ([`embree`], the only module with `unsafe`);
+//! system Embree bound by our own bindgen layer ([`embree`], the only FFI module);
 //! with the `obvhs` feature the pure-Rust CWBVH of the `obvhs` crate ([`bvh`]) is
 //! available too, and both report the same hits (up to floating-point ties at shared edges).
 

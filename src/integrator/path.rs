@@ -26,6 +26,20 @@ impl PathTracer {
         }
     }
 
+    /// MIS weight of emission reached after `segments` earlier segments: seen directly by
+    /// the camera (0), through a delta lobe, or by BSDF sampling against light sampling
+    /// (whose density `pdf_light` is computed only when needed).
+    #[inline]
+    fn emission_weight(&self, segments: u32, prev_delta: bool, prev_pdf: f32, pdf_light: impl FnOnce() -> f32) -> f32 {
+        if segments == 0 {
+            if self.hide_emitters { 0.0 } else { 1.0 }
+        } else if prev_delta {
+            1.0
+        } else {
+            power_heuristic(prev_pdf, pdf_light())
+        }
+    }
+
     /// Radiance arriving along a camera ray.
     pub fn li(&self, scene: &Scene, mut ray: Ray, sampler: &mut Sampler, counters: &mut Counters) -> Rgb {
         let mut l = Rgb::ZERO;
@@ -49,16 +63,10 @@ impl PathTracer {
                     if le == Rgb::ZERO {
                         continue;
                     }
-                    if depth == 0 {
-                        if !self.hide_emitters {
-                            l += beta * le;
-                        }
-                    } else if prev_delta {
-                        l += beta * le;
-                    } else {
-                        let pdf_light = scene.light_sampler.pmf(light_index) * light.pdf_infinite(d);
-                        l += beta * le * power_heuristic(prev_pdf, pdf_light);
-                    }
+                    let w = self.emission_weight(depth, prev_delta, prev_pdf, || {
+                        scene.light_sampler.pmf(light_index) * light.pdf_infinite(d)
+                    });
+                    l += beta * le * w;
                 }
                 break;
             };
@@ -67,16 +75,10 @@ impl PathTracer {
             if let Some((light_index, light)) = scene.area_light(&si) {
                 let le = light.radiance(si.ng, si.uv, si.wo);
                 if le != Rgb::ZERO {
-                    if depth == 1 {
-                        if !self.hide_emitters {
-                            l += beta * le;
-                        }
-                    } else if prev_delta {
-                        l += beta * le;
-                    } else {
-                        let pdf_light = scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, prev_p, &si);
-                        l += beta * le * power_heuristic(prev_pdf, pdf_light);
-                    }
+                    let w = self.emission_weight(depth - 1, prev_delta, prev_pdf, || {
+                        scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, prev_p, &si)
+                    });
+                    l += beta * le * w;
                 }
             }
             if depth >= self.max_depth {
