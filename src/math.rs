@@ -18,12 +18,6 @@ pub fn max_component(c: Rgb) -> f32 {
     c.x.max(c.y).max(c.z)
 }
 
-/// `true` when every component is finite.
-#[inline]
-pub fn is_finite(c: Rgb) -> bool {
-    c.is_finite()
-}
-
 /// Orthonormal frame with `n` as its z axis (Duff et al. 2017, "Building an orthonormal basis, revisited").
 #[derive(Clone, Copy, Debug)]
 pub struct Frame {
@@ -86,11 +80,6 @@ impl Transform {
     #[inline]
     pub fn normal(&self, n: Vec3) -> Vec3 {
         self.normal * n
-    }
-
-    /// `self` applied after `first`.
-    pub fn then(&self, first: &Transform) -> Transform {
-        Transform::new(self.matrix * first.matrix)
     }
 
     /// `true` when the transform flips orientation (negative determinant).

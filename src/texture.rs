@@ -42,6 +42,11 @@ impl Bitmap {
         Bitmap { width, height, texels, filter, wrap, mean }
     }
 
+    /// Mean texel value.
+    pub fn mean(&self) -> Rgb {
+        self.mean
+    }
+
     fn wrap_index(&self, i: i64, n: u32) -> usize {
         let n = n as i64;
         (match self.wrap {
@@ -115,17 +120,8 @@ impl Texture {
     pub fn mean(&self) -> Rgb {
         match self {
             Texture::Constant(c) => *c,
-            Texture::Bitmap { bitmap, .. } => bitmap.mean,
+            Texture::Bitmap { bitmap, .. } => bitmap.mean(),
             Texture::Checkerboard { color0, color1, .. } => (*color0 + *color1) * 0.5,
-        }
-    }
-
-    /// The largest value any lookup can return (per channel).
-    pub fn max(&self) -> Rgb {
-        match self {
-            Texture::Constant(c) => *c,
-            Texture::Bitmap { bitmap, .. } => bitmap.texels.iter().fold(Rgb::ZERO, |a, t| a.max(*t)),
-            Texture::Checkerboard { color0, color1, .. } => color0.max(*color1),
         }
     }
 }

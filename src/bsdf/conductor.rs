@@ -4,7 +4,7 @@
 use super::BsdfSample;
 use super::fresnel::fresnel_conductor;
 use super::microfacet::Microfacet;
-use crate::math::Rgb;
+use crate::math::{Rgb, reflect};
 use glam::{Vec2, Vec3};
 
 /// Mirror reflection about +z.
@@ -57,7 +57,7 @@ pub fn sample_rough(d: &Microfacet, eta: Rgb, k: Rgb, r: Rgb, wo: Vec3, u: Vec2)
     if wo.dot(m) <= 0.0 {
         return None;
     }
-    let wi = 2.0 * wo.dot(m) * m - wo;
+    let wi = reflect(wo, m);
     if wi.z <= 0.0 {
         return None;
     }

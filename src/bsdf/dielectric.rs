@@ -10,7 +10,7 @@ use super::conductor::mirror;
 use super::fresnel::{fresnel_dielectric, refract};
 use super::microfacet::Microfacet;
 use super::{BsdfSample, TransportMode};
-use crate::math::Rgb;
+use crate::math::{Rgb, reflect};
 use glam::{Vec2, Vec3};
 
 pub fn sample_smooth(eta: f32, r: Rgb, t: Rgb, wo: Vec3, u1: f32, mode: TransportMode) -> Option<BsdfSample> {
@@ -131,7 +131,7 @@ pub fn sample_rough(
     }
     let f = fresnel_dielectric(wo.dot(wm), eta);
     let wi = if u1 < f {
-        let wi = 2.0 * wo.dot(wm) * wm - wo;
+        let wi = reflect(wo, wm);
         if wo.z * wi.z <= 0.0 {
             return None;
         }

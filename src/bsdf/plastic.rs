@@ -8,7 +8,7 @@ use super::BsdfSample;
 use super::conductor::mirror;
 use super::fresnel::{fresnel_dielectric, refract};
 use super::microfacet::Microfacet;
-use crate::math::Rgb;
+use crate::math::{Rgb, reflect};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -140,7 +140,7 @@ fn interface_energy(d: &Microfacet, mu: f32, eta: f32) -> (f32, f32) {
                 continue;
             }
             let f = fresnel_dielectric(c, eta);
-            let wr = 2.0 * c * m - wi;
+            let wr = reflect(wi, m);
             if wr.z > 0.0 {
                 r += (f * d.g1(wr, m)) as f64;
             }
@@ -198,7 +198,7 @@ pub fn sample_rough(
         if wo.dot(m) <= 0.0 {
             return None;
         }
-        2.0 * wo.dot(m) * m - wo
+        reflect(wo, m)
     } else {
         square_to_cosine_hemisphere(u2)
     };

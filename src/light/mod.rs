@@ -125,7 +125,7 @@ impl Light {
             }
             Light::Directional { irradiance, .. } => disk * luminance(*irradiance),
             Light::Constant { radiance } => 4.0 * PI * disk * luminance(*radiance),
-            Light::Envmap(e) => 4.0 * PI * disk * luminance(e.bitmap_mean()) * e.scale,
+            Light::Envmap(e) => 4.0 * PI * disk * luminance(e.bitmap.mean()) * e.scale,
         }
     }
 
@@ -260,12 +260,6 @@ impl Light {
 
     pub fn is_delta(&self) -> bool {
         matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. })
-    }
-}
-
-impl EnvMap {
-    fn bitmap_mean(&self) -> Rgb {
-        Texture::Bitmap { bitmap: self.bitmap.clone(), to_uv: Mat3::IDENTITY }.mean()
     }
 }
 

@@ -104,11 +104,4 @@ impl Scene {
     pub fn area_light(&self, si: &SurfaceInteraction) -> Option<(usize, &Light)> {
         self.shapes[si.shape as usize].light.map(|l| (l, &self.lights[l]))
     }
-
-    /// Rebuilds the accelerator with another backend (same shapes, same ids).
-    pub fn rebuild_accel(&mut self, backend: Backend, options: BuildOptions) -> crate::error::Result<()> {
-        let geometry: Vec<_> = self.shapes.iter().map(|s| s.accel_geometry()).collect();
-        self.accel = Accel::build(backend, &geometry, options)?;
-        Ok(())
-    }
 }

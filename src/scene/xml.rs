@@ -197,11 +197,6 @@ impl Node {
     pub fn prop_loc(&self, name: &str) -> Location {
         self.props.iter().find(|p| p.name == name).map(|p| p.loc.clone()).unwrap_or_else(|| self.loc.clone())
     }
-
-    /// Marks a property as consumed without reading it (accepted and without effect).
-    pub fn ignore(&self, name: &str) {
-        let _ = self.prop(name);
-    }
 }
 
 /// The parsed scene file: an arena of nodes with the root at index 0.
