@@ -37,6 +37,22 @@ pub struct Camera {
     pub resolution: (u32, u32),
     pub near_clip: f32,
     pub far_clip: f32,
+    /// World → camera-local rotation (the inverse of `to_world`'s linear part).
+    to_local: glam::Mat3,
+}
+
+/// The camera seen from a point: where on the film the point appears and the importance
+/// it receives (what light tracing splats).
+#[derive(Clone, Copy, Debug)]
+pub struct CameraConnection {
+    /// Film position in pixel units.
+    pub raster: Vec2,
+    /// Unit direction from the point to the camera.
+    pub wi: Vec3,
+    pub dist2: f32,
+    /// `We · cos θ_camera`: the emitted importance times the camera-side cosine (the pinhole
+    /// has no surface, so the cosine stays with the importance).
+    pub we_cos: f32,
 }
 
 impl Camera {
@@ -77,7 +93,71 @@ impl Camera {
             }
         };
         let position = to_world.point(Vec3::ZERO);
-        Camera { to_world, position, tan_half, resolution, near_clip, far_clip }
+        let to_local = glam::Mat3::from_mat4(to_world.matrix).inverse();
+        Camera { to_world, position, tan_half, resolution, near_clip, far_clip, to_local }
+    }
+
+    /// Area of the image rectangle on the plane at unit distance in front of the pinhole.
+    #[inline]
+    pub fn image_plane_area(&self) -> f32 {
+        4.0 * self.tan_half.x * self.tan_half.y
+    }
+
+    /// Film position (pixel units) and the cosine with the viewing axis of a world direction
+    /// leaving the camera, when it falls on the image.
+    #[inline]
+    fn raster_of(&self, d: Vec3) -> Option<(Vec2, f32)> {
+        let l = self.to_local * d;
+        if l.z <= 0.0 {
+            return None;
+        }
+        let sx = 0.5 * (1.0 - l.x / (l.z * self.tan_half.x));
+        let sy = 0.5 * (1.0 - l.y / (l.z * self.tan_half.y));
+        if !(0.0..1.0).contains(&sx) || !(0.0..1.0).contains(&sy) {
+            return None;
+        }
+        let raster = Vec2::new(sx * self.resolution.0 as f32, sy * self.resolution.1 as f32);
+        Some((raster, l.z / l.length()))
+    }
+
+    /// Solid-angle density with which [`Camera::generate_ray`], at a uniformly random film
+    /// position, produces direction `d` (unit): `1 / (A cos³θ)`; zero off the image.
+    #[inline]
+    pub fn pdf_direction(&self, d: Vec3) -> f32 {
+        match self.raster_of(d) {
+            Some((_, cos)) => 1.0 / (self.image_plane_area() * cos * cos * cos),
+            None => 0.0,
+        }
+    }
+
+    /// Importance `We = 1 / (A cos⁴θ)` of a direction (unit) leaving the camera, normalised
+    /// so that it integrates to one over the image.
+    #[inline]
+    pub fn importance(&self, d: Vec3) -> f32 {
+        match self.raster_of(d) {
+            Some((_, cos)) => 1.0 / (self.image_plane_area() * cos * cos * cos * cos),
+            None => 0.0,
+        }
+    }
+
+    /// Connects a world point to the pinhole: `None` when the point is behind the camera,
+    /// outside the image, or outside the clip range.
+    #[inline]
+    pub fn connect(&self, p: Vec3) -> Option<CameraConnection> {
+        let d = p - self.position;
+        let dist2 = d.length_squared();
+        if dist2 <= 0.0 {
+            return None;
+        }
+        let dist = dist2.sqrt();
+        let dir = d / dist;
+        let (raster, cos) = self.raster_of(dir)?;
+        let depth = dist * cos;
+        if depth < self.near_clip || depth > self.far_clip {
+            return None;
+        }
+        let we = 1.0 / (self.image_plane_area() * cos * cos * cos * cos);
+        Some(CameraConnection { raster, wi: -dir, dist2, we_cos: we * cos })
     }
 
     /// The primary ray through a film position in pixel units (`(0,0)` is the top-left
@@ -114,6 +194,38 @@ mod tests {
     fn fov_axis_smaller_uses_the_short_side() {
         let c = Camera::new(Transform::new(Mat4::IDENTITY), 90.0, FovAxis::Smaller, (200, 100), 0.0, 1e4);
         assert!((c.tan_half.y - 1.0).abs() < 1e-6 && (c.tan_half.x - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn connect_inverts_generate_ray() {
+        let to_world = Transform::new(
+            Mat4::look_at_rh(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y).inverse()
+                * Mat4::from_scale(Vec3::new(-1.0, 1.0, -1.0)),
+        );
+        let c = Camera::new(to_world, 40.0, FovAxis::X, (64, 48), 0.01, 1e4);
+        for pos in [Vec2::new(10.3, 7.9), Vec2::new(63.5, 0.2), Vec2::new(0.1, 47.9)] {
+            let r = c.generate_ray(pos);
+            let k = c.connect(r.at(5.0)).unwrap();
+            assert!((k.raster - pos).abs().max_element() < 1e-3, "{pos} -> {}", k.raster);
+            assert!((k.wi + r.d).length() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn importance_integrates_to_one_over_the_image() {
+        // ∫ We dω over the image, by uniform sphere sampling.
+        let c = Camera::new(Transform::default(), 50.0, FovAxis::X, (40, 30), 0.0, 1e4);
+        let mut s = crate::sampling::Sampler::new(&[9]);
+        let n = 400_000;
+        let sum: f64 = (0..n)
+            .map(|_| c.importance(crate::sampling::square_to_uniform_sphere(s.next_2d())) as f64 * 4.0 * std::f64::consts::PI)
+            .sum();
+        assert!((sum / n as f64 - 1.0).abs() < 0.02, "{}", sum / n as f64);
+        // The direction density also integrates to one.
+        let sum: f64 = (0..n)
+            .map(|_| c.pdf_direction(crate::sampling::square_to_uniform_sphere(s.next_2d())) as f64 * 4.0 * std::f64::consts::PI)
+            .sum();
+        assert!((sum / n as f64 - 1.0).abs() < 0.02, "{}", sum / n as f64);
     }
 
     #[test]

@@ -70,6 +70,77 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
     out
 }
 
+/// Calls `f(x, y, w)` for every pixel whose centre lies within the filter's radius of the
+/// film position `pos`, with the filter weight `w > 0`.
+#[inline]
+fn footprint(filter: &Filter, pos: Vec2, mut f: impl FnMut(i32, i32, f32)) {
+    if let Filter::Box { radius } = *filter
+        && radius <= 0.5
+    {
+        f(pos.x.floor() as i32, pos.y.floor() as i32, 1.0);
+        return;
+    }
+    let r = filter.radius();
+    let x_lo = (pos.x - 0.5 - r).ceil() as i32;
+    let x_hi = (pos.x - 0.5 + r).floor() as i32;
+    let y_lo = (pos.y - 0.5 - r).ceil() as i32;
+    let y_hi = (pos.y - 0.5 + r).floor() as i32;
+    let mut wx = [0.0f32; 16];
+    let nx = ((x_hi - x_lo + 1).max(0) as usize).min(16);
+    for (k, w) in wx.iter_mut().enumerate().take(nx) {
+        *w = filter.eval(x_lo as f32 + k as f32 + 0.5 - pos.x);
+    }
+    for y in y_lo..=y_hi {
+        let wy = filter.eval(y as f32 + 0.5 - pos.y);
+        if wy == 0.0 {
+            continue;
+        }
+        for (k, &wxk) in wx.iter().enumerate().take(nx) {
+            let w = wxk * wy;
+            if w != 0.0 {
+                f(x_lo + k as i32, y, w);
+            }
+        }
+    }
+}
+
+/// A light-tracing contribution landing at a film position, with its strategy's layer.
+#[derive(Clone, Copy, Debug)]
+pub struct Splat {
+    pub pos: Vec2,
+    pub value: Rgb,
+    pub layer: u16,
+}
+
+/// Longest path (in segments) with an image of its own among the per-strategy images;
+/// longer paths share one.
+pub const STRATEGY_MAX_DEPTH: usize = 8;
+/// Number of per-strategy layers: one per `(s,t)` with `1 <= s+t-1 <= STRATEGY_MAX_DEPTH`,
+/// plus one for all longer paths.
+pub const STRATEGY_LAYERS: usize = (STRATEGY_MAX_DEPTH - 1) * (STRATEGY_MAX_DEPTH + 2) / 2 + STRATEGY_MAX_DEPTH + 2;
+
+/// The layer of strategy `(s,t)`.
+#[inline]
+pub fn strategy_layer(s: usize, t: usize) -> usize {
+    let d = s + t - 1;
+    if d > STRATEGY_MAX_DEPTH { STRATEGY_LAYERS - 1 } else { (d - 1) * (d + 2) / 2 + s }
+}
+
+/// The file name of a layer (`s2_t3`, or `longer`).
+pub fn strategy_layer_name(layer: usize) -> String {
+    if layer == STRATEGY_LAYERS - 1 {
+        return format!("longer_than_{STRATEGY_MAX_DEPTH}");
+    }
+    for d in 1..=STRATEGY_MAX_DEPTH {
+        for s in 0..=d {
+            if strategy_layer(s, d + 1 - s) == layer {
+                return format!("s{s}_t{}", d + 1 - s);
+            }
+        }
+    }
+    unreachable!("layer {layer} out of range")
+}
+
 /// Weighted sums `(Σ w r, Σ w g, Σ w b, Σ w)` for a tile plus a filter border.
 pub struct ImageBlock {
     /// Pixel coordinates of the block's top-left entry (may be negative by the border).
@@ -78,6 +149,9 @@ pub struct ImageBlock {
     w: usize,
     h: usize,
     data: Vec<[f32; 4]>,
+    /// Per-strategy weighted sums `(Σ w r, Σ w g, Σ w b)`, layer after layer (empty unless
+    /// per-strategy images are wanted).
+    layers: Vec<[f32; 3]>,
     filter: Filter,
     /// Samples rejected because their value was NaN or infinite.
     pub invalid_samples: u64,
@@ -85,6 +159,11 @@ pub struct ImageBlock {
 
 impl ImageBlock {
     pub fn new(tile: Tile, filter: Filter) -> ImageBlock {
+        ImageBlock::with_layers(tile, filter, 0)
+    }
+
+    /// A block that also keeps `layers` per-strategy images.
+    pub fn with_layers(tile: Tile, filter: Filter, layers: usize) -> ImageBlock {
         let b = (filter.radius() - 0.5).ceil().max(0.0) as i32;
         let (w, h) = (tile.width as usize + 2 * b as usize, tile.height as usize + 2 * b as usize);
         ImageBlock {
@@ -93,90 +172,102 @@ impl ImageBlock {
             w,
             h,
             data: vec![[0.0; 4]; w * h],
+            layers: vec![[0.0; 3]; layers * w * h],
             filter,
             invalid_samples: 0,
         }
+    }
+
+    #[inline]
+    fn index(&self, x: i32, y: i32) -> Option<usize> {
+        let (bx, by) = (x - self.ox, y - self.oy);
+        (bx >= 0 && by >= 0 && (bx as usize) < self.w && (by as usize) < self.h)
+            .then(|| by as usize * self.w + bx as usize)
     }
 
     /// Adds a radiance sample at a film position (pixel units). Non-finite values are
     /// dropped and counted.
     #[inline]
     pub fn put(&mut self, pos: Vec2, value: Rgb) {
-        if !value.is_finite() {
+        self.put_layers(pos, value, &[]);
+    }
+
+    /// Adds a sample and its per-strategy parts `(layer, value)`, which share its filter
+    /// weights (so the layers sum to the image).
+    pub fn put_layers(&mut self, pos: Vec2, value: Rgb, parts: &[(u16, Rgb)]) {
+        if !value.is_finite() || parts.iter().any(|(_, v)| !v.is_finite()) {
             self.invalid_samples += 1;
             return;
         }
-        let r = self.filter.radius();
-        if let Filter::Box { radius } = self.filter
-            && radius <= 0.5
-        {
-            let (px, py) = (pos.x.floor() as i32 - self.ox, pos.y.floor() as i32 - self.oy);
-            if px >= 0 && py >= 0 && (px as usize) < self.w && (py as usize) < self.h {
-                let e = &mut self.data[py as usize * self.w + px as usize];
-                e[0] += value.x;
-                e[1] += value.y;
-                e[2] += value.z;
-                e[3] += 1.0;
-            }
-            return;
-        }
-        // Pixels whose centre (i + 0.5) lies within the radius of the sample.
-        let x_lo = (pos.x - 0.5 - r).ceil() as i32;
-        let x_hi = (pos.x - 0.5 + r).floor() as i32;
-        let y_lo = (pos.y - 0.5 - r).ceil() as i32;
-        let y_hi = (pos.y - 0.5 + r).floor() as i32;
-        let mut wx = [0.0f32; 16];
-        let nx = ((x_hi - x_lo + 1).max(0) as usize).min(16);
-        for (k, w) in wx.iter_mut().enumerate().take(nx) {
-            *w = self.filter.eval(x_lo as f32 + k as f32 + 0.5 - pos.x);
-        }
-        for y in y_lo..=y_hi {
-            let by = y - self.oy;
-            if by < 0 || by as usize >= self.h {
-                continue;
-            }
-            let wy = self.filter.eval(y as f32 + 0.5 - pos.y);
-            if wy == 0.0 {
-                continue;
-            }
-            for (k, &wxk) in wx.iter().enumerate().take(nx) {
-                let bx = x_lo + k as i32 - self.ox;
-                if bx < 0 || bx as usize >= self.w {
-                    continue;
-                }
-                let w = wxk * wy;
-                if w == 0.0 {
-                    continue;
-                }
-                let e = &mut self.data[by as usize * self.w + bx as usize];
+        let filter = self.filter;
+        let plane = self.w * self.h;
+        footprint(&filter, pos, |x, y, w| {
+            if let Some(i) = self.index(x, y) {
+                let e = &mut self.data[i];
                 e[0] += value.x * w;
                 e[1] += value.y * w;
                 e[2] += value.z * w;
                 e[3] += w;
+                for (layer, v) in parts {
+                    let e = &mut self.layers[*layer as usize * plane + i];
+                    e[0] += v.x * w;
+                    e[1] += v.y * w;
+                    e[2] += v.z * w;
+                }
             }
-        }
+        });
     }
 }
 
-/// The accumulated image.
+/// The accumulated image: filtered camera samples (`Σ w L / Σ w`) plus light-tracing splats
+/// (`Σ h L / ∫h`, scaled by pixels per light path).
 #[derive(Clone)]
 pub struct Film {
     pub width: u32,
     pub height: u32,
     pub filter: Filter,
     data: Vec<[f64; 4]>,
+    splats: Vec<[f64; 3]>,
+    /// Per-strategy images: camera parts and splat parts, layer after layer.
+    layers: usize,
+    layer_data: Vec<[f64; 3]>,
+    layer_splats: Vec<[f64; 3]>,
+    /// `1 / ∫ filter`.
+    splat_norm: f32,
+    /// Light paths whose splats are in the film (the splat estimator's sample count).
+    pub light_paths: u64,
     /// Samples dropped for non-finite values.
     pub invalid_samples: u64,
 }
 
 impl Film {
     pub fn new(width: u32, height: u32, filter: Filter) -> Film {
-        Film { width, height, filter, data: vec![[0.0; 4]; width as usize * height as usize], invalid_samples: 0 }
+        Film::with_layers(width, height, filter, 0)
+    }
+
+    pub fn with_layers(width: u32, height: u32, filter: Filter, layers: usize) -> Film {
+        let n = width as usize * height as usize;
+        let integral = filter_integral(&filter);
+        Film {
+            width,
+            height,
+            filter,
+            data: vec![[0.0; 4]; n],
+            splats: Vec::new(),
+            layers,
+            layer_data: vec![[0.0; 3]; layers * n],
+            layer_splats: Vec::new(),
+            splat_norm: 1.0 / integral,
+            light_paths: 0,
+            invalid_samples: 0,
+        }
     }
 
     /// Adds a block (the caller merges blocks in a fixed order).
     pub fn merge(&mut self, block: &ImageBlock) {
         self.invalid_samples += block.invalid_samples;
+        let n = self.width as usize * self.height as usize;
+        let plane = block.w * block.h;
         for by in 0..block.h {
             let y = by as i32 + block.oy;
             if y < 0 || y >= self.height as i32 {
@@ -187,28 +278,107 @@ impl Film {
                 if x < 0 || x >= self.width as i32 {
                     continue;
                 }
-                let s = block.data[by * block.w + bx];
-                let d = &mut self.data[y as usize * self.width as usize + x as usize];
+                let bi = by * block.w + bx;
+                let fi = y as usize * self.width as usize + x as usize;
+                let s = block.data[bi];
+                let d = &mut self.data[fi];
                 for c in 0..4 {
                     d[c] += s[c] as f64;
+                }
+                for layer in 0..self.layers.min(block.layers.len() / plane.max(1)) {
+                    let s = block.layers[layer * plane + bi];
+                    let d = &mut self.layer_data[layer * n + fi];
+                    for c in 0..3 {
+                        d[c] += s[c] as f64;
+                    }
                 }
             }
         }
     }
 
-    /// The developed image: linear RGB, row-major from the top-left.
-    pub fn develop(&self) -> Vec<Rgb> {
-        self.data
-            .iter()
-            .map(|d| {
-                if d[3] > 0.0 {
-                    Rgb::new((d[0] / d[3]) as f32, (d[1] / d[3]) as f32, (d[2] / d[3]) as f32)
-                } else {
-                    Rgb::ZERO
+    /// Adds light-tracing splats (the caller adds them in a fixed order).
+    pub fn add_splats(&mut self, splats: &[Splat]) {
+        let n = self.width as usize * self.height as usize;
+        if self.splats.is_empty() {
+            self.splats = vec![[0.0; 3]; n];
+            self.layer_splats = vec![[0.0; 3]; self.layers * n];
+        }
+        let (w, h, norm, filter) = (self.width as i32, self.height as i32, self.splat_norm, self.filter);
+        for sp in splats {
+            if !sp.value.is_finite() {
+                self.invalid_samples += 1;
+                continue;
+            }
+            footprint(&filter, sp.pos, |x, y, wt| {
+                if x >= 0 && y >= 0 && x < w && y < h {
+                    let i = y as usize * w as usize + x as usize;
+                    let v = sp.value * (wt * norm);
+                    let d = &mut self.splats[i];
+                    d[0] += v.x as f64;
+                    d[1] += v.y as f64;
+                    d[2] += v.z as f64;
+                    if self.layers > 0 {
+                        let d = &mut self.layer_splats[sp.layer as usize * n + i];
+                        d[0] += v.x as f64;
+                        d[1] += v.y as f64;
+                        d[2] += v.z as f64;
+                    }
                 }
+            });
+        }
+    }
+
+    /// Pixels per light path: the factor that turns summed splats into pixel values.
+    fn splat_scale(&self) -> f64 {
+        if self.light_paths == 0 { 0.0 } else { (self.width as f64 * self.height as f64) / self.light_paths as f64 }
+    }
+
+    fn develop_with(&self, camera: &[[f64; 3]], splats: &[[f64; 3]]) -> Vec<Rgb> {
+        let scale = self.splat_scale();
+        (0..self.data.len())
+            .map(|i| {
+                let wsum = self.data[i][3];
+                let mut v = [0.0f64; 3];
+                if wsum > 0.0 {
+                    for c in 0..3 {
+                        v[c] = camera[i][c] / wsum;
+                    }
+                }
+                if let Some(sp) = splats.get(i) {
+                    for c in 0..3 {
+                        v[c] += sp[c] * scale;
+                    }
+                }
+                Rgb::new(v[0] as f32, v[1] as f32, v[2] as f32)
             })
             .collect()
     }
+
+    /// The developed image: linear RGB, row-major from the top-left.
+    pub fn develop(&self) -> Vec<Rgb> {
+        let camera: Vec<[f64; 3]> = self.data.iter().map(|d| [d[0], d[1], d[2]]).collect();
+        self.develop_with(&camera, &self.splats)
+    }
+
+    /// The developed image of one strategy layer (they sum to [`Film::develop`]).
+    pub fn develop_layer(&self, layer: usize) -> Vec<Rgb> {
+        let n = self.width as usize * self.height as usize;
+        let splats = if self.layer_splats.is_empty() { &[][..] } else { &self.layer_splats[layer * n..(layer + 1) * n] };
+        self.develop_with(&self.layer_data[layer * n..(layer + 1) * n], splats)
+    }
+
+    pub fn layers(&self) -> usize {
+        self.layers
+    }
+}
+
+/// `∫∫ filter(x) filter(y) dx dy` (the filters are separable), by the midpoint rule.
+fn filter_integral(filter: &Filter) -> f32 {
+    let r = filter.radius();
+    let n = 4096;
+    let h = 2.0 * r / n as f32;
+    let one: f64 = (0..n).map(|i| filter.eval(-r + (i as f32 + 0.5) * h) as f64 * h as f64).sum();
+    (one * one) as f32
 }
 
 #[cfg(test)]

@@ -5,7 +5,8 @@ use pcbpt::accel::{Backend, BuildOptions, BuildQuality};
 use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
-use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use pcbpt::integrator::bidir::mis::Heuristic;
+use pcbpt::integrator::{self, BidirOptions, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -72,6 +73,21 @@ struct RenderArgs {
     /// Embree's robust traversal mode (slower, fewer arithmetic shortcuts).
     #[arg(long)]
     robust: bool,
+    /// MIS heuristic of the bidirectional integrators.
+    #[arg(long, value_enum, default_value_t = Heuristic::Power)]
+    heuristic: Heuristic,
+    /// EORR: Russian-roulette threshold as a fraction of the pixel's running mean luminance.
+    #[arg(long, default_value_t = 0.1)]
+    eorr_fraction: f32,
+    /// LVC: light paths per iteration (0 = one per pixel).
+    #[arg(long, default_value_t = 0)]
+    lvc_light_paths: usize,
+    /// LVC: connections to pool vertices per camera vertex.
+    #[arg(long, default_value_t = 1)]
+    lvc_connections: u32,
+    /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
+    #[arg(long, value_name = "DIR")]
+    strategy_images: Option<PathBuf>,
     /// Write render statistics as JSON to this file.
     #[arg(long)]
     stats: Option<PathBuf>,
@@ -176,8 +192,30 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     opts.threads = a.threads;
     opts.progress = !a.quiet;
     opts.stop = Some(stop);
+    if !(a.eorr_fraction >= 0.0 && a.eorr_fraction.is_finite()) {
+        return Err(Error::Usage(format!("--eorr-fraction must be a non-negative number, got {}", a.eorr_fraction)));
+    }
+    opts.bidir = BidirOptions {
+        heuristic: a.heuristic,
+        eorr_fraction: a.eorr_fraction,
+        lvc_light_paths: a.lvc_light_paths,
+        lvc_connections: a.lvc_connections,
+    };
+    opts.strategy_images = a.strategy_images.is_some();
+    if let Some(dir) = &a.strategy_images {
+        if kind == IntegratorKind::Path {
+            return Err(Error::Usage("--strategy-images needs a bidirectional integrator".into()));
+        }
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::Output { path: dir.clone(), msg: format!("cannot create the folder: {e}") })?;
+    }
     let out = integrator::render(&scene, &opts)?;
     let s = &out.stats;
+    if let Some(dir) = &a.strategy_images {
+        for (name, pixels) in &out.strategy_images {
+            image_io::write(&dir.join(format!("{name}.exr")), &Image::new(out.width, out.height, pixels.clone()))?;
+        }
+    }
     image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
     if let Some(path) = &a.stats {
         let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "render": s });

@@ -6,10 +6,21 @@
 //! (seed, pixel, sample index), so a fixed seed gives the same image whatever the number of
 //! threads. A time budget (`--time`) runs whole passes until the budget is spent; a stop
 //! flag (set by Ctrl-C) ends the render after the pass in flight.
+//!
+//! Light-tracing contributions (`t = 1`) are splatted: each tile (and each chunk of a light
+//! pool) collects its splats in a list, and the lists are added to the film in order, so
+//! splatting is as deterministic as the rest. Integrators with a light pool (`lvc`) trace
+//! the pool at the start of every pass; each pass is then one iteration of one sample per
+//! pixel.
 
+pub mod bidir;
 pub mod path;
 
-use crate::film::{Film, ImageBlock, Tile, tiles};
+use bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
+use bidir::mis::{Counts, Heuristic};
+use bidir::pool::{LightPool, Lvc};
+use bidir::{Sink, WalkLimits};
+use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
 use crate::math::Rgb;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -26,6 +37,14 @@ use std::time::{Duration, Instant};
 pub enum IntegratorKind {
     /// Unidirectional path tracing with next-event estimation and MIS.
     Path,
+    /// Light tracing: light subpaths connected to the camera (`t = 1`) only.
+    Lighttrace,
+    /// Bidirectional path tracing with every strategy.
+    Bdpt,
+    /// BDPT with efficiency-optimised Russian roulette on connections.
+    Eorr,
+    /// Light-vertex-cache BDPT: a shared pool of light paths, uniform connections.
+    Lvc,
 }
 
 impl IntegratorKind {
@@ -33,6 +52,8 @@ impl IntegratorKind {
     pub fn from_plugin(name: &str) -> Option<IntegratorKind> {
         match name {
             "path" => Some(IntegratorKind::Path),
+            "ptracer" => Some(IntegratorKind::Lighttrace),
+            "bdpt" => Some(IntegratorKind::Bdpt),
             _ => None,
         }
     }
@@ -45,6 +66,14 @@ pub struct Counters {
     pub camera_rays: u64,
     pub extension_rays: u64,
     pub shadow_rays: u64,
+    /// Light subpaths traced.
+    pub light_paths: u64,
+    /// Connections whose shadow ray was traced (NEE, `t = 1`, `s,t >= 2`).
+    pub connections: u64,
+    /// Of those, connections found occluded.
+    pub connections_occluded: u64,
+    /// Connections left untraced by Russian roulette (EORR).
+    pub connections_skipped: u64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -53,7 +82,40 @@ impl std::ops::AddAssign for Counters {
         self.camera_rays += o.camera_rays;
         self.extension_rays += o.extension_rays;
         self.shadow_rays += o.shadow_rays;
+        self.light_paths += o.light_paths;
+        self.connections += o.connections;
+        self.connections_occluded += o.connections_occluded;
+        self.connections_skipped += o.connections_skipped;
     }
+}
+
+/// Options of the bidirectional integrators.
+#[derive(Clone, Debug, Serialize)]
+pub struct BidirOptions {
+    pub heuristic: Heuristic,
+    /// EORR: the roulette threshold as a fraction of the pixel's running mean luminance.
+    pub eorr_fraction: f32,
+    /// LVC: light paths per iteration (0 = one per pixel).
+    pub lvc_light_paths: usize,
+    /// LVC: connections per camera vertex.
+    pub lvc_connections: u32,
+}
+
+impl Default for BidirOptions {
+    fn default() -> BidirOptions {
+        BidirOptions { heuristic: Heuristic::Power, eorr_fraction: 0.1, lvc_light_paths: 0, lvc_connections: 1 }
+    }
+}
+
+/// Wall time spent in each phase of the render loop.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PhaseTimes {
+    /// Tracing light pools (and their light-tracing splats).
+    pub light_pool: f64,
+    /// Camera samples (tiles).
+    pub camera_pass: f64,
+    /// Merging blocks and splats into the film.
+    pub merge: f64,
 }
 
 /// How much to render.
@@ -76,11 +138,24 @@ pub struct RenderOptions {
     pub progress: bool,
     /// Set from outside (a signal handler) to stop after the current pass.
     pub stop: Option<Arc<AtomicBool>>,
+    pub bidir: BidirOptions,
+    /// Keep one image per strategy `(s,t)` (bidirectional integrators).
+    pub strategy_images: bool,
 }
 
 impl RenderOptions {
     pub fn new(integrator: IntegratorKind, budget: Budget) -> RenderOptions {
-        RenderOptions { integrator, budget, seed: 0, threads: 0, tile_size: 32, progress: false, stop: None }
+        RenderOptions {
+            integrator,
+            budget,
+            seed: 0,
+            threads: 0,
+            tile_size: 32,
+            progress: false,
+            stop: None,
+            bidir: BidirOptions::default(),
+            strategy_images: false,
+        }
     }
 }
 
@@ -98,6 +173,13 @@ pub struct RenderStats {
     pub samples_per_second: f64,
     pub rays_per_second: f64,
     pub counters: Counters,
+    pub phases: PhaseTimes,
+    /// Options of the bidirectional integrators (when one ran).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bidir: Option<BidirOptions>,
+    /// Light-pool size of the last iteration: light paths and connectible vertices.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pool: Option<(usize, usize)>,
     /// Samples dropped because they were NaN or infinite.
     pub invalid_samples: u64,
     /// The render stopped early (interrupted).
@@ -107,6 +189,8 @@ pub struct RenderStats {
 /// A finished render.
 pub struct RenderOutput {
     pub image: Vec<Rgb>,
+    /// Per-strategy images `(name, pixels)` when asked for; they sum to `image`.
+    pub strategy_images: Vec<(String, Vec<Rgb>)>,
     pub width: u32,
     pub height: u32,
     pub stats: RenderStats,
@@ -115,52 +199,132 @@ pub struct RenderOutput {
 /// An integrator ready to estimate camera samples.
 enum Estimator {
     Path(path::PathTracer),
+    Bdpt(Bdpt),
+    Lvc(Lvc),
+}
+
+/// What a pass shares between its tiles.
+struct PassData<'a> {
+    pool: Option<&'a LightPool>,
+    counts: Counts,
+    roulette: Option<RouletteMap<'a>>,
+    heuristic: Heuristic,
+    layers: bool,
 }
 
 impl Estimator {
-    fn new(kind: IntegratorKind, scene: &Scene) -> Estimator {
-        match kind {
-            IntegratorKind::Path => Estimator::Path(path::PathTracer::new(&scene.integrator)),
+    fn new(kind: IntegratorKind, scene: &Scene, opts: &BidirOptions) -> Result<Estimator, crate::error::Error> {
+        let spec = &scene.integrator;
+        let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
+        let bdpt = |light_only| Bdpt {
+            limits: WalkLimits::new(max_depth, spec.rr_depth),
+            max_depth,
+            hide_emitters: spec.hide_emitters,
+            light_only,
+        };
+        if kind != IntegratorKind::Path {
+            bidir::bdpt::check_lights(scene, &format!("{kind:?}").to_lowercase()).map_err(crate::error::Error::Usage)?;
+        }
+        Ok(match kind {
+            IntegratorKind::Path => Estimator::Path(path::PathTracer::new(spec)),
+            IntegratorKind::Lighttrace => Estimator::Bdpt(bdpt(true)),
+            IntegratorKind::Bdpt | IntegratorKind::Eorr => Estimator::Bdpt(bdpt(false)),
+            IntegratorKind::Lvc => {
+                if opts.lvc_connections == 0 {
+                    return Err(crate::error::Error::Usage("--lvc-connections must be at least 1".into()));
+                }
+                let pixels = scene.film.width as usize * scene.film.height as usize;
+                let m = if opts.lvc_light_paths == 0 { pixels } else { opts.lvc_light_paths };
+                Estimator::Lvc(Lvc { bdpt: bdpt(false), light_paths: m, connections: opts.lvc_connections })
+            }
+        })
+    }
+}
+
+/// Sink of one camera sample: its radiance, its per-strategy parts, and its splats.
+struct PixelSink<'a> {
+    l: Rgb,
+    parts: Vec<(u16, Rgb)>,
+    layers: bool,
+    splats: &'a mut Vec<Splat>,
+}
+
+impl Sink for PixelSink<'_> {
+    #[inline]
+    fn add(&mut self, s: usize, t: usize, value: Rgb) {
+        self.l += value;
+        if self.layers {
+            self.parts.push((strategy_layer(s, t) as u16, value));
         }
     }
 
     #[inline]
-    fn sample(&self, scene: &Scene, pixel: (u32, u32), sampler: &mut Sampler, counters: &mut Counters) -> (Vec2, Rgb) {
-        let pos = Vec2::new(pixel.0 as f32, pixel.1 as f32) + sampler.next_2d();
-        let ray = scene.camera.generate_ray(pos);
-        counters.camera_rays += 1;
-        let l = match self {
-            Estimator::Path(p) => p.li(scene, ray, sampler, counters),
-        };
-        (pos, l)
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
+        let layer = if self.layers { strategy_layer(s, t) as u16 } else { 0 };
+        self.splats.push(Splat { pos, value, layer });
     }
+}
+
+struct TileResult {
+    block: ImageBlock,
+    splats: Vec<Splat>,
+    counters: Counters,
 }
 
 fn render_tile(
     scene: &Scene,
     est: &Estimator,
+    pass: &PassData,
     tile: Tile,
     seed: u64,
     first: u32,
     count: u32,
-) -> (ImageBlock, Counters) {
+) -> TileResult {
     crate::accel::embree::set_flush_denormals();
-    let mut block = ImageBlock::new(tile, scene.film.filter);
+    let layers = if pass.layers { STRATEGY_LAYERS } else { 0 };
+    let mut block = ImageBlock::with_layers(tile, scene.film.filter, layers);
     let mut counters = Counters::default();
+    let mut splats = Vec::new();
+    let mut scratch = Scratch::default();
+    let mut sink = PixelSink { l: Rgb::ZERO, parts: Vec::new(), layers: pass.layers, splats: &mut splats };
+    let conn = Connector { scene, heuristic: pass.heuristic, counts: &pass.counts, roulette: pass.roulette };
     let width = scene.film.width as u64;
     for y in tile.y0..tile.y0 + tile.height {
         for x in tile.x0..tile.x0 + tile.width {
             let pixel = y as u64 * width + x as u64;
             for s in first..first + count {
                 let mut sampler = Sampler::new(&[seed, pixel, s as u64]);
-                let (pos, l) = est.sample(scene, (x, y), &mut sampler, &mut counters);
-                block.put(pos, l);
+                let pos = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                sink.l = Rgb::ZERO;
+                sink.parts.clear();
+                match est {
+                    Estimator::Path(p) => {
+                        let ray = scene.camera.generate_ray(pos);
+                        counters.camera_rays += 1;
+                        let l = p.li(scene, ray, &mut sampler, &mut counters);
+                        block.put(pos, l);
+                    }
+                    Estimator::Bdpt(b) => {
+                        b.sample(&conn, pos, &mut sampler, &mut scratch, &mut sink, &mut counters);
+                        if !b.light_only {
+                            block.put_layers(pos, sink.l, &sink.parts);
+                        }
+                    }
+                    Estimator::Lvc(lvc) => {
+                        let pool = pass.pool.expect("a pool integrator has a pool");
+                        lvc.sample(&conn, pool, pos, &mut sampler, &mut scratch, &mut sink, &mut counters);
+                        block.put_layers(pos, sink.l, &sink.parts);
+                    }
+                }
                 counters.samples += 1;
             }
         }
     }
-    (block, counters)
+    TileResult { block, splats, counters }
 }
+
+/// Key of the pilot pool that measures `V̄` before the first iteration.
+const PILOT_ITERATION: u64 = u64::MAX;
 
 /// Renders the scene's image.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate::error::Error> {
@@ -170,12 +334,17 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         .map_err(|e| crate::error::Error::Usage(format!("cannot start {} threads: {e}", opts.threads)))?;
     let threads = pool.current_num_threads();
     let (w, h) = (scene.film.width, scene.film.height);
-    let est = Estimator::new(opts.integrator, scene);
+    let est = Estimator::new(opts.integrator, scene, &opts.bidir)?;
+    let bidirectional = !matches!(est, Estimator::Path(_));
+    let layers = opts.strategy_images && bidirectional;
     let tile_list = tiles(w, h, opts.tile_size.max(1));
-    let mut film = Film::new(w, h, scene.film.filter);
+    let mut film = Film::with_layers(w, h, scene.film.filter, if layers { STRATEGY_LAYERS } else { 0 });
     let mut counters = Counters::default();
+    let mut phases = PhaseTimes::default();
     let start = Instant::now();
+    let one_per_pass = matches!(est, Estimator::Lvc(_));
     let (pass_spp, total_passes) = match opts.budget {
+        Budget::Spp(spp) if one_per_pass => (1, spp),
         Budget::Spp(spp) => {
             // About 32 passes, each of at most ~1 M samples so that progress and Ctrl-C
             // stay responsive; the split depends only on spp and resolution.
@@ -185,31 +354,99 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         }
         Budget::Time(_) => (1, u32::MAX),
     };
+    let pixels = w as f32 * h as f32;
+    let counts = match (opts.integrator, &est) {
+        (IntegratorKind::Lighttrace, _) => Counts::LightTrace,
+        _ => Counts::Bdpt,
+    };
     let bar = progress_bar(opts, w, h);
     let mut done = 0u32;
     let mut passes = 0u32;
     let mut interrupted = false;
+    let mut pool_size = None;
     pool.install(|| {
+        // LVC's strategy counts use V̄ of the previous iteration (a pilot pool before the first).
+        let mut vbar = match &est {
+            Estimator::Lvc(lvc) => {
+                let (p, _, _) = LightPool::trace::<Counts>(
+                    scene,
+                    &lvc.bdpt.limits,
+                    lvc.light_paths,
+                    opts.seed,
+                    PILOT_ITERATION,
+                    None,
+                );
+                p.mean_vertices()
+            }
+            _ => 0.0,
+        };
         while passes < total_passes {
             let count = match opts.budget {
                 Budget::Spp(spp) => pass_spp.min(spp - done),
                 Budget::Time(_) => 1,
             };
             let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+            let t_pool = Instant::now();
+            let mut pass_counts = counts;
+            let mut pool_data = None;
+            let mut pool_splats = Vec::new();
+            let mut pool_counters = Counters::default();
+            if let Estimator::Lvc(lvc) = &est {
+                pass_counts = Counts::Pool {
+                    light_trace: lvc.light_paths as f32 / pixels,
+                    connect: if vbar > 0.0 { lvc.connections as f32 / vbar } else { 0.0 },
+                };
+                let conn =
+                    Connector { scene, heuristic: opts.bidir.heuristic, counts: &pass_counts, roulette: None };
+                let (p, sp, c) = LightPool::trace(
+                    scene,
+                    &lvc.bdpt.limits,
+                    lvc.light_paths,
+                    opts.seed,
+                    passes as u64,
+                    Some((&conn, &lvc.bdpt, layers)),
+                );
+                vbar = p.mean_vertices();
+                pool_size = Some((p.paths, p.connectible.len()));
+                pool_data = Some(p);
+                pool_splats = sp;
+                pool_counters = c;
+            }
+            phases.light_pool += t_pool.elapsed().as_secs_f64();
+            // EORR: thresholds from the image of the passes so far (none before the first).
+            let tau: Option<Vec<f32>> = (opts.integrator == IntegratorKind::Eorr && passes > 0).then(|| {
+                film.develop().iter().map(|c| crate::math::luminance(*c).max(0.0) * opts.bidir.eorr_fraction).collect()
+            });
+            let pass = PassData {
+                pool: pool_data.as_ref(),
+                counts: pass_counts,
+                roulette: tau.as_deref().map(|tau| RouletteMap { tau, width: w, height: h }),
+                heuristic: opts.bidir.heuristic,
+                layers,
+            };
+            let t_cam = Instant::now();
             // A pass interrupted part-way is discarded whole, so every pixel keeps the same
             // number of samples.
-            let blocks: Option<Vec<(ImageBlock, Counters)>> = tile_list
+            let results: Option<Vec<TileResult>> = tile_list
                 .par_iter()
-                .map(|&t| (!stopped()).then(|| render_tile(scene, &est, t, opts.seed, done, count)))
+                .map(|&t| (!stopped()).then(|| render_tile(scene, &est, &pass, t, opts.seed, done, count)))
                 .collect();
-            let Some(blocks) = blocks else {
+            phases.camera_pass += t_cam.elapsed().as_secs_f64();
+            let Some(results) = results else {
                 interrupted = true;
                 break;
             };
-            for (b, c) in &blocks {
-                film.merge(b);
-                counters += *c;
+            let t_merge = Instant::now();
+            film.add_splats(&pool_splats);
+            film.light_paths += pool_counters.light_paths;
+            counters += pool_counters;
+            for r in &results {
+                film.merge(&r.block);
+                film.add_splats(&r.splats);
+                film.light_paths += r.counters.light_paths;
+                counters += r.counters;
             }
+            phases.merge += t_merge.elapsed().as_secs_f64();
             done += count;
             passes += 1;
             if let Some(bar) = &bar {
@@ -250,10 +487,15 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         samples_per_second: counters.samples as f64 / seconds.max(1e-9),
         rays_per_second: rays as f64 / seconds.max(1e-9),
         counters,
+        phases,
+        bidir: bidirectional.then(|| opts.bidir.clone()),
+        pool: pool_size,
         invalid_samples: film.invalid_samples,
         interrupted,
     };
-    Ok(RenderOutput { image: film.develop(), width: w, height: h, stats })
+    let strategy_images =
+        (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
+    Ok(RenderOutput { image: film.develop(), strategy_images, width: w, height: h, stats })
 }
 
 fn progress_bar(opts: &RenderOptions, w: u32, h: u32) -> Option<indicatif::ProgressBar> {

@@ -263,6 +263,111 @@ impl Light {
     }
 }
 
+/// An emitted ray: a point on a light and a direction leaving it (light tracing).
+#[derive(Clone, Copy, Debug)]
+pub struct EmissionSample {
+    pub p: Vec3,
+    /// Surface normal at `p` (zero for point lights).
+    pub n: Vec3,
+    pub uv: Vec2,
+    /// Unit direction the light travels.
+    pub d: Vec3,
+    /// Area density of `p` (1 for a delta position).
+    pub pdf_pos: f32,
+    /// Solid-angle density of `d` given `p`.
+    pub pdf_dir: f32,
+}
+
+impl Light {
+    /// `true` for lights the bidirectional integrators can start paths from and connect
+    /// to: area, point and spot emitters.
+    pub fn is_finite(&self) -> bool {
+        matches!(self, Light::Area { .. } | Light::Point { .. } | Light::Spot { .. })
+    }
+
+    /// `true` when the light's position is a delta distribution (rays cannot hit it).
+    pub fn is_delta_position(&self) -> bool {
+        matches!(self, Light::Point { .. } | Light::Spot { .. })
+    }
+
+    /// Samples a point on the light (area lights uniformly by area) and a direction of
+    /// emission (area lights: cosine-weighted about the normal; point lights: uniform;
+    /// spot lights: uniform within the cutoff cone).
+    pub fn sample_emission(&self, shapes: &[Shape], u1: f32, u_pos: Vec2, u_dir: Vec2) -> Option<EmissionSample> {
+        match self {
+            Light::Area { shape, .. } => {
+                let s = &shapes[*shape];
+                let ps = s.sample_area(u1, u_pos);
+                if ps.n == Vec3::ZERO {
+                    return None;
+                }
+                let local = crate::sampling::square_to_cosine_hemisphere(u_dir);
+                if local.z <= 0.0 {
+                    return None;
+                }
+                let d = Frame::from_normal(ps.n).to_world(local);
+                Some(EmissionSample {
+                    p: ps.p,
+                    n: ps.n,
+                    uv: ps.uv,
+                    d,
+                    pdf_pos: 1.0 / s.area(),
+                    pdf_dir: local.z * std::f32::consts::FRAC_1_PI,
+                })
+            }
+            Light::Point { position, .. } => Some(EmissionSample {
+                p: *position,
+                n: Vec3::ZERO,
+                uv: Vec2::ZERO,
+                d: square_to_uniform_sphere(u_dir),
+                pdf_pos: 1.0,
+                pdf_dir: UNIFORM_SPHERE_PDF,
+            }),
+            Light::Spot { position, frame, cutoff, .. } => {
+                let cos_max = cutoff.cos();
+                let d = frame.to_world(crate::sampling::square_to_uniform_cone(u_dir, cos_max));
+                Some(EmissionSample {
+                    p: *position,
+                    n: Vec3::ZERO,
+                    uv: Vec2::ZERO,
+                    d,
+                    pdf_pos: 1.0,
+                    pdf_dir: crate::sampling::square_to_uniform_cone_pdf(cos_max),
+                })
+            }
+            _ => None,
+        }
+    }
+
+    /// Solid-angle density of [`Light::sample_emission`] choosing direction `d` (unit) at a
+    /// point with normal `n`.
+    pub fn pdf_emission_direction(&self, n: Vec3, d: Vec3) -> f32 {
+        match self {
+            Light::Area { .. } => n.dot(d).max(0.0) * std::f32::consts::FRAC_1_PI,
+            Light::Point { .. } => UNIFORM_SPHERE_PDF,
+            Light::Spot { frame, cutoff, .. } => {
+                let cos_max = cutoff.cos();
+                if frame.n.dot(d) > cos_max { crate::sampling::square_to_uniform_cone_pdf(cos_max) } else { 0.0 }
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Emitted radiance (area lights) or intensity (point and spot lights) leaving a point
+    /// of the light with normal `n` and texture coordinates `uv` in direction `d` (unit).
+    #[inline]
+    pub fn emitted(&self, n: Vec3, uv: Vec2, d: Vec3) -> Rgb {
+        match self {
+            Light::Area { .. } => self.radiance(n, uv, d),
+            Light::Point { intensity, .. } => *intensity,
+            Light::Spot { frame, intensity, cutoff, beam_width, .. } => {
+                *intensity * spot_falloff(frame.n.dot(d), *cutoff, *beam_width)
+            }
+            _ => Rgb::ZERO,
+        }
+    }
+}
+
 /// Mitsuba 3's spot falloff: 1 inside the beam, linear in angle to 0 at the cutoff.
 #[inline]
 pub fn spot_falloff(cos_theta: f32, cutoff: f32, beam_width: f32) -> f32 {

@@ -26,6 +26,28 @@ pub fn hash_words(words: &[u64]) -> u64 {
     words.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, &w| mix64(h ^ mix64(w.wrapping_add(0x632b_e59b_d9b4_e019))))
 }
 
+/// A source of uniform random numbers in `[0, 1)`: the independent [`Sampler`], or a
+/// primary-sample-space state that Metropolis methods mutate.
+pub trait Random {
+    fn next_1d(&mut self) -> f32;
+    #[inline]
+    fn next_2d(&mut self) -> Vec2 {
+        let x = self.next_1d();
+        Vec2::new(x, self.next_1d())
+    }
+}
+
+impl Random for Sampler {
+    #[inline]
+    fn next_1d(&mut self) -> f32 {
+        Sampler::next_1d(self)
+    }
+    #[inline]
+    fn next_2d(&mut self) -> Vec2 {
+        Sampler::next_2d(self)
+    }
+}
+
 /// The `independent` sampler: a PCG32 stream seeded from a hash of (seed, pass, pixel),
 /// so every pixel sample is the same whatever thread renders it.
 pub struct Sampler {

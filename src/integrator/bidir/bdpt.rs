@@ -1,0 +1,282 @@
+//! The strategies of bidirectional path tracing on the shared core, and the per-sample
+//! estimators built from them: light tracing (`t = 1` only), BDPT (Veach 1997: every
+//! `(s,t)`), and BDPT with efficiency-optimised Russian roulette on connections (EORR,
+//! contract §4).
+
+use super::mis::{Heuristic, StrategyCounts, mis_weight};
+use super::{
+    Sink, Vertex, VertexKind, WalkLimits, camera_subpath, connection_contribution, light_origin_pdf, light_subpath,
+    visible,
+};
+use crate::bsdf::TransportMode;
+use crate::integrator::Counters;
+use crate::math::{Rgb, luminance};
+use crate::sampling::Random;
+use crate::scene::Scene;
+use glam::Vec2;
+use std::slice::from_ref;
+
+/// Per-pixel thresholds of efficiency-optimised Russian roulette: a connection whose
+/// weighted contribution (luminance) falls below `tau` is traced with probability
+/// `c / tau` and divided by it.
+#[derive(Clone, Copy)]
+pub struct RouletteMap<'a> {
+    pub tau: &'a [f32],
+    pub width: u32,
+    pub height: u32,
+}
+
+impl RouletteMap<'_> {
+    #[inline]
+    fn at(&self, pos: Vec2) -> f32 {
+        let x = (pos.x.max(0.0) as u32).min(self.width - 1);
+        let y = (pos.y.max(0.0) as u32).min(self.height - 1);
+        self.tau[(y * self.width + x) as usize]
+    }
+}
+
+/// Evaluates single strategies of a path and hands their weighted contributions to a sink.
+pub struct Connector<'a, C> {
+    pub scene: &'a Scene,
+    pub heuristic: Heuristic,
+    pub counts: &'a C,
+    pub roulette: Option<RouletteMap<'a>>,
+}
+
+impl<C: StrategyCounts> Connector<'_, C> {
+    /// Russian roulette on a connection whose weighted contribution is `c`, for the pixel
+    /// at `pos`: `Some(scale)` when the shadow ray is to be traced.
+    #[inline]
+    fn roulette<R: Random>(&self, c: Rgb, pos: Vec2, rng: &mut R, counters: &mut Counters) -> Option<f32> {
+        let Some(map) = &self.roulette else { return Some(1.0) };
+        let tau = map.at(pos);
+        let y = luminance(c).abs();
+        if y >= tau || tau <= 0.0 {
+            return Some(1.0);
+        }
+        let p = y / tau;
+        if rng.next_1d() < p {
+            Some(1.0 / p)
+        } else {
+            counters.connections_skipped += 1;
+            None
+        }
+    }
+
+    /// Traces the shadow ray of a connection: `true` when unoccluded.
+    #[inline]
+    fn trace(&self, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
+        counters.connections += 1;
+        let v = visible(self.scene, a, b, counters);
+        if !v {
+            counters.connections_occluded += 1;
+        }
+        v
+    }
+
+    /// `s = 0`: the camera subpath `z_0..z_{t-1}` ends on an emitter.
+    pub fn emission(&self, camera: &[Vertex], sink: &mut impl Sink) {
+        let t = camera.len();
+        let pt = &camera[t - 1];
+        if pt.kind != VertexKind::Surface {
+            return;
+        }
+        let Some(l) = self.scene.shapes[pt.shape as usize].light else { return };
+        let le = self.scene.lights[l].radiance(pt.ng, pt.uv, pt.wo);
+        if le == Rgb::ZERO {
+            return;
+        }
+        let w = mis_weight(self.scene, &[], camera, self.heuristic, self.counts);
+        sink.add(0, t, pt.beta * le * w);
+    }
+
+    /// `s = 1`: next-event estimation from `z_{t-1}` to a fresh point on a light.
+    pub fn next_event<R: Random>(
+        &self,
+        camera: &[Vertex],
+        pos: Vec2,
+        rng: &mut R,
+        sink: &mut impl Sink,
+        counters: &mut Counters,
+    ) {
+        let scene = self.scene;
+        let t = camera.len();
+        let pt = &camera[t - 1];
+        let u = rng.next_1d();
+        let u1 = rng.next_1d();
+        let u2 = rng.next_2d();
+        if !pt.is_connectible(scene) {
+            return;
+        }
+        let Some((l, pmf, _)) = scene.light_sampler.sample(u) else { return };
+        let Some(ls) = scene.lights[l].sample_li(&scene.shapes, &scene.bounds, pt.p, u1, u2) else { return };
+        let fc = pt.f_cos(scene, ls.wi, TransportMode::Radiance);
+        if fc == Rgb::ZERO {
+            return;
+        }
+        let c = pt.beta * fc * ls.li / (pmf * ls.pdf);
+        let y0 = Vertex::light(l, ls.p, ls.n, Vec2::ZERO, Rgb::ONE, light_origin_pdf(scene, l));
+        self.finish(from_ref(&y0), camera, c, pos, rng, sink, counters, |s, w| s.add(1, t, w));
+    }
+
+    /// `t = 1`: `y_{s-1}` connects to the camera and splats onto the film.
+    pub fn to_camera<R: Random>(&self, light: &[Vertex], rng: &mut R, sink: &mut impl Sink, counters: &mut Counters) {
+        let scene = self.scene;
+        let s = light.len();
+        let qs = &light[s - 1];
+        if !qs.is_connectible(scene) {
+            return;
+        }
+        let Some(k) = scene.camera.connect(qs.p) else { return };
+        let fc = qs.f_cos(scene, k.wi, TransportMode::Importance);
+        if fc == Rgb::ZERO {
+            return;
+        }
+        let c = qs.beta * fc * (k.we_cos / k.dist2);
+        let z0 = Vertex::camera(scene.camera.position);
+        self.finish(light, from_ref(&z0), c, k.raster, rng, sink, counters, |sk, w| sk.splat(s, 1, k.raster, w));
+    }
+
+    /// `s, t >= 2`: joins `y_{s-1}` and `z_{t-1}` with a shadow ray; `scale` multiplies the
+    /// contribution (the pool connections' `1 / (N M PMF)`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn connect<R: Random>(
+        &self,
+        light: &[Vertex],
+        camera: &[Vertex],
+        scale: f32,
+        pos: Vec2,
+        rng: &mut R,
+        sink: &mut impl Sink,
+        counters: &mut Counters,
+    ) {
+        let scene = self.scene;
+        let (s, t) = (light.len(), camera.len());
+        let (qs, pt) = (&light[s - 1], &camera[t - 1]);
+        if !qs.is_connectible(scene) || !pt.is_connectible(scene) {
+            return;
+        }
+        let c = connection_contribution(scene, qs, pt) * scale;
+        if c == Rgb::ZERO {
+            return;
+        }
+        self.finish(light, camera, c, pos, rng, sink, counters, |sk, w| sk.add(s, t, w));
+    }
+
+    /// Weights an unweighted connection contribution, applies roulette, traces the shadow
+    /// ray and delivers the result.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn finish<R: Random, S: Sink>(
+        &self,
+        light: &[Vertex],
+        camera: &[Vertex],
+        c: Rgb,
+        pos: Vec2,
+        rng: &mut R,
+        sink: &mut S,
+        counters: &mut Counters,
+        deliver: impl FnOnce(&mut S, Rgb),
+    ) {
+        let (a, b) = (&light[light.len() - 1], &camera[camera.len() - 1]);
+        if self.roulette.is_some() {
+            // The weight is part of what the roulette judges, so it comes first.
+            let w = mis_weight(self.scene, light, camera, self.heuristic, self.counts);
+            if w == 0.0 {
+                return;
+            }
+            let Some(k) = self.roulette(c * w, pos, rng, counters) else { return };
+            if self.trace(a, b, counters) {
+                deliver(sink, c * (w * k));
+            }
+        } else if self.trace(a, b, counters) {
+            let w = mis_weight(self.scene, light, camera, self.heuristic, self.counts);
+            deliver(sink, c * w);
+        }
+    }
+}
+
+/// The per-sample estimator of light tracing, BDPT and EORR.
+#[derive(Clone, Debug)]
+pub struct Bdpt {
+    pub limits: WalkLimits,
+    /// Longest path in segments (`u32::MAX` = unlimited).
+    pub max_depth: u32,
+    pub hide_emitters: bool,
+    /// Light tracing only: no camera subpath, every path splats through `t = 1`.
+    pub light_only: bool,
+}
+
+/// Reusable subpath storage (one per worker).
+#[derive(Default)]
+pub struct Scratch {
+    pub camera: Vec<Vertex>,
+    pub light: Vec<Vertex>,
+}
+
+impl Bdpt {
+    /// Whether strategy `(s,t)` builds a path that the integrator renders.
+    #[inline]
+    pub fn allowed(&self, s: usize, t: usize) -> bool {
+        s + t >= 2 && s + t - 1 <= self.max_depth as usize && !(self.hide_emitters && s + t == 2)
+    }
+
+    /// One camera sample at film position `pos`: a camera subpath (unless light tracing),
+    /// one light subpath, and every strategy joining them.
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample<R: Random, C: StrategyCounts>(
+        &self,
+        conn: &Connector<C>,
+        pos: Vec2,
+        rng: &mut R,
+        scratch: &mut Scratch,
+        sink: &mut impl Sink,
+        counters: &mut Counters,
+    ) {
+        let scene = conn.scene;
+        if self.light_only {
+            scratch.camera.clear();
+            scratch.camera.push(Vertex::camera(scene.camera.position));
+        } else {
+            camera_subpath(scene, pos, &self.limits, rng, &mut scratch.camera, counters);
+        }
+        light_subpath(scene, &self.limits, rng, &mut scratch.light, counters);
+        counters.light_paths += 1;
+        let (camera, light) = (&scratch.camera, &scratch.light);
+        for t in 1..=camera.len() {
+            for s in 0..=light.len() {
+                if !self.allowed(s, t) {
+                    continue;
+                }
+                match (s, t) {
+                    (0, _) => conn.emission(&camera[..t], sink),
+                    (_, 1) => conn.to_camera(&light[..s], rng, sink, counters),
+                    (1, _) => conn.next_event(&camera[..t], pos, rng, sink, counters),
+                    _ => conn.connect(&light[..s], &camera[..t], 1.0, pos, rng, sink, counters),
+                }
+            }
+        }
+    }
+}
+
+/// Checks that the scene's lights are ones the bidirectional integrators can start light
+/// paths from.
+pub fn check_lights(scene: &Scene, integrator: &str) -> Result<(), String> {
+    if let Some(l) = scene.lights.iter().find(|l| !l.is_finite()) {
+        let kind = match l {
+            crate::light::Light::Directional { .. } => "directional",
+            crate::light::Light::Constant { .. } => "constant",
+            crate::light::Light::Envmap(_) => "envmap",
+            _ => "this",
+        };
+        return Err(format!(
+            "{}: the {integrator} integrator supports area, point and spot emitters; the scene has a {kind} emitter \
+             (render it with --integrator path)",
+            scene.path.display()
+        ));
+    }
+    if scene.lights.is_empty() {
+        return Err(format!("{}: the scene has no emitter", scene.path.display()));
+    }
+    Ok(())
+}

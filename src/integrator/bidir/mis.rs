@@ -1,0 +1,297 @@
+//! MIS weights of bidirectional strategies by the ratio walk (pbrt-v4 style), on a copy of
+//! the path's densities: the vertices are never modified.
+//!
+//! A full path `x_0..x_{n-1}` runs from the light end (`x_0 = y_0`) to the camera
+//! (`x_{n-1} = z_0`). Strategy `s'` (with `t' = n - s'`) samples `x_0..x_{s'-1}` from the
+//! light and the rest from the camera, with density `p_{s'} = Π_{i<s'} pL(x_i) Π_{i≥s'}
+//! pE(x_i)`, so `p_{s'+1} / p_{s'} = pL(x_{s'}) / pE(x_{s'})`. Each strategy is used
+//! `n(s',t')` times per camera sample (the strategy count, 1 in BDPT); the weight of
+//! strategy `s` is `(n_s p_s)^β / Σ_{s'} (n_{s'} p_{s'})^β`, β = 1 (balance) or 2 (power).
+
+use super::{Vertex, VertexKind, nee_ratio};
+use crate::scene::Scene;
+
+/// Room for two subpaths of [`super::MAX_VERTICES`].
+pub const CAP: usize = 2 * super::MAX_VERTICES;
+
+/// The MIS heuristic.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Heuristic {
+    /// β = 1.
+    Balance,
+    /// β = 2.
+    Power,
+}
+
+impl Heuristic {
+    #[inline]
+    fn apply(self, x: f32) -> f32 {
+        match self {
+            Heuristic::Balance => x,
+            Heuristic::Power => x * x,
+        }
+    }
+}
+
+/// The densities of one full path as seen by one strategy, copied out of its vertices and
+/// patched where the connection changes them.
+#[derive(Clone, Debug)]
+pub struct PathPdfs {
+    pub n: usize,
+    /// `pL(x_i)`: area density of `x_i` generated from the light side.
+    pub pl: [f32; CAP],
+    /// `pE(x_i)`: area density of `x_i` generated from the camera side.
+    pub pe: [f32; CAP],
+    /// `x_i` scatters through a Dirac delta (no connection can end there).
+    pub delta: [bool; CAP],
+    /// `x_0` is a light with a delta position (no camera path can hit it).
+    pub delta_light: bool,
+    /// Density of next-event estimation producing `x_0` from `x_1`, over `pL(x_0)`.
+    pub nee_ratio: f32,
+}
+
+impl PathPdfs {
+    pub fn new(n: usize) -> PathPdfs {
+        PathPdfs { n, pl: [0.0; CAP], pe: [0.0; CAP], delta: [false; CAP], delta_light: false, nee_ratio: 1.0 }
+    }
+
+    /// Whether strategy `s` can produce this path: the camera is a pinhole (so `t >= 1`),
+    /// a point light cannot be hit, and neither end of the connecting edge is specular.
+    #[inline]
+    pub fn valid(&self, s: usize) -> bool {
+        if s >= self.n {
+            return false;
+        }
+        if s == 0 { !self.delta_light } else { !self.delta[s - 1] && !self.delta[s] }
+    }
+}
+
+/// Zero densities mark Dirac deltas; they cancel in the ratios (pbrt's `remap0`).
+#[inline]
+fn remap0(x: f32) -> f32 {
+    if x == 0.0 { 1.0 } else { x }
+}
+
+/// The weight of strategy `s` of the path, with strategy counts `count(s')`.
+pub fn weight_from_pdfs(p: &PathPdfs, s: usize, heuristic: Heuristic, count: &impl Fn(usize) -> f32) -> f32 {
+    let n_s = count(s);
+    if n_s <= 0.0 {
+        return 0.0;
+    }
+    // p_1 uses next-event estimation's density for x_0; the others the light subpath's.
+    let nee = |i: usize| if i == 1 { p.nee_ratio } else { 1.0 };
+    let norm = nee(s) * n_s;
+    let mut sum = 1.0f32;
+    let mut add = |i: usize, r: f32| {
+        if p.valid(i) {
+            let c = count(i);
+            if c > 0.0 {
+                sum += heuristic.apply(r * nee(i) * c / norm);
+            }
+        }
+    };
+    // Towards the light: p_i / p_s.
+    let mut r = 1.0f32;
+    for i in (0..s).rev() {
+        r *= remap0(p.pe[i]) / remap0(p.pl[i]);
+        add(i, r);
+    }
+    // Towards the camera: p_{i+1} / p_s.
+    let mut r = 1.0f32;
+    for i in s..p.n.saturating_sub(1) {
+        r *= remap0(p.pl[i]) / remap0(p.pe[i]);
+        add(i + 1, r);
+    }
+    let w = 1.0 / sum;
+    if w.is_finite() { w } else { 0.0 }
+}
+
+/// A full path given by its two subpath prefixes: `light = y_0..y_{s-1}`,
+/// `camera = z_0..z_{t-1}`.
+#[derive(Clone, Copy)]
+pub struct FullPath<'a> {
+    pub light: &'a [Vertex],
+    pub camera: &'a [Vertex],
+}
+
+impl FullPath<'_> {
+    pub fn len(&self) -> usize {
+        self.light.len() + self.camera.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Vertex `x_i`, counted from the light end.
+    #[inline]
+    pub fn get(&self, i: usize) -> &Vertex {
+        if i < self.light.len() { &self.light[i] } else { &self.camera[self.len() - 1 - i] }
+    }
+}
+
+/// How many times per camera sample each strategy is used (`n(s,t)`).
+pub trait StrategyCounts {
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32;
+}
+
+/// The counts of the integrators without probabilistic selection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Counts {
+    /// BDPT: every strategy once.
+    Bdpt,
+    /// Light tracing alone: only `t = 1`.
+    LightTrace,
+    /// A light pool shared by all pixels: light tracing from `M` paths over `W·H` pixels
+    /// (`light_trace = M / (W·H)`) and `N` uniform pool connections per camera vertex
+    /// (`connect = N / V̄`, V̄ the mean number of pool vertices per light path).
+    Pool { light_trace: f32, connect: f32 },
+}
+
+impl StrategyCounts for Counts {
+    #[inline]
+    fn count(&self, _path: &FullPath, s: usize, t: usize) -> f32 {
+        match *self {
+            Counts::Bdpt => 1.0,
+            Counts::LightTrace => {
+                if t == 1 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Counts::Pool { light_trace, connect } => match (s, t) {
+                (_, 1) => light_trace,
+                (0 | 1, _) => 1.0,
+                _ => connect,
+            },
+        }
+    }
+}
+
+/// Copies the densities of the path `light ++ reverse(camera)` and patches those the
+/// connection of `y_{s-1}` and `z_{t-1}` changes: the reverse densities of the two
+/// connecting vertices and of their predecessors. For `s = 1` and `t = 1` the slices hold
+/// the sampled light point and the camera.
+pub fn path_pdfs(scene: &Scene, light: &[Vertex], camera: &[Vertex]) -> PathPdfs {
+    let (s, t) = (light.len(), camera.len());
+    let n = s + t;
+    debug_assert!(t >= 1 && n <= CAP);
+    let mut p = PathPdfs::new(n);
+    for (i, v) in light.iter().enumerate() {
+        p.pl[i] = v.pdf_fwd;
+        p.pe[i] = v.pdf_rev;
+        p.delta[i] = v.delta;
+    }
+    for (j, v) in camera.iter().enumerate() {
+        let i = n - 1 - j;
+        p.pe[i] = v.pdf_fwd;
+        p.pl[i] = v.pdf_rev;
+        p.delta[i] = v.delta;
+    }
+    let pt = &camera[t - 1];
+    let pt_minus = (t >= 2).then(|| &camera[t - 2]);
+    let qs = (s >= 1).then(|| &light[s - 1]);
+    let qs_minus = (s >= 2).then(|| &light[s - 2]);
+    // pt as reached from the light side, and its predecessor.
+    p.pl[s] = match qs {
+        Some(qs) => qs.pdf(scene, qs_minus, pt),
+        None => pt.pdf_light_origin(scene),
+    };
+    if let Some(ptm) = pt_minus {
+        p.pl[s + 1] = match qs {
+            Some(qs) => pt.pdf(scene, Some(qs), ptm),
+            None => pt.pdf_light(scene, ptm),
+        };
+    }
+    // qs as reached from the camera side, and its predecessor.
+    if let Some(qs) = qs {
+        p.pe[s - 1] = pt.pdf(scene, pt_minus, qs);
+        if let Some(qsm) = qs_minus {
+            p.pe[s - 2] = qs.pdf(scene, Some(pt), qsm);
+        }
+        p.delta[s - 1] = false;
+    }
+    p.delta[s] = false;
+    let x0 = if s > 0 { &light[0] } else { pt };
+    p.delta_light = match x0.kind {
+        VertexKind::Light(l) => scene.lights[l as usize].is_delta_position(),
+        _ => false,
+    };
+    let x1 = FullPath { light, camera }.get(1).p;
+    p.nee_ratio = nee_ratio(scene, x0, x1);
+    p
+}
+
+/// The MIS weight of the strategy that joins `light` (`y_0..y_{s-1}`) and `camera`
+/// (`z_0..z_{t-1}`).
+pub fn mis_weight(
+    scene: &Scene,
+    light: &[Vertex],
+    camera: &[Vertex],
+    heuristic: Heuristic,
+    counts: &impl StrategyCounts,
+) -> f32 {
+    let p = path_pdfs(scene, light, camera);
+    let full = FullPath { light, camera };
+    let n = p.n;
+    weight_from_pdfs(&p, light.len(), heuristic, &|sp| counts.count(&full, sp, n - sp))
+}
+
+/// The weights of every strategy of a full path computed from scratch: each strategy's
+/// density is the product of the generation densities of all vertices (no ratios, no
+/// patching). The reference the ratio walk is tested against; `path` runs from the light
+/// end to the camera, without Dirac deltas.
+pub fn brute_force_weights(
+    scene: &Scene,
+    path: &[Vertex],
+    heuristic: Heuristic,
+    counts: &impl StrategyCounts,
+) -> Vec<f64> {
+    let n = path.len();
+    let pl: Vec<f64> = (0..n)
+        .map(|i| match i {
+            0 => path[0].pdf_light_origin(scene) as f64,
+            1 => path[0].pdf_light(scene, &path[1]) as f64,
+            _ => path[i - 1].pdf(scene, Some(&path[i - 2]), &path[i]) as f64,
+        })
+        .collect();
+    let pe: Vec<f64> = (0..n)
+        .map(|i| {
+            if i == n - 1 {
+                1.0
+            } else if i == n - 2 {
+                path[n - 1].pdf(scene, None, &path[i]) as f64
+            } else {
+                path[i + 1].pdf(scene, Some(&path[i + 2]), &path[i]) as f64
+            }
+        })
+        .collect();
+    let nee = nee_ratio(scene, &path[0], path[1].p) as f64;
+    let delta_light = matches!(path[0].kind, VertexKind::Light(l) if scene.lights[l as usize].is_delta_position());
+    let dens: Vec<f64> = (0..n)
+        .map(|s| {
+            if s == 0 && delta_light {
+                return 0.0;
+            }
+            // Strategy s: the light subpath is path[0..s], the camera subpath the rest.
+            let light: Vec<Vertex> = path[..s].to_vec();
+            let camera: Vec<Vertex> = path[s..].iter().rev().copied().collect();
+            let c = counts.count(&FullPath { light: &light, camera: &camera }, s, n - s) as f64;
+            let mut p = c * if s == 1 { nee } else { 1.0 };
+            for (i, (l, e)) in pl.iter().zip(&pe).enumerate() {
+                p *= if i < s { *l } else { *e };
+            }
+            match heuristic {
+                Heuristic::Balance => p,
+                Heuristic::Power => p * p,
+            }
+        })
+        .collect();
+    let total: f64 = dens.iter().sum();
+    dens.iter().map(|d| d / total).collect()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,449 @@
+//! The bidirectional core shared by light tracing, BDPT, EORR, light-vertex-cache BDPT and
+//! (later) PCBPT and Metropolis: path vertices with area-measure densities, one random walk
+//! for both subpaths, the connection terms, and MIS weights by the ratio walk ([`mis`]).
+//!
+//! Notation follows pbrt-v4 and the contract: light vertices `y_0..y_{s-1}` (`y_0` on an
+//! emitter), camera vertices `z_0..z_{t-1}` (`z_0` the pinhole); strategy `(s,t)` joins
+//! `y_{s-1}` and `z_{t-1}`. `pdf_fwd` is the area density with which a vertex was generated
+//! by its own walk, `pdf_rev` the density had it been generated from the other end.
+
+pub mod bdpt;
+pub mod mis;
+pub mod pool;
+
+use super::Counters;
+use crate::accel::Ray;
+use crate::bsdf::TransportMode;
+use crate::math::{Frame, Rgb, max_component, offset_origin};
+use crate::sampling::Random;
+use crate::scene::Scene;
+use crate::scene::shape::SurfaceInteraction;
+use glam::{Vec2, Vec3};
+
+/// Longest subpath (in vertices) a walk builds, also with unlimited `max_depth`. Russian
+/// roulette ends paths long before: a path of 48 bounces carries a negligible share.
+pub const MAX_VERTICES: usize = 48;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VertexKind {
+    /// The pinhole `z_0`.
+    Camera,
+    /// A point on an emitter that starts a light subpath (or was sampled for NEE).
+    Light(u32),
+    /// A surface point reached by a walk.
+    Surface,
+}
+
+/// A path vertex.
+#[derive(Clone, Copy, Debug)]
+pub struct Vertex {
+    pub kind: VertexKind,
+    pub p: Vec3,
+    /// Geometric normal (zero for point lights and the pinhole).
+    pub ng: Vec3,
+    /// Shading frame (surfaces).
+    pub frame: Frame,
+    pub uv: Vec2,
+    /// Unit direction towards the previous vertex of its own walk (zero for endpoints).
+    pub wo: Vec3,
+    pub shape: u32,
+    /// Throughput of the subpath up to and including this vertex (over its densities).
+    pub beta: Rgb,
+    pub pdf_fwd: f32,
+    pub pdf_rev: f32,
+    /// The walk left this vertex through a Dirac delta lobe.
+    pub delta: bool,
+}
+
+impl Vertex {
+    pub fn camera(p: Vec3) -> Vertex {
+        Vertex {
+            kind: VertexKind::Camera,
+            p,
+            ng: Vec3::ZERO,
+            frame: Frame::from_normal(Vec3::Z),
+            uv: Vec2::ZERO,
+            wo: Vec3::ZERO,
+            shape: u32::MAX,
+            beta: Rgb::ONE,
+            pdf_fwd: 1.0,
+            pdf_rev: 0.0,
+            delta: false,
+        }
+    }
+
+    pub fn light(light: usize, p: Vec3, n: Vec3, uv: Vec2, beta: Rgb, pdf_fwd: f32) -> Vertex {
+        Vertex {
+            kind: VertexKind::Light(light as u32),
+            p,
+            ng: n,
+            frame: Frame::from_normal(if n == Vec3::ZERO { Vec3::Z } else { n }),
+            uv,
+            wo: Vec3::ZERO,
+            shape: u32::MAX,
+            beta,
+            pdf_fwd,
+            pdf_rev: 0.0,
+            delta: false,
+        }
+    }
+
+    pub fn surface(si: &SurfaceInteraction, beta: Rgb) -> Vertex {
+        Vertex {
+            kind: VertexKind::Surface,
+            p: si.p,
+            ng: si.ng,
+            frame: si.shading,
+            uv: si.uv,
+            wo: si.wo,
+            shape: si.shape,
+            beta,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+        }
+    }
+
+    /// The emitter this vertex lies on: a light endpoint, or a surface of an area light.
+    #[inline]
+    pub fn light_index(&self, scene: &Scene) -> Option<usize> {
+        match self.kind {
+            VertexKind::Light(l) => Some(l as usize),
+            VertexKind::Surface => scene.shapes[self.shape as usize].light,
+            VertexKind::Camera => None,
+        }
+    }
+
+    /// Whether a deterministic connection can end at this vertex (not a purely specular
+    /// surface).
+    #[inline]
+    pub fn is_connectible(&self, scene: &Scene) -> bool {
+        match self.kind {
+            VertexKind::Surface => !scene.bsdfs[scene.shapes[self.shape as usize].bsdf].is_delta(),
+            _ => true,
+        }
+    }
+
+    /// `|cos|` between the geometric normal and `w` for points on surfaces; 1 for point-like
+    /// vertices. Converts solid-angle densities to area densities at this vertex.
+    #[inline]
+    pub fn cos_area(&self, w: Vec3) -> f32 {
+        if self.ng == Vec3::ZERO { 1.0 } else { self.ng.dot(w).abs() }
+    }
+
+    /// Converts a solid-angle density at `from` to an area density at this vertex.
+    #[inline]
+    pub fn area_density(&self, pdf_solid: f32, from: Vec3) -> f32 {
+        let d = self.p - from;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return 0.0;
+        }
+        pdf_solid * self.cos_area(d / dist2.sqrt()) / dist2
+    }
+
+    /// BSDF (or emission) times the cosine at this vertex for light travelling between
+    /// this vertex and the unit direction `w`, with the adjoint shading-normal correction
+    /// in importance mode. The camera has no BSDF (its term is [`crate::camera::Camera::connect`]).
+    #[inline]
+    pub fn f_cos(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> Rgb {
+        match self.kind {
+            VertexKind::Surface => {
+                let bsdf = &scene.bsdfs[scene.shapes[self.shape as usize].bsdf];
+                let wo = self.frame.to_local(self.wo);
+                let wi = self.frame.to_local(w);
+                let mut f = bsdf.eval(wo, wi, self.uv, mode) * wi.z.abs();
+                if mode == TransportMode::Importance {
+                    f *= shading_correction(self.ng, self.frame.n, self.wo, w);
+                }
+                f
+            }
+            VertexKind::Light(l) => scene.lights[l as usize].emitted(self.ng, self.uv, w) * self.cos_area(w),
+            VertexKind::Camera => Rgb::ZERO,
+        }
+    }
+
+    /// Area density at `next` of this vertex generating it, given the vertex `prev` before
+    /// this one (surfaces need it for their BSDF; endpoints ignore it).
+    pub fn pdf(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+        let d = next.p - self.p;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return 0.0;
+        }
+        let w = d / dist2.sqrt();
+        let solid = match self.kind {
+            VertexKind::Camera => scene.camera.pdf_direction(w),
+            VertexKind::Light(l) => scene.lights[l as usize].pdf_emission_direction(self.ng, w),
+            VertexKind::Surface => {
+                let Some(prev) = prev else { return 0.0 };
+                let wo = (prev.p - self.p).normalize_or_zero();
+                let bsdf = &scene.bsdfs[scene.shapes[self.shape as usize].bsdf];
+                bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.uv, TransportMode::Radiance)
+            }
+        };
+        solid * next.cos_area(-w) / dist2
+    }
+
+    /// Area density at `next` of this vertex, taken as a light, emitting towards it.
+    pub fn pdf_light(&self, scene: &Scene, next: &Vertex) -> f32 {
+        let Some(l) = self.light_index(scene) else { return 0.0 };
+        let d = next.p - self.p;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return 0.0;
+        }
+        let w = d / dist2.sqrt();
+        scene.lights[l].pdf_emission_direction(self.ng, w) * next.cos_area(-w) / dist2
+    }
+
+    /// Density of a light subpath starting at this point: light choice times position.
+    pub fn pdf_light_origin(&self, scene: &Scene) -> f32 {
+        let Some(l) = self.light_index(scene) else { return 0.0 };
+        light_origin_pdf(scene, l)
+    }
+}
+
+/// Light-selection probability times the area density of the start point.
+#[inline]
+pub fn light_origin_pdf(scene: &Scene, light: usize) -> f32 {
+    let pos = match &scene.lights[light] {
+        crate::light::Light::Area { shape, .. } => 1.0 / scene.shapes[*shape].area(),
+        _ => 1.0,
+    };
+    scene.light_sampler.pmf(light) * pos
+}
+
+/// Ratio of the area density with which next-event estimation from `from` produces the
+/// light point `x0` to the density of a light subpath starting there. Both choose the light
+/// by power; they differ where NEE samples the cone a sphere subtends instead of its area.
+pub fn nee_ratio(scene: &Scene, x0: &Vertex, from: Vec3) -> f32 {
+    let Some(l) = x0.light_index(scene) else { return 1.0 };
+    match &scene.lights[l] {
+        crate::light::Light::Area { shape, .. } => {
+            let s = &scene.shapes[*shape];
+            let d = x0.p - from;
+            let dist2 = d.length_squared();
+            if dist2 == 0.0 {
+                return 1.0;
+            }
+            let solid = s.pdf_direction(from, x0.p, x0.ng);
+            let r = solid * x0.cos_area(d / dist2.sqrt()) / dist2 * s.area();
+            if r.is_finite() && r > 0.0 { r } else { 1.0 }
+        }
+        _ => 1.0,
+    }
+}
+
+/// The factor that makes BSDF sampling with shading normals adjoint in importance mode
+/// (Veach 1997, §5.3): `|wo·ns| |wi·ng| / (|wo·ng| |wi·ns|)`.
+#[inline]
+pub fn shading_correction(ng: Vec3, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+    let num = wo.dot(ns).abs() * wi.dot(ng).abs();
+    let den = wo.dot(ng).abs() * wi.dot(ns).abs();
+    if den == 0.0 { 0.0 } else { num / den }
+}
+
+/// How long walks may be and when Russian roulette starts.
+#[derive(Clone, Copy, Debug)]
+pub struct WalkLimits {
+    /// Most vertices of a camera subpath (camera included).
+    pub camera_vertices: usize,
+    /// Most vertices of a light subpath (emitter included).
+    pub light_vertices: usize,
+    /// Bounces after which Russian roulette may end a walk.
+    pub rr_depth: u32,
+}
+
+impl WalkLimits {
+    /// Mitsuba's `max_depth` counts segments from the camera (`u32::MAX` = unlimited): a
+    /// camera subpath has at most `max_depth + 1` vertices, a light subpath `max_depth`.
+    pub fn new(max_depth: u32, rr_depth: u32) -> WalkLimits {
+        let m = (max_depth as usize).min(MAX_VERTICES);
+        WalkLimits { camera_vertices: (m + 1).min(MAX_VERTICES), light_vertices: m, rr_depth }
+    }
+}
+
+/// Extends `path` (which holds the vertex the ray leaves from) by sampling BSDFs, writing
+/// each vertex's forward density and the previous vertex's reverse density as it goes.
+#[allow(clippy::too_many_arguments)]
+fn random_walk<R: Random>(
+    scene: &Scene,
+    mut ray: Ray,
+    mut beta: Rgb,
+    mut pdf_dir: f32,
+    mode: TransportMode,
+    max_vertices: usize,
+    rr_depth: u32,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    // Throughput of the scattering alone (what Russian roulette looks at).
+    let mut rr_beta = Rgb::ONE;
+    let mut bounces = 0u32;
+    while path.len() < max_vertices {
+        counters.extension_rays += 1;
+        let Some(si) = scene.intersect(&ray) else { break };
+        let prev_p = path[path.len() - 1].p;
+        let mut v = Vertex::surface(&si, beta);
+        v.pdf_fwd = v.area_density(pdf_dir, prev_p);
+        path.push(v);
+        if path.len() >= max_vertices {
+            break;
+        }
+        let bsdf = scene.bsdf(&si);
+        let wo = si.shading.to_local(si.wo);
+        let u1 = rng.next_1d();
+        let u2 = rng.next_2d();
+        let Some(bs) = bsdf.sample(wo, si.uv, u1, u2, mode) else { break };
+        let wi = si.shading.to_world(bs.wi);
+        let mut weight = bs.weight;
+        if mode == TransportMode::Importance {
+            weight *= shading_correction(si.ng, si.shading.n, si.wo, wi);
+        }
+        let (pdf_fwd, pdf_rev) = if bs.delta {
+            let n = path.len();
+            path[n - 1].delta = true;
+            (0.0, 0.0)
+        } else {
+            (bs.pdf, bsdf.pdf(bs.wi, wo, si.uv, mode))
+        };
+        let n = path.len();
+        let here = path[n - 1].p;
+        path[n - 2].pdf_rev = path[n - 2].area_density(pdf_rev, here);
+        beta *= weight;
+        rr_beta *= weight;
+        if beta == Rgb::ZERO || !beta.is_finite() {
+            break;
+        }
+        bounces += 1;
+        if bounces >= rr_depth {
+            let q = max_component(rr_beta).min(0.95);
+            if rng.next_1d() >= q {
+                break;
+            }
+            beta /= q;
+            rr_beta /= q;
+        }
+        pdf_dir = pdf_fwd;
+        ray = si.spawn_ray(wi);
+    }
+}
+
+/// Traces a camera subpath through film position `pos` (pixel units) into `path`.
+pub fn camera_subpath<R: Random>(
+    scene: &Scene,
+    pos: Vec2,
+    limits: &WalkLimits,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    path.clear();
+    let ray = scene.camera.generate_ray(pos);
+    path.push(Vertex::camera(ray.o));
+    if limits.camera_vertices <= 1 {
+        return;
+    }
+    let pdf_dir = scene.camera.pdf_direction(ray.d);
+    let before = counters.extension_rays;
+    random_walk(
+        scene,
+        ray,
+        Rgb::ONE,
+        pdf_dir,
+        TransportMode::Radiance,
+        limits.camera_vertices,
+        limits.rr_depth,
+        rng,
+        path,
+        counters,
+    );
+    // The walk's first ray is the camera ray.
+    if counters.extension_rays > before {
+        counters.extension_rays -= 1;
+        counters.camera_rays += 1;
+    }
+}
+
+/// Traces a light subpath into `path`: a light chosen by power, a point and direction of
+/// emission, then BSDF sampling in importance mode.
+pub fn light_subpath<R: Random>(
+    scene: &Scene,
+    limits: &WalkLimits,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    path.clear();
+    let u_light = rng.next_1d();
+    let u1 = rng.next_1d();
+    let u_pos = rng.next_2d();
+    let u_dir = rng.next_2d();
+    if limits.light_vertices == 0 {
+        return;
+    }
+    let Some((l, pmf, _)) = scene.light_sampler.sample(u_light) else { return };
+    let light = &scene.lights[l];
+    let Some(es) = light.sample_emission(&scene.shapes, u1, u_pos, u_dir) else { return };
+    let origin = pmf * es.pdf_pos;
+    if origin <= 0.0 || es.pdf_dir <= 0.0 {
+        return;
+    }
+    let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::splat(1.0 / origin), origin);
+    path.push(y0);
+    let le = y0.f_cos(scene, es.d, TransportMode::Importance);
+    let beta = le / (origin * es.pdf_dir);
+    if limits.light_vertices <= 1 || beta == Rgb::ZERO {
+        return;
+    }
+    let o = if es.n == Vec3::ZERO { es.p } else { offset_origin(es.p, es.n, es.d) };
+    random_walk(
+        scene,
+        Ray::new(o, es.d),
+        beta,
+        es.pdf_dir,
+        TransportMode::Importance,
+        limits.light_vertices,
+        limits.rr_depth,
+        rng,
+        path,
+        counters,
+    );
+}
+
+/// A shadow ray between two vertices, offset at both ends along their geometric normals.
+#[inline]
+pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
+    counters.shadow_rays += 1;
+    let d = b.p - a.p;
+    let o = if a.ng == Vec3::ZERO { a.p } else { offset_origin(a.p, a.ng, d) };
+    let e = if b.ng == Vec3::ZERO { b.p } else { offset_origin(b.p, b.ng, -d) };
+    !scene.occluded(&Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON))
+}
+
+/// The unweighted contribution of joining light vertex `qs` and camera vertex `pt` (both
+/// surfaces): everything but visibility.
+#[inline]
+pub fn connection_contribution(scene: &Scene, qs: &Vertex, pt: &Vertex) -> Rgb {
+    let d = pt.p - qs.p;
+    let dist2 = d.length_squared();
+    if dist2 == 0.0 {
+        return Rgb::ZERO;
+    }
+    let w = d / dist2.sqrt();
+    let fl = qs.f_cos(scene, w, TransportMode::Importance);
+    if fl == Rgb::ZERO {
+        return Rgb::ZERO;
+    }
+    let fe = pt.f_cos(scene, -w, TransportMode::Radiance);
+    qs.beta * fl * fe * pt.beta / dist2
+}
+
+/// Where a strategy's contribution goes: onto the pixel being sampled (`add`) or, for
+/// `t = 1`, splatted at a film position (`splat`).
+pub trait Sink {
+    fn add(&mut self, s: usize, t: usize, value: Rgb);
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb);
+}

@@ -1,0 +1,174 @@
+//! Light pools shared by every pixel of an iteration, and light-vertex-cache BDPT on them
+//! (Davidovic et al. 2014; contract §5): `M` light subpaths per iteration, light tracing
+//! (`t = 1`) from all of them, and `N` connections per camera vertex to pool vertices chosen
+//! uniformly — PCBPT without its cached PMFs.
+
+use super::bdpt::{Bdpt, Connector, Scratch};
+use super::mis::StrategyCounts;
+use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
+use crate::film::Splat;
+use crate::integrator::Counters;
+use crate::sampling::{Random, Sampler};
+use crate::scene::Scene;
+use glam::Vec2;
+use rayon::prelude::*;
+
+/// Key word that separates pool random streams from camera-sample streams.
+const POOL_STREAM: u64 = 0x706f_6f6c;
+
+/// The light subpaths of one iteration in one flat array.
+#[derive(Default)]
+pub struct LightPool {
+    /// Every vertex of every path, path after path.
+    pub vertices: Vec<Vertex>,
+    /// For each vertex, where its path starts in `vertices`.
+    pub path_start: Vec<u32>,
+    /// The vertices pool connections draw from: connectible surface vertices after the
+    /// emitter (`y_1, y_2, …`; `y_0` is left to next-event estimation).
+    pub connectible: Vec<u32>,
+    /// Number of light subpaths traced (`M`).
+    pub paths: usize,
+}
+
+/// Collects splats (pool light tracing has no pixel of its own).
+pub struct SplatSink<'a> {
+    pub splats: &'a mut Vec<Splat>,
+    pub layers: bool,
+}
+
+impl Sink for SplatSink<'_> {
+    fn add(&mut self, _s: usize, _t: usize, _value: crate::math::Rgb) {
+        unreachable!("light paths only splat");
+    }
+
+    #[inline]
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: crate::math::Rgb) {
+        let layer = if self.layers { crate::film::strategy_layer(s, t) as u16 } else { 0 };
+        self.splats.push(Splat { pos, value, layer });
+    }
+}
+
+impl LightPool {
+    /// Traces `paths` light subpaths for iteration `iteration`, splatting their `t = 1`
+    /// strategies through `splat` when given. Work is split into fixed chunks and joined
+    /// in order, so the pool and the splats do not depend on the number of threads.
+    pub fn trace<C: StrategyCounts + Sync>(
+        scene: &Scene,
+        limits: &WalkLimits,
+        paths: usize,
+        seed: u64,
+        iteration: u64,
+        splat: Option<(&Connector<C>, &Bdpt, bool)>,
+    ) -> (LightPool, Vec<Splat>, Counters) {
+        const CHUNK: usize = 256;
+        let chunks: Vec<(Vec<Vertex>, Vec<u32>, Vec<Splat>, Counters)> = (0..paths.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                crate::accel::embree::set_flush_denormals();
+                let mut verts = Vec::new();
+                let mut lens = Vec::new();
+                let mut splats = Vec::new();
+                let mut counters = Counters::default();
+                let mut path = Vec::new();
+                for i in c * CHUNK..((c + 1) * CHUNK).min(paths) {
+                    let mut rng = Sampler::new(&[seed, POOL_STREAM, iteration, i as u64]);
+                    light_subpath(scene, limits, &mut rng, &mut path, &mut counters);
+                    counters.light_paths += 1;
+                    if let Some((conn, bdpt, layers)) = splat {
+                        let mut sink = SplatSink { splats: &mut splats, layers };
+                        for s in 1..=path.len() {
+                            if bdpt.allowed(s, 1) {
+                                conn.to_camera(&path[..s], &mut rng, &mut sink, &mut counters);
+                            }
+                        }
+                    }
+                    lens.push(path.len() as u32);
+                    verts.extend_from_slice(&path);
+                }
+                (verts, lens, splats, counters)
+            })
+            .collect();
+        let mut pool = LightPool { paths, ..Default::default() };
+        let mut splats = Vec::new();
+        let mut counters = Counters::default();
+        for (verts, lens, sp, c) in chunks {
+            let mut k = 0usize;
+            for len in lens {
+                let start = pool.vertices.len() as u32;
+                for (depth, v) in verts[k..k + len as usize].iter().enumerate() {
+                    let index = pool.vertices.len() as u32;
+                    if depth >= 1 && v.kind == VertexKind::Surface && v.is_connectible(scene) {
+                        pool.connectible.push(index);
+                    }
+                    pool.vertices.push(*v);
+                    pool.path_start.push(start);
+                }
+                k += len as usize;
+            }
+            splats.extend(sp);
+            counters += c;
+        }
+        (pool, splats, counters)
+    }
+
+    /// The light subpath `y_0..y_{s-1}` that ends at connectible vertex `k`.
+    #[inline]
+    pub fn prefix(&self, k: usize) -> &[Vertex] {
+        let g = self.connectible[k] as usize;
+        &self.vertices[self.path_start[g] as usize..=g]
+    }
+
+    /// Connectible vertices per light path (`V / M`).
+    pub fn mean_vertices(&self) -> f32 {
+        if self.paths == 0 { 0.0 } else { self.connectible.len() as f32 / self.paths as f32 }
+    }
+}
+
+/// Light-vertex-cache BDPT: BDPT's `s = 0` and `s = 1` strategies per camera vertex, and
+/// `N` connections to uniformly chosen pool vertices, `F = (1/N) Σ w C(v, z) V / M`.
+#[derive(Clone, Debug)]
+pub struct Lvc {
+    pub bdpt: Bdpt,
+    /// Light paths per iteration (`M`).
+    pub light_paths: usize,
+    /// Connections per camera vertex (`N`).
+    pub connections: u32,
+}
+
+impl Lvc {
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample<R: Random, C: StrategyCounts>(
+        &self,
+        conn: &Connector<C>,
+        pool: &LightPool,
+        pos: Vec2,
+        rng: &mut R,
+        scratch: &mut Scratch,
+        sink: &mut impl Sink,
+        counters: &mut Counters,
+    ) {
+        let scene = conn.scene;
+        camera_subpath(scene, pos, &self.bdpt.limits, rng, &mut scratch.camera, counters);
+        let camera = &scratch.camera;
+        let v = pool.connectible.len();
+        let scale = v as f32 / (pool.paths.max(1) as f32 * self.connections as f32);
+        for t in 2..=camera.len() {
+            if self.bdpt.allowed(0, t) {
+                conn.emission(&camera[..t], sink);
+            }
+            if self.bdpt.allowed(1, t) {
+                conn.next_event(&camera[..t], pos, rng, sink, counters);
+            }
+            if v == 0 || !camera[t - 1].is_connectible(scene) {
+                continue;
+            }
+            for _ in 0..self.connections {
+                let k = ((rng.next_1d() * v as f32) as usize).min(v - 1);
+                let light = pool.prefix(k);
+                if self.bdpt.allowed(light.len(), t) {
+                    conn.connect(light, &camera[..t], scale, pos, rng, sink, counters);
+                }
+            }
+        }
+    }
+}
