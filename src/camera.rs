@@ -199,7 +199,9 @@ mod tests {
     #[test]
     fn connect_inverts_generate_ray() {
         let to_world = Transform::new(
-            Mat4::look_at_rh(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y).inverse()
+            Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0))
+                * Mat4::from_rotation_y(0.7)
+                * Mat4::from_rotation_x(-0.3)
                 * Mat4::from_scale(Vec3::new(-1.0, 1.0, -1.0)),
         );
         let c = Camera::new(to_world, 40.0, FovAxis::X, (64, 48), 0.01, 1e4);
@@ -213,17 +215,24 @@ mod tests {
 
     #[test]
     fn importance_integrates_to_one_over_the_image() {
-        // ∫ We dω over the image, by uniform sphere sampling.
+        // ∫ We cos θ dω over the image, by uniform sphere sampling (the camera looks along +z).
         let c = Camera::new(Transform::default(), 50.0, FovAxis::X, (40, 30), 0.0, 1e4);
         let mut s = crate::sampling::Sampler::new(&[9]);
         let n = 400_000;
         let sum: f64 = (0..n)
-            .map(|_| c.importance(crate::sampling::square_to_uniform_sphere(s.next_2d())) as f64 * 4.0 * std::f64::consts::PI)
+            .map(|_| {
+                let d = crate::sampling::square_to_uniform_sphere(s.next_2d());
+                (c.importance(d) * d.z) as f64 * 4.0 * std::f64::consts::PI
+            })
             .sum();
         assert!((sum / n as f64 - 1.0).abs() < 0.02, "{}", sum / n as f64);
         // The direction density also integrates to one.
         let sum: f64 = (0..n)
-            .map(|_| c.pdf_direction(crate::sampling::square_to_uniform_sphere(s.next_2d())) as f64 * 4.0 * std::f64::consts::PI)
+            .map(|_| {
+                c.pdf_direction(crate::sampling::square_to_uniform_sphere(s.next_2d())) as f64
+                    * 4.0
+                    * std::f64::consts::PI
+            })
             .sum();
         assert!((sum / n as f64 - 1.0).abs() < 0.02, "{}", sum / n as f64);
     }

@@ -363,7 +363,8 @@ impl Film {
     /// The developed image of one strategy layer (they sum to [`Film::develop`]).
     pub fn develop_layer(&self, layer: usize) -> Vec<Rgb> {
         let n = self.width as usize * self.height as usize;
-        let splats = if self.layer_splats.is_empty() { &[][..] } else { &self.layer_splats[layer * n..(layer + 1) * n] };
+        let splats =
+            if self.layer_splats.is_empty() { &[][..] } else { &self.layer_splats[layer * n..(layer + 1) * n] };
         self.develop_with(&self.layer_data[layer * n..(layer + 1) * n], splats)
     }
 

@@ -16,14 +16,14 @@
 pub mod bidir;
 pub mod path;
 
-use bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
-use bidir::mis::{Counts, Heuristic};
-use bidir::pool::{LightPool, Lvc};
-use bidir::{Sink, WalkLimits};
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
 use crate::math::Rgb;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
+use bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
+use bidir::mis::{Counts, Heuristic};
+use bidir::pool::{LightPool, Lvc};
+use bidir::{Sink, WalkLimits};
 use glam::Vec2;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -223,7 +223,8 @@ impl Estimator {
             light_only,
         };
         if kind != IntegratorKind::Path {
-            bidir::bdpt::check_lights(scene, &format!("{kind:?}").to_lowercase()).map_err(crate::error::Error::Usage)?;
+            bidir::bdpt::check_lights(scene, &format!("{kind:?}").to_lowercase())
+                .map_err(crate::error::Error::Usage)?;
         }
         Ok(match kind {
             IntegratorKind::Path => Estimator::Path(path::PathTracer::new(spec)),
@@ -396,8 +397,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                     light_trace: lvc.light_paths as f32 / pixels,
                     connect: if vbar > 0.0 { lvc.connections as f32 / vbar } else { 0.0 },
                 };
-                let conn =
-                    Connector { scene, heuristic: opts.bidir.heuristic, counts: &pass_counts, roulette: None };
+                let conn = Connector { scene, heuristic: opts.bidir.heuristic, counts: &pass_counts, roulette: None };
                 let (p, sp, c) = LightPool::trace(
                     scene,
                     &lvc.bdpt.limits,

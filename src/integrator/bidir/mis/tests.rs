@@ -1,0 +1,309 @@
+//! MIS weights on constructed paths: for every split of a path into a light and a camera
+//! subpath (built the way the walks build them, with the densities the connection must
+//! patch poisoned), the weights sum to one; for paths without Dirac deltas they equal the
+//! weights computed from full path densities.
+
+use super::*;
+use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
+use crate::bsdf::{Bsdf, BsdfModel};
+use crate::integrator::Counters;
+use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
+use crate::light::{Light, LightSampler};
+use crate::math::{Frame, Rgb};
+use crate::sampling::Sampler;
+use crate::scene::{LoadOptions, Scene};
+use crate::texture::Texture;
+use glam::{Vec2, Vec3};
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Variant {
+    Diffuse,
+    Glossy,
+    Mirror,
+    PointLight,
+    SphereLight,
+}
+
+fn scene(variant: Variant) -> Scene {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box/scene.xml");
+    let overrides = vec![("resx".into(), "48".into()), ("resy".into(), "40".into())];
+    let mut scene = Scene::load(&path, &LoadOptions { overrides, ..Default::default() }).unwrap();
+    let shape = |scene: &Scene, name: &str| scene.shapes.iter().position(|s| s.name == name).unwrap();
+    let rough = |a: f32, kind| BsdfModel::RoughConductor {
+        distribution: Roughness::Fixed(Microfacet { kind, alpha_u: a, alpha_v: a * 0.6, sample_visible: true }),
+        eta: Rgb::new(0.2, 0.9, 1.1),
+        k: Rgb::new(3.9, 2.4, 2.2),
+        specular_reflectance: Texture::Constant(Rgb::ONE),
+    };
+    let set = |scene: &mut Scene, name: &str, model: BsdfModel| {
+        let s = shape(scene, name);
+        scene.bsdfs.push(Bsdf { model, two_sided: true });
+        scene.shapes[s].bsdf = scene.bsdfs.len() - 1;
+    };
+    match variant {
+        Variant::Diffuse => {}
+        Variant::Glossy => {
+            set(&mut scene, "TallBox", rough(0.15, MicrofacetType::Ggx));
+            set(&mut scene, "BackWall", rough(0.4, MicrofacetType::Beckmann));
+        }
+        Variant::Mirror => {
+            set(
+                &mut scene,
+                "ShortBox",
+                BsdfModel::Conductor {
+                    eta: Rgb::splat(0.2),
+                    k: Rgb::splat(3.0),
+                    specular_reflectance: Texture::Constant(Rgb::ONE),
+                },
+            );
+            set(&mut scene, "LeftWall", rough(0.2, MicrofacetType::Ggx));
+        }
+        Variant::PointLight => {
+            scene.lights.push(Light::Point { position: Vec3::new(0.3, 1.5, 0.2), intensity: Rgb::splat(2.0) });
+            scene.light_sampler = LightSampler::new(&scene.lights, &scene.shapes, &scene.bounds);
+        }
+        Variant::SphereLight => {
+            // A sphere emitter: next-event estimation samples its cone, light paths its area.
+            let mut sph = crate::scene::shape::Shape::new(
+                crate::scene::shape::ShapeGeometry::Sphere { center: Vec3::new(-0.4, 1.2, 0.3), radius: 0.2 },
+                0,
+                false,
+                "sphere".into(),
+            );
+            sph.prepare_sampling();
+            sph.light = Some(scene.lights.len());
+            scene.lights.push(Light::Area { shape: scene.shapes.len(), radiance: Texture::Constant(Rgb::splat(3.0)) });
+            scene.shapes.push(sph);
+            let geometry: Vec<_> = scene.shapes.iter().map(|s| s.accel_geometry()).collect();
+            scene.accel = crate::accel::Accel::build(Default::default(), &geometry, Default::default()).unwrap();
+            scene.light_sampler = LightSampler::new(&scene.lights, &scene.shapes, &scene.bounds);
+        }
+    }
+    scene
+}
+
+/// `x_0` as the end of a camera subpath: a surface point of an area light.
+fn as_surface(scene: &Scene, v: &Vertex) -> Option<Vertex> {
+    let VertexKind::Light(l) = v.kind else { return Some(*v) };
+    let Light::Area { shape, .. } = &scene.lights[l as usize] else { return None };
+    let mut s = *v;
+    s.kind = VertexKind::Surface;
+    s.shape = *shape as u32;
+    s.frame = Frame::from_normal(v.ng);
+    Some(s)
+}
+
+fn as_light(scene: &Scene, v: &Vertex) -> Vertex {
+    match v.kind {
+        VertexKind::Light(_) => *v,
+        _ => {
+            let l = scene.shapes[v.shape as usize].light.unwrap();
+            Vertex::light(l, v.p, v.ng, v.uv, Rgb::ONE, 0.0)
+        }
+    }
+}
+
+fn is_delta_surface(scene: &Scene, v: &Vertex) -> bool {
+    v.kind == VertexKind::Surface && scene.bsdfs[scene.shapes[v.shape as usize].bsdf].is_delta()
+}
+
+/// The subpaths strategy `s` uses for the full path `x` (light end first), with the
+/// densities a walk writes and NaN where the connection must patch them.
+fn subpaths(scene: &Scene, x: &[Vertex], s: usize) -> Option<(Vec<Vertex>, Vec<Vertex>)> {
+    let n = x.len();
+    let t = n - s;
+    let mut light: Vec<Vertex> = Vec::new();
+    for i in 0..s {
+        let mut v = if i == 0 { as_light(scene, &x[0]) } else { x[i] };
+        v.pdf_fwd = match i {
+            0 => v.pdf_light_origin(scene),
+            1 => light[0].pdf_light(scene, &x[1]),
+            _ => x[i - 1].pdf(scene, Some(&x[i - 2]), &x[i]),
+        };
+        v.pdf_rev = if i + 3 <= s { x[i + 1].pdf(scene, Some(&x[i + 2]), &x[i]) } else { f32::NAN };
+        if i > 0 {
+            v.wo = (x[i - 1].p - x[i].p).normalize();
+        }
+        v.delta = is_delta_surface(scene, &v);
+        light.push(v);
+    }
+    let mut camera: Vec<Vertex> = Vec::new();
+    for j in 0..t {
+        let i = n - 1 - j;
+        let mut v = if i == 0 { as_surface(scene, &x[0])? } else { x[i] };
+        v.pdf_fwd = match j {
+            0 => 1.0,
+            1 => x[n - 1].pdf(scene, None, &x[i]),
+            _ => x[i + 1].pdf(scene, Some(&x[i + 2]), &x[i]),
+        };
+        v.pdf_rev = if j + 3 <= t { x[i - 1].pdf(scene, Some(&x[i - 2]), &x[i]) } else { f32::NAN };
+        if j > 0 {
+            v.wo = (x[i + 1].p - x[i].p).normalize();
+        }
+        v.delta = is_delta_surface(scene, &v);
+        camera.push(v);
+    }
+    Some((light, camera))
+}
+
+/// Full paths of 2–8 vertices made from traced subpaths.
+fn paths(scene: &Scene, seed: u64, want: usize) -> Vec<Vec<Vertex>> {
+    let limits = WalkLimits::new(8, 100);
+    let mut out = Vec::new();
+    let mut counters = Counters::default();
+    let (mut lp, mut cp) = (Vec::new(), Vec::new());
+    let mut i = 0u64;
+    while out.len() < want {
+        i += 1;
+        assert!(i < 100_000, "could not build enough paths");
+        let mut rng = Sampler::new(&[seed, i]);
+        let pos = Vec2::new(48.0, 40.0) * rng.next_2d();
+        camera_subpath(scene, pos, &limits, &mut rng, &mut cp, &mut counters);
+        light_subpath(scene, &limits, &mut rng, &mut lp, &mut counters);
+        let a = 1 + (rng.next_u32() as usize % lp.len().clamp(1, 4));
+        let b = 1 + (rng.next_u32() as usize % cp.len().clamp(1, 4));
+        if lp.is_empty() || a > lp.len() || b > cp.len() || a + b < 2 {
+            continue;
+        }
+        let mut x: Vec<Vertex> = lp[..a].to_vec();
+        x.extend(cp[..b].iter().rev());
+        // Every vertex must be reachable from both ends (the two subpaths were traced
+        // independently, so their junction may not be): the vertex before the camera lies
+        // on the image, and every generation density of the path is positive.
+        if x.iter().skip(1).take(x.len() - 2).any(|v| v.kind != VertexKind::Surface)
+            || scene.camera.connect(x[x.len() - 2].p).is_none()
+        {
+            continue;
+        }
+        let has_delta = x.iter().any(|v| is_delta_surface(scene, v));
+        let densities_positive = (0..x.len() - 1).all(|i| {
+            let fwd = if i == 0 { x[0].pdf_light(scene, &x[1]) } else { x[i].pdf(scene, Some(&x[i - 1]), &x[i + 1]) };
+            let n = x.len();
+            let j = n - 1 - i;
+            let rev = if j == n - 1 {
+                x[n - 1].pdf(scene, None, &x[n - 2])
+            } else {
+                x[j].pdf(scene, Some(&x[j + 1]), &x[j - 1])
+            };
+            fwd > 0.0 && rev > 0.0
+        });
+        if !has_delta && !densities_positive {
+            continue;
+        }
+        out.push(x);
+    }
+    out
+}
+
+/// Path-dependent counts, like PCBPT's `N M P(y | z)`.
+struct Positional;
+
+impl StrategyCounts for Positional {
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+        if s >= 2 && t >= 2 { 0.3 + path.get(s - 1).p.x.abs() + 0.5 * path.get(s).p.z.abs() } else { 1.0 }
+    }
+}
+
+fn check_variant(variant: Variant, seed: u64) {
+    let scene = scene(variant);
+    let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
+    let mut checked = 0;
+    let mut with_delta = 0;
+    for x in paths(&scene, seed, 300) {
+        let n = x.len();
+        let has_delta = x.iter().any(|v| is_delta_surface(&scene, v));
+        with_delta += has_delta as usize;
+        for heuristic in [Heuristic::Balance, Heuristic::Power] {
+            let check = |counts: &dyn Fn(&[Vertex], &[Vertex]) -> f32, reference: Option<Vec<f64>>, what: &str| {
+                let mut sum = 0.0f64;
+                let mut ws = Vec::new();
+                for s in 0..n {
+                    // Strategies that would connect at a specular vertex are never evaluated.
+                    let usable = (s == 0 || x[s - 1].is_connectible(&scene)) && x[s].is_connectible(&scene);
+                    let Some((l, c)) = subpaths(&scene, &x, s).filter(|_| usable) else {
+                        ws.push(0.0);
+                        continue;
+                    };
+                    let w = counts(&l, &c) as f64;
+                    assert!(w.is_finite() && w >= 0.0, "{variant:?} {what} s={s} n={n}: weight {w}");
+                    ws.push(w);
+                    sum += w;
+                }
+                assert!(
+                    (sum - 1.0).abs() < 1e-4,
+                    "{variant:?} {what} {heuristic:?} n={n}: weights {ws:?} sum to {sum}"
+                );
+                if let Some(r) = reference {
+                    for (s, (a, b)) in ws.iter().zip(&r).enumerate() {
+                        assert!(
+                            (a - b).abs() < 1e-4 * (1.0 + b.abs()) + 1e-5,
+                            "{variant:?} {what} {heuristic:?} n={n} s={s}: ratio walk {a} vs brute force {b} ({ws:?} vs {r:?})"
+                        );
+                    }
+                }
+            };
+            let mut x0 = x.clone();
+            x0[0] = as_light(&scene, &x[0]);
+            let brute = |r: Vec<f64>| (!has_delta).then_some(r);
+            let b = brute(brute_force_weights(&scene, &x0, heuristic, &Counts::Bdpt));
+            check(&|l, c| mis_weight(&scene, l, c, heuristic, &Counts::Bdpt), b, "bdpt");
+            let b = brute(brute_force_weights(&scene, &x0, heuristic, &pool));
+            check(&|l, c| mis_weight(&scene, l, c, heuristic, &pool), b, "pool");
+            let b = brute(brute_force_weights(&scene, &x0, heuristic, &Positional));
+            check(&|l, c| mis_weight(&scene, l, c, heuristic, &Positional), b, "positional");
+            // Light tracing alone: the t = 1 strategy carries everything it can sample.
+            let lt: f32 = (1..n)
+                .filter_map(|s| subpaths(&scene, &x, s))
+                .map(|(l, c)| mis_weight(&scene, &l, &c, heuristic, &Counts::LightTrace))
+                .sum();
+            assert!((lt - 1.0).abs() < 1e-5 || x[n - 2].kind != VertexKind::Surface, "light tracing: {lt}");
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 300);
+    if variant == Variant::Mirror {
+        assert!(with_delta > 10, "only {with_delta} paths through the mirror");
+    }
+}
+
+#[test]
+fn weights_sum_to_one_on_diffuse_paths() {
+    check_variant(Variant::Diffuse, 1);
+}
+
+#[test]
+fn weights_sum_to_one_on_glossy_paths() {
+    check_variant(Variant::Glossy, 2);
+}
+
+#[test]
+fn weights_sum_to_one_through_a_mirror() {
+    check_variant(Variant::Mirror, 3);
+}
+
+#[test]
+fn weights_sum_to_one_with_a_point_light() {
+    check_variant(Variant::PointLight, 4);
+}
+
+#[test]
+fn weights_sum_to_one_with_a_sphere_light_sampled_by_cone() {
+    check_variant(Variant::SphereLight, 5);
+}
+
+#[test]
+fn balance_heuristic_of_two_strategies_is_their_density_ratio() {
+    // Hand-made densities: p_0 = pE0 pE1, p_1 = pL0 pE1 (t = 1 is x_1 = camera only).
+    let mut p = PathPdfs::new(3);
+    p.pl[..3].copy_from_slice(&[0.5, 2.0, 0.0]);
+    p.pe[..3].copy_from_slice(&[4.0, 3.0, 1.0]);
+    // Strategy densities: p_0 = pE0 pE1 pE2 = 12, p_1 = pL0 pE1 pE2 = 1.5, p_2 = pL0 pL1 pE2 = 1.
+    let w = |s| weight_from_pdfs(&p, s, Heuristic::Balance, &|_| 1.0);
+    assert!((w(0) - 12.0 / 14.5).abs() < 1e-6);
+    assert!((w(1) - 1.5 / 14.5).abs() < 1e-6);
+    assert!((w(2) - 1.0 / 14.5).abs() < 1e-6);
+    // Counts multiply densities.
+    let w = |s| weight_from_pdfs(&p, s, Heuristic::Power, &|k| if k == 2 { 3.0 } else { 1.0 });
+    let d = 144.0 + 2.25 + 9.0;
+    assert!((w(2) - 9.0 / d).abs() < 1e-6 && (w(0) - 144.0 / d).abs() < 1e-6);
+}
