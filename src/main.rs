@@ -155,7 +155,16 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     let stop = install_signal_handlers()?;
     let t0 = Instant::now();
     let build = BuildOptions { quality: a.bvh_quality, robust: a.robust, compact: false };
-    let scene = Scene::load(&a.scene, &LoadOptions { overrides: a.define.clone(), backend: a.backend, build })?;
+    let mut scene = Scene::load(&a.scene, &LoadOptions { overrides: a.define.clone(), backend: a.backend, build })?;
+    if let Some(d) = a.max_depth {
+        if d < -1 {
+            return Err(Error::Usage(format!("--max-depth must be -1 (unlimited) or at least 0, got {d}")));
+        }
+        scene.integrator.max_depth = d;
+    }
+    if let Some(d) = a.rr_depth {
+        scene.integrator.rr_depth = d;
+    }
     let load_seconds = t0.elapsed().as_secs_f64();
     if !a.quiet {
         for w in &scene.stats.warnings {
