@@ -246,3 +246,62 @@ fn material_parameter_errors() {
         fails(&s, &[&format!("{name}:7:"), msg]);
     }
 }
+
+#[test]
+fn bdpt_writes_strategy_images_and_bidirectional_statistics() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("bdpt.exr");
+    let dir = d.path().join("strategies");
+    let stats = d.path().join("stats.json");
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let o = pcbpt(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-D",
+        "resx=24",
+        "-D",
+        "resy=20",
+        "--integrator",
+        "bdpt",
+        "--spp",
+        "2",
+        "--max-depth",
+        "4",
+        "--heuristic",
+        "balance",
+        "-o",
+        out.to_str().unwrap(),
+        "--strategy-images",
+        dir.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Paths of up to 4 segments: 2 + 3 + 4 + 5 strategies, plus the longer-path image.
+    for name in ["s0_t2", "s1_t1", "s2_t3", "s4_t1", "s0_t5", "longer_than_8"] {
+        assert!(dir.join(format!("{name}.exr")).exists(), "{name}.exr missing");
+    }
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let r = &json["render"];
+    assert_eq!(r["integrator"], "bdpt");
+    assert_eq!(r["bidir"]["heuristic"], "balance");
+    for key in ["extension_rays", "shadow_rays", "light_paths", "connections", "connections_occluded"] {
+        assert!(r["counters"][key].as_u64().unwrap() > 0, "{key} in {r}");
+    }
+    assert!(r["phases"]["camera_pass"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn bidirectional_integrators_refuse_lights_at_infinity_clearly() {
+    let d = tempfile::tempdir().unwrap();
+    let s = scene(d.path(), "sky.xml", r#"    <emitter type="constant"><rgb name="radiance" value="1"/></emitter>"#);
+    let out = d.path().join("sky.exr");
+    for integrator in ["bdpt", "lighttrace", "eorr", "lvc"] {
+        let o = pcbpt(&["render", s.to_str().unwrap(), "--integrator", integrator, "-o", out.to_str().unwrap(), "-q"]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(err.contains("sky.xml") && err.contains("constant emitter"), "{err}");
+        assert!(!out.exists());
+    }
+}

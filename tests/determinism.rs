@@ -17,3 +17,23 @@ fn path_tracer_is_bit_identical_with_1_and_2_threads() {
     let other = render(&scene, IntegratorKind::Path, 8, 43, 2);
     assert_ne!(one.image, other.image, "the seed must change the image");
 }
+
+#[test]
+fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
+    for kind in [IntegratorKind::Lighttrace, IntegratorKind::Bdpt, IntegratorKind::Eorr, IntegratorKind::Lvc] {
+        // Several passes, so EORR's thresholds and LVC's pools come from earlier passes.
+        let one = render(&scene, kind, 4, 42, 1);
+        let two = render(&scene, kind, 4, 42, 2);
+        assert_eq!(one.stats.passes, 4, "{kind:?}");
+        assert!(
+            one.image
+                .iter()
+                .zip(&two.image)
+                .all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)),
+            "{kind:?} differs between 1 and 2 threads"
+        );
+        let other = render(&scene, kind, 4, 43, 2);
+        assert_ne!(one.image, other.image, "{kind:?}: the seed must change the image");
+    }
+}

@@ -65,6 +65,19 @@ impl Verdict {
         Verdict { metrics, noise, expected, excluded: 0 }
     }
 
+    /// Judges the average of two independent renders `a` and `b` against a reference made
+    /// by a different estimator, whose own relMSE noise `ref_noise` is given (measured from
+    /// the path tracer's noise at the reference's sample count). The average carries half
+    /// the noise of one render: `expected = relMSE(a, b) / 4 + ref_noise`.
+    pub fn averaged(reference: &Image, a: &Image, b: &Image, ref_noise: f64) -> (Verdict, Image) {
+        let avg = Image::new(a.width, a.height, a.pixels.iter().zip(&b.pixels).map(|(x, y)| (*x + *y) * 0.5).collect());
+        let mut v = Verdict::new(reference, a, b, 1, u32::MAX);
+        v.metrics = compare::metrics(reference, &avg).unwrap();
+        v.noise /= 2.0;
+        v.expected = v.noise + ref_noise;
+        (v, avg)
+    }
+
     /// Compares image means over the pixels whose reference value stays below `cutoff`:
     /// pixels that see a tiny, very bright emitter directly carry a large share of the mean
     /// and their estimate is pure pixel-coverage noise (in `veach-mis`, 6 pixels of 20 736
