@@ -3,10 +3,9 @@
 //! `(s,t)`), and BDPT with efficiency-optimised Russian roulette on connections (EORR,
 //! contract §4).
 
-use super::mis::{Heuristic, StrategyCounts, mis_weight};
+use super::mis::{Heuristic, StrategyCounts, mis_weight_with};
 use super::{
-    Sink, Vertex, VertexKind, WalkLimits, camera_subpath, connection_contribution, light_origin_pdf, light_subpath,
-    visible,
+    Connection, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
 };
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
@@ -86,7 +85,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         if le == Rgb::ZERO {
             return;
         }
-        let w = mis_weight(self.scene, &[], camera, self.heuristic, self.counts);
+        let w = mis_weight_with(self.scene, &[], camera, None, self.heuristic, self.counts);
         sink.add(0, t, pt.beta * le * w);
     }
 
@@ -110,13 +109,19 @@ impl<C: StrategyCounts> Connector<'_, C> {
         }
         let Some((l, pmf, _)) = scene.light_sampler.sample(u) else { return };
         let Some(ls) = scene.lights[l].sample_li(&scene.shapes, &scene.bounds, pt.p, u1, u2) else { return };
-        let fc = pt.f_cos(scene, ls.wi, TransportMode::Radiance);
-        if fc == Rgb::ZERO {
+        let camera_end = pt.end(scene, ls.wi, TransportMode::Radiance);
+        if camera_end.f == Rgb::ZERO {
             return;
         }
-        let c = pt.beta * fc * ls.li / (pmf * ls.pdf);
+        let c = pt.beta * camera_end.f * ls.li / (pmf * ls.pdf);
         let y0 = Vertex::light(l, ls.p, ls.n, Vec2::ZERO, Rgb::ONE, light_origin_pdf(scene, l));
-        self.finish(from_ref(&y0), camera, c, pos, rng, sink, counters, |s, w| s.add(1, t, w));
+        let conn = Connection {
+            w: -ls.wi,
+            dist2: (ls.p - pt.p).length_squared(),
+            light_end: y0.end(scene, -ls.wi, TransportMode::Importance),
+            camera_end,
+        };
+        self.finish(from_ref(&y0), camera, &conn, c, pos, rng, sink, counters, |s, w| s.add(1, t, w));
     }
 
     /// `t = 1`: `y_{s-1}` connects to the camera and splats onto the film.
@@ -128,13 +133,14 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return;
         }
         let Some(k) = scene.camera.connect(qs.p) else { return };
-        let fc = qs.f_cos(scene, k.wi, TransportMode::Importance);
-        if fc == Rgb::ZERO {
+        let light_end = qs.end(scene, k.wi, TransportMode::Importance);
+        if light_end.f == Rgb::ZERO {
             return;
         }
-        let c = qs.beta * fc * (k.we_cos / k.dist2);
+        let c = qs.beta * light_end.f * (k.we_cos / k.dist2);
         let z0 = Vertex::camera(scene.camera.position);
-        self.finish(light, from_ref(&z0), c, k.raster, rng, sink, counters, |sk, w| sk.splat(s, 1, k.raster, w));
+        let conn = Connection { w: k.wi, dist2: k.dist2, light_end, camera_end: z0.end(scene, -k.wi, TransportMode::Radiance) };
+        self.finish(light, from_ref(&z0), &conn, c, k.raster, rng, sink, counters, |sk, w| sk.splat(s, 1, k.raster, w));
     }
 
     /// `s, t >= 2`: joins `y_{s-1}` and `z_{t-1}` with a shadow ray; `scale` multiplies the
@@ -156,11 +162,13 @@ impl<C: StrategyCounts> Connector<'_, C> {
         if !qs.is_connectible(scene) || !pt.is_connectible(scene) {
             return;
         }
-        let c = connection_contribution(scene, qs, pt) * scale;
-        if c == Rgb::ZERO {
+        let Some(conn) = Connection::new(scene, qs, pt) else { return };
+        let f = conn.light_end.f * conn.camera_end.f;
+        if f == Rgb::ZERO {
             return;
         }
-        self.finish(light, camera, c, pos, rng, sink, counters, |sk, w| sk.add(s, t, w));
+        let c = qs.beta * f * pt.beta * (scale / conn.dist2);
+        self.finish(light, camera, &conn, c, pos, rng, sink, counters, |sk, w| sk.add(s, t, w));
     }
 
     /// Weights an unweighted connection contribution, applies roulette, traces the shadow
@@ -171,6 +179,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         &self,
         light: &[Vertex],
         camera: &[Vertex],
+        conn: &Connection,
         c: Rgb,
         pos: Vec2,
         rng: &mut R,
@@ -181,7 +190,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         let (a, b) = (&light[light.len() - 1], &camera[camera.len() - 1]);
         if self.roulette.is_some() {
             // The weight is part of what the roulette judges, so it comes first.
-            let w = mis_weight(self.scene, light, camera, self.heuristic, self.counts);
+            let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
             if w == 0.0 {
                 return;
             }
@@ -190,7 +199,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
                 deliver(sink, c * (w * k));
             }
         } else if self.trace(a, b, counters) {
-            let w = mis_weight(self.scene, light, camera, self.heuristic, self.counts);
+            let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
             deliver(sink, c * w);
         }
     }

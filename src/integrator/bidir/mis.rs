@@ -8,7 +8,7 @@
 //! `n(s',t')` times per camera sample (the strategy count, 1 in BDPT); the weight of
 //! strategy `s` is `(n_s p_s)^β / Σ_{s'} (n_{s'} p_{s'})^β`, β = 1 (balance) or 2 (power).
 
-use super::{Vertex, VertexKind, nee_ratio};
+use super::{Connection, Vertex, VertexKind, nee_ratio};
 use crate::scene::Scene;
 
 /// Room for two subpaths of [`super::MAX_VERTICES`].
@@ -173,8 +173,9 @@ impl StrategyCounts for Counts {
 /// Copies the densities of the path `light ++ reverse(camera)` and patches those the
 /// connection of `y_{s-1}` and `z_{t-1}` changes: the reverse densities of the two
 /// connecting vertices and of their predecessors. For `s = 1` and `t = 1` the slices hold
-/// the sampled light point and the camera.
-pub fn path_pdfs(scene: &Scene, light: &[Vertex], camera: &[Vertex]) -> PathPdfs {
+/// the sampled light point and the camera. `conn` is the connection's evaluation (absent
+/// for `s = 0`, where the camera subpath ends on an emitter).
+pub fn path_pdfs(scene: &Scene, light: &[Vertex], camera: &[Vertex], conn: Option<&Connection>) -> PathPdfs {
     let (s, t) = (light.len(), camera.len());
     let n = s + t;
     debug_assert!(t >= 1 && n <= CAP);
@@ -191,27 +192,30 @@ pub fn path_pdfs(scene: &Scene, light: &[Vertex], camera: &[Vertex]) -> PathPdfs
         p.delta[i] = v.delta;
     }
     let pt = &camera[t - 1];
-    let pt_minus = (t >= 2).then(|| &camera[t - 2]);
-    let qs = (s >= 1).then(|| &light[s - 1]);
-    let qs_minus = (s >= 2).then(|| &light[s - 2]);
-    // pt as reached from the light side, and its predecessor.
-    p.pl[s] = match qs {
-        Some(qs) => qs.pdf(scene, qs_minus, pt),
-        None => pt.pdf_light_origin(scene),
-    };
-    if let Some(ptm) = pt_minus {
-        p.pl[s + 1] = match qs {
-            Some(qs) => pt.pdf(scene, Some(qs), ptm),
-            None => pt.pdf_light(scene, ptm),
-        };
-    }
-    // qs as reached from the camera side, and its predecessor.
-    if let Some(qs) = qs {
-        p.pe[s - 1] = pt.pdf(scene, pt_minus, qs);
-        if let Some(qsm) = qs_minus {
-            p.pe[s - 2] = qs.pdf(scene, Some(pt), qsm);
+    // The density, at `to`, of `from`'s solid-angle density `pdf` towards it.
+    let area = |pdf: f32, from: &Vertex, to: &Vertex| to.area_density(pdf, from.p);
+    match conn {
+        Some(c) => {
+            let qs = &light[s - 1];
+            // pt and qs as reached across the connection.
+            p.pl[s] = c.light_end.pdf_fwd * pt.cos_area(c.w) / c.dist2;
+            p.pe[s - 1] = c.camera_end.pdf_fwd * qs.cos_area(c.w) / c.dist2;
+            // Their predecessors, generated from them given the other end.
+            if t >= 2 {
+                p.pl[s + 1] = area(c.camera_end.pdf_rev, pt, &camera[t - 2]);
+            }
+            if s >= 2 {
+                p.pe[s - 2] = area(c.light_end.pdf_rev, qs, &light[s - 2]);
+            }
+            p.delta[s - 1] = false;
         }
-        p.delta[s - 1] = false;
+        None => {
+            debug_assert_eq!(s, 0);
+            p.pl[0] = pt.pdf_light_origin(scene);
+            if t >= 2 {
+                p.pl[1] = pt.pdf_light(scene, &camera[t - 2]);
+            }
+        }
     }
     p.delta[s] = false;
     let x0 = if s > 0 { &light[0] } else { pt };
@@ -225,7 +229,23 @@ pub fn path_pdfs(scene: &Scene, light: &[Vertex], camera: &[Vertex]) -> PathPdfs
 }
 
 /// The MIS weight of the strategy that joins `light` (`y_0..y_{s-1}`) and `camera`
-/// (`z_0..z_{t-1}`).
+/// (`z_0..z_{t-1}`), with the connection already evaluated (`None` for `s = 0`).
+pub fn mis_weight_with(
+    scene: &Scene,
+    light: &[Vertex],
+    camera: &[Vertex],
+    conn: Option<&Connection>,
+    heuristic: Heuristic,
+    counts: &impl StrategyCounts,
+) -> f32 {
+    let p = path_pdfs(scene, light, camera, conn);
+    let full = FullPath { light, camera };
+    let n = p.n;
+    weight_from_pdfs(&p, light.len(), heuristic, &|sp| counts.count(&full, sp, n - sp))
+}
+
+/// The MIS weight of the strategy that joins `light` and `camera`, evaluating the
+/// connection itself.
 pub fn mis_weight(
     scene: &Scene,
     light: &[Vertex],
@@ -233,10 +253,14 @@ pub fn mis_weight(
     heuristic: Heuristic,
     counts: &impl StrategyCounts,
 ) -> f32 {
-    let p = path_pdfs(scene, light, camera);
-    let full = FullPath { light, camera };
-    let n = p.n;
-    weight_from_pdfs(&p, light.len(), heuristic, &|sp| counts.count(&full, sp, n - sp))
+    let conn = match light.last() {
+        Some(qs) => match Connection::new(scene, qs, &camera[camera.len() - 1]) {
+            Some(c) => Some(c),
+            None => return 0.0,
+        },
+        None => None,
+    };
+    mis_weight_with(scene, light, camera, conn.as_ref(), heuristic, counts)
 }
 
 /// The weights of every strategy of a full path computed from scratch: each strategy's

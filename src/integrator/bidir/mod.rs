@@ -163,6 +163,36 @@ impl Vertex {
         }
     }
 
+    /// What a connection needs from this vertex as one of its ends, towards the unit
+    /// direction `w` of the other end: `f·cos` (as [`Vertex::f_cos`]), the solid-angle
+    /// density of generating the other end, and that of generating this vertex's own
+    /// predecessor given the other end — one BSDF evaluation for all three.
+    #[inline]
+    pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
+        match self.kind {
+            VertexKind::Surface => {
+                let bsdf = &scene.bsdfs[scene.shapes[self.shape as usize].bsdf];
+                let wo = self.frame.to_local(self.wo);
+                let wi = self.frame.to_local(w);
+                let mut f = bsdf.eval(wo, wi, self.uv, mode) * wi.z.abs();
+                if mode == TransportMode::Importance {
+                    f *= shading_correction(self.ng, self.frame.n, self.wo, w);
+                }
+                let (pdf_fwd, pdf_rev) = bsdf.pdf_pair(wo, wi, self.uv, mode);
+                End { f, pdf_fwd, pdf_rev }
+            }
+            VertexKind::Light(l) => {
+                let light = &scene.lights[l as usize];
+                End {
+                    f: light.emitted(self.ng, self.uv, w) * self.cos_area(w),
+                    pdf_fwd: light.pdf_emission_direction(self.ng, w),
+                    pdf_rev: 0.0,
+                }
+            }
+            VertexKind::Camera => End { f: Rgb::ZERO, pdf_fwd: scene.camera.pdf_direction(w), pdf_rev: 0.0 },
+        }
+    }
+
     /// Area density at `next` of this vertex generating it, given the vertex `prev` before
     /// this one (surfaces need it for their BSDF; endpoints ignore it).
     pub fn pdf(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex) -> f32 {
@@ -201,6 +231,40 @@ impl Vertex {
     pub fn pdf_light_origin(&self, scene: &Scene) -> f32 {
         let Some(l) = self.light_index(scene) else { return 0.0 };
         light_origin_pdf(scene, l)
+    }
+}
+
+/// One end of a connection (see [`Vertex::end`]).
+#[derive(Clone, Copy, Debug)]
+pub struct End {
+    pub f: Rgb,
+    pub pdf_fwd: f32,
+    pub pdf_rev: f32,
+}
+
+/// A connection between `y_{s-1}` and `z_{t-1}`: the unit direction from the light end to
+/// the camera end, the squared distance, and both ends' terms.
+#[derive(Clone, Copy, Debug)]
+pub struct Connection {
+    pub w: Vec3,
+    pub dist2: f32,
+    pub light_end: End,
+    pub camera_end: End,
+}
+
+impl Connection {
+    /// Evaluates the connection of two vertices (`None` when they coincide).
+    #[inline]
+    pub fn new(scene: &Scene, qs: &Vertex, pt: &Vertex) -> Option<Connection> {
+        let d = pt.p - qs.p;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 || !dist2.is_finite() {
+            return None;
+        }
+        let w = d / dist2.sqrt();
+        let light_end = qs.end(scene, w, TransportMode::Importance);
+        let camera_end = pt.end(scene, -w, TransportMode::Radiance);
+        Some(Connection { w, dist2, light_end, camera_end })
     }
 }
 
@@ -421,24 +485,6 @@ pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -
     let o = if a.ng == Vec3::ZERO { a.p } else { offset_origin(a.p, a.ng, d) };
     let e = if b.ng == Vec3::ZERO { b.p } else { offset_origin(b.p, b.ng, -d) };
     !scene.occluded(&Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON))
-}
-
-/// The unweighted contribution of joining light vertex `qs` and camera vertex `pt` (both
-/// surfaces): everything but visibility.
-#[inline]
-pub fn connection_contribution(scene: &Scene, qs: &Vertex, pt: &Vertex) -> Rgb {
-    let d = pt.p - qs.p;
-    let dist2 = d.length_squared();
-    if dist2 == 0.0 {
-        return Rgb::ZERO;
-    }
-    let w = d / dist2.sqrt();
-    let fl = qs.f_cos(scene, w, TransportMode::Importance);
-    if fl == Rgb::ZERO {
-        return Rgb::ZERO;
-    }
-    let fe = pt.f_cos(scene, -w, TransportMode::Radiance);
-    qs.beta * fl * fe * pt.beta / dist2
 }
 
 /// Where a strategy's contribution goes: onto the pixel being sampled (`add`) or, for
