@@ -13,6 +13,8 @@ use crate::scene::Scene;
 
 /// Room for two subpaths of [`super::MAX_VERTICES`].
 pub const CAP: usize = 2 * super::MAX_VERTICES;
+/// Paths up to this many vertices use a small array.
+const SHORT: usize = 16;
 
 /// The MIS heuristic.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -36,24 +38,26 @@ impl Heuristic {
 
 /// The densities of one full path as seen by one strategy, copied out of its vertices and
 /// patched where the connection changes them.
+/// `N` bounds the path length: short paths use a small array.
 #[derive(Clone, Debug)]
-pub struct PathPdfs {
+pub struct PathPdfs<const N: usize = CAP> {
     pub n: usize,
     /// `pL(x_i)`: area density of `x_i` generated from the light side.
-    pub pl: [f32; CAP],
+    pub pl: [f32; N],
     /// `pE(x_i)`: area density of `x_i` generated from the camera side.
-    pub pe: [f32; CAP],
+    pub pe: [f32; N],
     /// `x_i` scatters through a Dirac delta (no connection can end there).
-    pub delta: [bool; CAP],
+    pub delta: [bool; N],
     /// `x_0` is a light with a delta position (no camera path can hit it).
     pub delta_light: bool,
     /// Density of next-event estimation producing `x_0` from `x_1`, over `pL(x_0)`.
     pub nee_ratio: f32,
 }
 
-impl PathPdfs {
-    pub fn new(n: usize) -> PathPdfs {
-        PathPdfs { n, pl: [0.0; CAP], pe: [0.0; CAP], delta: [false; CAP], delta_light: false, nee_ratio: 1.0 }
+impl<const N: usize> PathPdfs<N> {
+    pub fn new(n: usize) -> PathPdfs<N> {
+        assert!(n <= N, "a path of {n} vertices does not fit in {N}");
+        PathPdfs { n, pl: [0.0; N], pe: [0.0; N], delta: [false; N], delta_light: false, nee_ratio: 1.0 }
     }
 
     /// Whether strategy `s` can produce this path: the camera is a pinhole (so `t >= 1`),
@@ -74,7 +78,7 @@ fn remap0(x: f32) -> f32 {
 }
 
 /// The weight of strategy `s` of the path, with strategy counts `count(s')`.
-pub fn weight_from_pdfs(p: &PathPdfs, s: usize, heuristic: Heuristic, count: &impl Fn(usize) -> f32) -> f32 {
+pub fn weight_from_pdfs<const N: usize>(p: &PathPdfs<N>, s: usize, heuristic: Heuristic, count: &impl Fn(usize) -> f32) -> f32 {
     let n_s = count(s);
     if n_s <= 0.0 {
         return 0.0;
@@ -175,7 +179,12 @@ impl StrategyCounts for Counts {
 /// connecting vertices and of their predecessors. For `s = 1` and `t = 1` the slices hold
 /// the sampled light point and the camera. `conn` is the connection's evaluation (absent
 /// for `s = 0`, where the camera subpath ends on an emitter).
-pub fn path_pdfs(scene: &Scene, light: &[Vertex], camera: &[Vertex], conn: Option<&Connection>) -> PathPdfs {
+pub fn path_pdfs<const N: usize>(
+    scene: &Scene,
+    light: &[Vertex],
+    camera: &[Vertex],
+    conn: Option<&Connection>,
+) -> PathPdfs<N> {
     let (s, t) = (light.len(), camera.len());
     let n = s + t;
     debug_assert!(t >= 1 && n <= CAP);
@@ -238,10 +247,15 @@ pub fn mis_weight_with(
     heuristic: Heuristic,
     counts: &impl StrategyCounts,
 ) -> f32 {
-    let p = path_pdfs(scene, light, camera, conn);
     let full = FullPath { light, camera };
-    let n = p.n;
-    weight_from_pdfs(&p, light.len(), heuristic, &|sp| counts.count(&full, sp, n - sp))
+    let n = full.len();
+    let count = |sp| counts.count(&full, sp, n - sp);
+    // Most paths are short: a small array is cheaper to set up.
+    if n <= SHORT {
+        weight_from_pdfs(&path_pdfs::<SHORT>(scene, light, camera, conn), light.len(), heuristic, &count)
+    } else {
+        weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), light.len(), heuristic, &count)
+    }
 }
 
 /// The MIS weight of the strategy that joins `light` and `camera`, evaluating the

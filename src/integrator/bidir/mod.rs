@@ -286,6 +286,10 @@ pub fn nee_ratio(scene: &Scene, x0: &Vertex, from: Vec3) -> f32 {
     match &scene.lights[l] {
         crate::light::Light::Area { shape, .. } => {
             let s = &scene.shapes[*shape];
+            // Meshes are sampled by area both ways: the ratio is exactly one.
+            if !matches!(s.geometry, crate::scene::shape::ShapeGeometry::Sphere { .. }) {
+                return 1.0;
+            }
             let d = x0.p - from;
             let dist2 = d.length_squared();
             if dist2 == 0.0 {

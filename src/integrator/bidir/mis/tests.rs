@@ -294,7 +294,7 @@ fn weights_sum_to_one_with_a_sphere_light_sampled_by_cone() {
 #[test]
 fn balance_heuristic_of_two_strategies_is_their_density_ratio() {
     // Hand-made densities: p_0 = pE0 pE1, p_1 = pL0 pE1 (t = 1 is x_1 = camera only).
-    let mut p = PathPdfs::new(3);
+    let mut p = PathPdfs::<CAP>::new(3);
     p.pl[..3].copy_from_slice(&[0.5, 2.0, 0.0]);
     p.pe[..3].copy_from_slice(&[4.0, 3.0, 1.0]);
     // Strategy densities: p_0 = pE0 pE1 pE2 = 12, p_1 = pL0 pE1 pE2 = 1.5, p_2 = pL0 pL1 pE2 = 1.
