@@ -5,7 +5,7 @@
 
 use super::mis::{Heuristic, StrategyCounts, mis_weight_with};
 use super::{
-    Connection, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
+    Connection, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
 };
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
@@ -104,7 +104,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         let u = rng.next_1d();
         let u1 = rng.next_1d();
         let u2 = rng.next_2d();
-        if !pt.is_connectible(scene) {
+        if !pt.is_connectible() {
             return;
         }
         let Some((l, pmf, _)) = scene.light_sampler.sample(u) else { return };
@@ -118,7 +118,12 @@ impl<C: StrategyCounts> Connector<'_, C> {
         let conn = Connection {
             w: -ls.wi,
             dist2: (ls.p - pt.p).length_squared(),
-            light_end: y0.end(scene, -ls.wi, TransportMode::Importance),
+            // Only the emission density matters at a sampled light point.
+            light_end: End {
+                f: Rgb::ZERO,
+                pdf_fwd: scene.lights[l].pdf_emission_direction(ls.n, -ls.wi),
+                pdf_rev: 0.0,
+            },
             camera_end,
         };
         self.finish(from_ref(&y0), camera, &conn, c, pos, rng, sink, counters, |s, w| s.add(1, t, w));
@@ -129,7 +134,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         let scene = self.scene;
         let s = light.len();
         let qs = &light[s - 1];
-        if !qs.is_connectible(scene) {
+        if !qs.is_connectible() {
             return;
         }
         let Some(k) = scene.camera.connect(qs.p) else { return };
@@ -139,7 +144,12 @@ impl<C: StrategyCounts> Connector<'_, C> {
         }
         let c = qs.beta * light_end.f * (k.we_cos / k.dist2);
         let z0 = Vertex::camera(scene.camera.position);
-        let conn = Connection { w: k.wi, dist2: k.dist2, light_end, camera_end: z0.end(scene, -k.wi, TransportMode::Radiance) };
+        let conn = Connection {
+            w: k.wi,
+            dist2: k.dist2,
+            light_end,
+            camera_end: z0.end(scene, -k.wi, TransportMode::Radiance),
+        };
         self.finish(light, from_ref(&z0), &conn, c, k.raster, rng, sink, counters, |sk, w| sk.splat(s, 1, k.raster, w));
     }
 
@@ -159,7 +169,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         let scene = self.scene;
         let (s, t) = (light.len(), camera.len());
         let (qs, pt) = (&light[s - 1], &camera[t - 1]);
-        if !qs.is_connectible(scene) || !pt.is_connectible(scene) {
+        if !qs.is_connectible() || !pt.is_connectible() {
             return;
         }
         let Some(conn) = Connection::new(scene, qs, pt) else { return };

@@ -78,7 +78,12 @@ fn remap0(x: f32) -> f32 {
 }
 
 /// The weight of strategy `s` of the path, with strategy counts `count(s')`.
-pub fn weight_from_pdfs<const N: usize>(p: &PathPdfs<N>, s: usize, heuristic: Heuristic, count: &impl Fn(usize) -> f32) -> f32 {
+pub fn weight_from_pdfs<const N: usize>(
+    p: &PathPdfs<N>,
+    s: usize,
+    heuristic: Heuristic,
+    count: &impl Fn(usize) -> f32,
+) -> f32 {
     let n_s = count(s);
     if n_s <= 0.0 {
         return 0.0;

@@ -53,6 +53,8 @@ pub struct Vertex {
     pub pdf_rev: f32,
     /// The walk left this vertex through a Dirac delta lobe.
     pub delta: bool,
+    /// A deterministic connection can end here (not a purely specular surface).
+    pub connectible: bool,
 }
 
 impl Vertex {
@@ -69,6 +71,7 @@ impl Vertex {
             pdf_fwd: 1.0,
             pdf_rev: 0.0,
             delta: false,
+            connectible: true,
         }
     }
 
@@ -85,10 +88,12 @@ impl Vertex {
             pdf_fwd,
             pdf_rev: 0.0,
             delta: false,
+            connectible: true,
         }
     }
 
-    pub fn surface(si: &SurfaceInteraction, beta: Rgb) -> Vertex {
+    /// A surface vertex; `connectible` is false for purely specular BSDFs.
+    pub fn surface(si: &SurfaceInteraction, beta: Rgb, connectible: bool) -> Vertex {
         Vertex {
             kind: VertexKind::Surface,
             p: si.p,
@@ -101,6 +106,7 @@ impl Vertex {
             pdf_fwd: 0.0,
             pdf_rev: 0.0,
             delta: false,
+            connectible,
         }
     }
 
@@ -117,11 +123,8 @@ impl Vertex {
     /// Whether a deterministic connection can end at this vertex (not a purely specular
     /// surface).
     #[inline]
-    pub fn is_connectible(&self, scene: &Scene) -> bool {
-        match self.kind {
-            VertexKind::Surface => !scene.bsdfs[scene.shapes[self.shape as usize].bsdf].is_delta(),
-            _ => true,
-        }
+    pub fn is_connectible(&self) -> bool {
+        self.connectible
     }
 
     /// `|cos|` between the geometric normal and `w` for points on surfaces; 1 for point-like
@@ -354,13 +357,13 @@ fn random_walk<R: Random>(
         counters.extension_rays += 1;
         let Some(si) = scene.intersect(&ray) else { break };
         let prev_p = path[path.len() - 1].p;
-        let mut v = Vertex::surface(&si, beta);
+        let bsdf = scene.bsdf(&si);
+        let mut v = Vertex::surface(&si, beta, !bsdf.is_delta());
         v.pdf_fwd = v.area_density(pdf_dir, prev_p);
         path.push(v);
         if path.len() >= max_vertices {
             break;
         }
-        let bsdf = scene.bsdf(&si);
         let wo = si.shading.to_local(si.wo);
         let u1 = rng.next_1d();
         let u2 = rng.next_2d();

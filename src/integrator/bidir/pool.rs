@@ -16,6 +16,9 @@ use rayon::prelude::*;
 /// Key word that separates pool random streams from camera-sample streams.
 const POOL_STREAM: u64 = 0x706f_6f6c;
 
+/// One chunk of a pool being traced: its vertices, path lengths, splats and counters.
+type Chunk = (Vec<Vertex>, Vec<u32>, Vec<Splat>, Counters);
+
 /// The light subpaths of one iteration in one flat array.
 #[derive(Default)]
 pub struct LightPool {
@@ -61,7 +64,7 @@ impl LightPool {
         splat: Option<(&Connector<C>, &Bdpt, bool)>,
     ) -> (LightPool, Vec<Splat>, Counters) {
         const CHUNK: usize = 256;
-        let chunks: Vec<(Vec<Vertex>, Vec<u32>, Vec<Splat>, Counters)> = (0..paths.div_ceil(CHUNK))
+        let chunks: Vec<Chunk> = (0..paths.div_ceil(CHUNK))
             .into_par_iter()
             .map(|c| {
                 crate::accel::embree::set_flush_denormals();
@@ -97,7 +100,7 @@ impl LightPool {
                 let start = pool.vertices.len() as u32;
                 for (depth, v) in verts[k..k + len as usize].iter().enumerate() {
                     let index = pool.vertices.len() as u32;
-                    if depth >= 1 && v.kind == VertexKind::Surface && v.is_connectible(scene) {
+                    if depth >= 1 && v.kind == VertexKind::Surface && v.is_connectible() {
                         pool.connectible.push(index);
                     }
                     pool.vertices.push(*v);
@@ -159,7 +162,7 @@ impl Lvc {
             if self.bdpt.allowed(1, t) {
                 conn.next_event(&camera[..t], pos, rng, sink, counters);
             }
-            if v == 0 || !camera[t - 1].is_connectible(scene) {
+            if v == 0 || !camera[t - 1].is_connectible() {
                 continue;
             }
             for _ in 0..self.connections {

@@ -90,6 +90,7 @@ fn as_surface(scene: &Scene, v: &Vertex) -> Option<Vertex> {
     s.kind = VertexKind::Surface;
     s.shape = *shape as u32;
     s.frame = Frame::from_normal(v.ng);
+    s.connectible = !scene.bsdfs[scene.shapes[*shape].bsdf].is_delta();
     Some(s)
 }
 
@@ -219,7 +220,7 @@ fn check_variant(variant: Variant, seed: u64) {
                 let mut ws = Vec::new();
                 for s in 0..n {
                     // Strategies that would connect at a specular vertex are never evaluated.
-                    let usable = (s == 0 || x[s - 1].is_connectible(&scene)) && x[s].is_connectible(&scene);
+                    let usable = (s == 0 || x[s - 1].is_connectible()) && x[s].is_connectible();
                     let Some((l, c)) = subpaths(&scene, &x, s).filter(|_| usable) else {
                         ws.push(0.0);
                         continue;
