@@ -248,6 +248,20 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             output.display()
         );
     }
+    if !a.quiet && s.bidir.is_some() {
+        let c = &s.counters;
+        eprintln!(
+            "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette){}; time: light pool {:.2} s, camera pass {:.2} s, merge {:.2} s",
+            c.light_paths,
+            c.connections,
+            c.connections_occluded,
+            c.connections_skipped,
+            s.pool.map(|(m, v)| format!(", pool of {m} paths with {v} connectible vertices")).unwrap_or_default(),
+            s.phases.light_pool,
+            s.phases.camera_pass,
+            s.phases.merge
+        );
+    }
     Ok(if s.interrupted { ExitCode::from(INTERRUPTED) } else { ExitCode::SUCCESS })
 }
 
