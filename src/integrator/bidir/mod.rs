@@ -145,31 +145,12 @@ impl Vertex {
         pdf_solid * self.cos_area(d / dist2.sqrt()) / dist2
     }
 
-    /// BSDF (or emission) times the cosine at this vertex for light travelling between
-    /// this vertex and the unit direction `w`, with the adjoint shading-normal correction
-    /// in importance mode. The camera has no BSDF (its term is [`crate::camera::Camera::connect`]).
-    #[inline]
-    pub fn f_cos(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> Rgb {
-        match self.kind {
-            VertexKind::Surface => {
-                let bsdf = &scene.bsdfs[scene.shapes[self.shape as usize].bsdf];
-                let wo = self.frame.to_local(self.wo);
-                let wi = self.frame.to_local(w);
-                let mut f = bsdf.eval(wo, wi, self.uv, mode) * wi.z.abs();
-                if mode == TransportMode::Importance {
-                    f *= shading_correction(self.ng, self.frame.n, self.wo, w);
-                }
-                f
-            }
-            VertexKind::Light(l) => scene.lights[l as usize].emitted(self.ng, self.uv, w) * self.cos_area(w),
-            VertexKind::Camera => Rgb::ZERO,
-        }
-    }
-
     /// What a connection needs from this vertex as one of its ends, towards the unit
-    /// direction `w` of the other end: `f·cos` (as [`Vertex::f_cos`]), the solid-angle
-    /// density of generating the other end, and that of generating this vertex's own
-    /// predecessor given the other end — one BSDF evaluation for all three.
+    /// direction `w` of the other end: the BSDF (or emission) times the cosine at this vertex
+    /// for light travelling between it and `w`, with the adjoint shading-normal correction in
+    /// importance mode; the solid-angle density of generating the other end; and that of
+    /// generating this vertex's own predecessor given the other end — one BSDF lookup for all
+    /// three.
     #[inline]
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
         match self.kind {
@@ -464,7 +445,7 @@ pub fn light_subpath<R: Random>(
     }
     let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::splat(1.0 / origin), origin);
     path.push(y0);
-    let le = y0.f_cos(scene, es.d, TransportMode::Importance);
+    let le = y0.end(scene, es.d, TransportMode::Importance).f;
     let beta = le / (origin * es.pdf_dir);
     if limits.light_vertices <= 1 || beta == Rgb::ZERO {
         return;
