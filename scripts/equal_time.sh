@@ -12,7 +12,7 @@ shift 4
 out=${OUT:-equal-time}
 bin=${PCBPT:-target/release/pcbpt}
 mkdir -p "$out"
-printf '| integrator | spp | samples/s | relMSE | mean ratio |\n|---|---|---|---|---|\n'
+printf '| integrator | spp | samples/s | relMSE | mean ratio | notes |\n|---|---|---|---|---|---|\n'
 for i in $integrators; do
     "$bin" render "$scene" --integrator "$i" --time "$secs" -o "$out/$i.exr" --stats "$out/$i.json" --quiet "$@"
     python3 - "$out/$i.json" "$ref" "$out/$i.exr" "$bin" "$i" <<'PY'
@@ -20,6 +20,10 @@ import json, subprocess, sys
 stats, ref, img, binary, name = sys.argv[1:]
 r = json.load(open(stats))["render"]
 m = json.loads(subprocess.run([binary, "compare", ref, img, "--json"], check=True, capture_output=True, text=True).stdout)
-print(f"| {name} | {r['spp']} | {r['samples_per_second'] / 1e6:.3f} M | {m['relmse']:.4f} | {m['mean_ratio']:.4f} |")
+notes = ""
+if r.get("mlt"):
+    t = r["mlt"]
+    notes = f"acceptance small {t['small_acceptance'] * 100:.1f}%, large {t['large_acceptance'] * 100:.1f}%; {t['mutations_per_second'] / 1e6:.3f} M mutations/s"
+print(f"| {name} | {r['spp']} | {r['samples_per_second'] / 1e6:.3f} M | {m['relmse']:.4f} | {m['mean_ratio']:.4f} | {notes} |")
 PY
 done

@@ -328,6 +328,21 @@ impl Film {
         }
     }
 
+    /// Adds another film's splats (the caller adds films in a fixed order).
+    pub fn add_film_splats(&mut self, other: &Film) {
+        if other.splats.is_empty() {
+            return;
+        }
+        if self.splats.is_empty() {
+            self.splats = vec![[0.0; 3]; self.width as usize * self.height as usize];
+        }
+        for (d, s) in self.splats.iter_mut().zip(&other.splats) {
+            for c in 0..3 {
+                d[c] += s[c];
+            }
+        }
+    }
+
     /// Pixels per light path: the factor that turns summed splats into pixel values.
     fn splat_scale(&self) -> f64 {
         if self.light_paths == 0 { 0.0 } else { (self.width as f64 * self.height as f64) / self.light_paths as f64 }

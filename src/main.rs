@@ -6,6 +6,7 @@ use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
 use pcbpt::integrator::bidir::mis::Heuristic;
+use pcbpt::integrator::mlt::{MltBase, MltOptions};
 use pcbpt::integrator::{self, BidirOptions, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::{Path, PathBuf};
@@ -85,6 +86,15 @@ struct RenderArgs {
     /// LVC: connections to pool vertices per camera vertex.
     #[arg(long, default_value_t = 1)]
     lvc_connections: u32,
+    /// PSSMLT: probability of a large step.
+    #[arg(long, default_value_t = 0.3)]
+    large_step_prob: f32,
+    /// PSSMLT: independent samples for the normalisation and the chains' start states.
+    #[arg(long, default_value_t = 100_000)]
+    bootstrap: usize,
+    /// PSSMLT: the estimator the Markov chains drive.
+    #[arg(long, value_enum, default_value_t = MltBase::Bdpt)]
+    mlt_path_integrator: MltBase,
     /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
     #[arg(long, value_name = "DIR")]
     strategy_images: Option<PathBuf>,
@@ -210,9 +220,11 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         lvc_light_paths: a.lvc_light_paths,
         lvc_connections: a.lvc_connections,
     };
+    opts.mlt =
+        MltOptions { large_step_prob: a.large_step_prob, bootstrap: a.bootstrap, base: a.mlt_path_integrator };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
-        if kind == IntegratorKind::Path {
+        if matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt) {
             return Err(Error::Usage("--strategy-images needs a bidirectional integrator".into()));
         }
         std::fs::create_dir_all(dir)
@@ -248,7 +260,18 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             output.display()
         );
     }
-    if !a.quiet && s.bidir.is_some() {
+    if let (false, Some(m)) = (a.quiet, &s.mlt) {
+        eprintln!(
+            "  PSSMLT: b = {:.5}, {} chains, {} mutations ({:.3} M/s), acceptance small {:.1}% large {:.1}%, bootstrap {:.2} s",
+            m.normalisation,
+            m.chains,
+            m.mutations,
+            m.mutations_per_second / 1e6,
+            m.small_acceptance * 100.0,
+            m.large_acceptance * 100.0,
+            m.bootstrap_seconds
+        );
+    } else if !a.quiet && s.bidir.is_some() {
         let c = &s.counters;
         eprintln!(
             "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette){}; time: light pool {:.2} s, camera pass {:.2} s, merge {:.2} s",

@@ -14,6 +14,7 @@
 //! pixel.
 
 pub mod bidir;
+pub mod mlt;
 pub mod path;
 
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
@@ -45,6 +46,8 @@ pub enum IntegratorKind {
     Eorr,
     /// Light-vertex-cache BDPT: a shared pool of light paths, uniform connections.
     Lvc,
+    /// Primary-sample-space Metropolis light transport over BDPT (or the path tracer).
+    Pssmlt,
 }
 
 impl IntegratorKind {
@@ -54,6 +57,7 @@ impl IntegratorKind {
             "path" => Some(IntegratorKind::Path),
             "ptracer" => Some(IntegratorKind::Lighttrace),
             "bdpt" => Some(IntegratorKind::Bdpt),
+            "pssmlt" => Some(IntegratorKind::Pssmlt),
             _ => None,
         }
     }
@@ -139,6 +143,7 @@ pub struct RenderOptions {
     /// Set from outside (a signal handler) to stop after the current pass.
     pub stop: Option<Arc<AtomicBool>>,
     pub bidir: BidirOptions,
+    pub mlt: mlt::MltOptions,
     /// Keep one image per strategy `(s,t)` (bidirectional integrators).
     pub strategy_images: bool,
 }
@@ -154,6 +159,7 @@ impl RenderOptions {
             progress: false,
             stop: None,
             bidir: BidirOptions::default(),
+            mlt: mlt::MltOptions::default(),
             strategy_images: false,
         }
     }
@@ -180,6 +186,9 @@ pub struct RenderStats {
     /// Light-pool size of the last iteration: light paths and connectible vertices.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pool: Option<(usize, usize)>,
+    /// Metropolis statistics (PSSMLT).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mlt: Option<mlt::MltStats>,
     /// Samples dropped because they were NaN or infinite.
     pub invalid_samples: u64,
     /// The render stopped early (interrupted).
@@ -230,6 +239,7 @@ impl Estimator {
             IntegratorKind::Path => Estimator::Path(path::PathTracer::new(spec)),
             IntegratorKind::Lighttrace => Estimator::Bdpt(bdpt(true)),
             IntegratorKind::Bdpt | IntegratorKind::Eorr => Estimator::Bdpt(bdpt(false)),
+            IntegratorKind::Pssmlt => unreachable!("PSSMLT has its own render loop"),
             IntegratorKind::Lvc => {
                 if opts.lvc_connections == 0 {
                     return Err(crate::error::Error::Usage("--lvc-connections must be at least 1".into()));
@@ -329,6 +339,9 @@ const PILOT_ITERATION: u64 = u64::MAX;
 
 /// Renders the scene's image.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate::error::Error> {
+    if opts.integrator == IntegratorKind::Pssmlt {
+        return mlt::render(scene, opts);
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
         .build()
@@ -490,6 +503,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         phases,
         bidir: bidirectional.then(|| opts.bidir.clone()),
         pool: pool_size,
+        mlt: None,
         invalid_samples: film.invalid_samples,
         interrupted,
     };

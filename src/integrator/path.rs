@@ -6,7 +6,7 @@ use super::Counters;
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::math::{Rgb, max_component};
-use crate::sampling::{Sampler, power_heuristic};
+use crate::sampling::{Random, power_heuristic};
 use crate::scene::{IntegratorSpec, Scene};
 
 #[derive(Clone, Debug)]
@@ -41,7 +41,7 @@ impl PathTracer {
     }
 
     /// Radiance arriving along a camera ray.
-    pub fn li(&self, scene: &Scene, mut ray: Ray, sampler: &mut Sampler, counters: &mut Counters) -> Rgb {
+    pub fn li<R: Random>(&self, scene: &Scene, mut ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
         let mut l = Rgb::ZERO;
         let mut beta = Rgb::ONE;
         let mut depth = 0u32;

@@ -30,6 +30,12 @@ pub fn hash_words(words: &[u64]) -> u64 {
 /// primary-sample-space state that Metropolis methods mutate.
 pub trait Random {
     fn next_1d(&mut self) -> f32;
+    /// Switches to numbered stream `k` from its start. Independent samplers ignore it;
+    /// primary-sample-space samplers keep each stream's coordinates apart, so that the
+    /// camera subpath, the light subpath and the connections each keep their coordinates
+    /// when another part of the path changes length.
+    #[inline]
+    fn start_stream(&mut self, _k: u32) {}
     #[inline]
     fn next_2d(&mut self) -> Vec2 {
         let x = self.next_1d();

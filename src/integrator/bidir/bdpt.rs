@@ -259,8 +259,10 @@ impl Bdpt {
         } else {
             camera_subpath(scene, pos, &self.limits, rng, &mut scratch.camera, counters);
         }
+        rng.start_stream(1);
         light_subpath(scene, &self.limits, rng, &mut scratch.light, counters);
         counters.light_paths += 1;
+        rng.start_stream(2);
         let (camera, light) = (&scratch.camera, &scratch.light);
         for t in 1..=camera.len() {
             for s in 0..=light.len() {
