@@ -95,6 +95,9 @@ struct RenderArgs {
     /// PSSMLT: the estimator the Markov chains drive.
     #[arg(long, value_enum, default_value_t = MltBase::Bdpt)]
     mlt_path_integrator: MltBase,
+    /// Memory limit of a light pool (lvc), in MiB.
+    #[arg(long, default_value_t = 4096)]
+    max_pool_mb: usize,
     /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
     #[arg(long, value_name = "DIR")]
     strategy_images: Option<PathBuf>,
@@ -219,9 +222,9 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         eorr_fraction: a.eorr_fraction,
         lvc_light_paths: a.lvc_light_paths,
         lvc_connections: a.lvc_connections,
+        max_pool_mb: a.max_pool_mb,
     };
-    opts.mlt =
-        MltOptions { large_step_prob: a.large_step_prob, bootstrap: a.bootstrap, base: a.mlt_path_integrator };
+    opts.mlt = MltOptions { large_step_prob: a.large_step_prob, bootstrap: a.bootstrap, base: a.mlt_path_integrator };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
         if matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt) {

@@ -305,3 +305,31 @@ fn bidirectional_integrators_refuse_lights_at_infinity_clearly() {
         assert!(!out.exists());
     }
 }
+
+#[test]
+fn light_pool_over_the_memory_limit_is_refused_before_rendering() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("lvc.exr");
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let o = pcbpt(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-D",
+        "resx=64",
+        "-D",
+        "resy=64",
+        "--integrator",
+        "lvc",
+        "--spp",
+        "2",
+        "--max-pool-mb",
+        "1",
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("--max-pool-mb") && err.contains("4096 paths"), "{err}");
+    assert!(!err.contains("panicked") && !out.exists());
+}

@@ -103,11 +103,19 @@ pub struct BidirOptions {
     pub lvc_light_paths: usize,
     /// LVC: connections per camera vertex.
     pub lvc_connections: u32,
+    /// Memory limit of a light pool, in MiB: settings whose pool would need more are refused.
+    pub max_pool_mb: usize,
 }
 
 impl Default for BidirOptions {
     fn default() -> BidirOptions {
-        BidirOptions { heuristic: Heuristic::Power, eorr_fraction: 0.1, lvc_light_paths: 0, lvc_connections: 1 }
+        BidirOptions {
+            heuristic: Heuristic::Power,
+            eorr_fraction: 0.1,
+            lvc_light_paths: 0,
+            lvc_connections: 1,
+            max_pool_mb: 4096,
+        }
     }
 }
 
@@ -334,6 +342,11 @@ fn render_tile(
     TileResult { block, splats, counters }
 }
 
+/// Bytes a light pool spends per vertex (the vertex and its path-start index).
+fn pool_vertex_bytes() -> usize {
+    std::mem::size_of::<bidir::Vertex>() + std::mem::size_of::<u32>() * 2
+}
+
 /// Key of the pilot pool that measures `V̄` before the first iteration.
 const PILOT_ITERATION: u64 = u64::MAX;
 
@@ -378,6 +391,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let mut passes = 0u32;
     let mut interrupted = false;
     let mut pool_size = None;
+    let mut pool_error = None;
     pool.install(|| {
         // LVC's strategy counts use V̄ of the previous iteration (a pilot pool before the first).
         let mut vbar = match &est {
@@ -390,6 +404,19 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                     PILOT_ITERATION,
                     None,
                 );
+                // The pool is checked against the memory limit before the first real one
+                // is traced: its size per path measured on the pilot, with a margin.
+                let per_path = p.vertices.len() as f64 / p.paths.max(1) as f64;
+                let bytes = 1.5 * lvc.light_paths as f64 * per_path.max(1.0) * pool_vertex_bytes() as f64;
+                let mb = bytes / (1024.0 * 1024.0);
+                if mb > opts.bidir.max_pool_mb as f64 {
+                    pool_error = Some(crate::error::Error::Usage(format!(
+                        "the light pool of {} paths ({:.1} vertices per path) needs about {:.0} MiB, over the limit of {} MiB \
+                         (--max-pool-mb); use fewer light paths (--lvc-light-paths) or raise the limit",
+                        lvc.light_paths, per_path, mb, opts.bidir.max_pool_mb
+                    )));
+                    return;
+                }
                 p.mean_vertices()
             }
             _ => 0.0,
@@ -485,6 +512,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     });
     if let Some(bar) = bar {
         bar.finish_and_clear();
+    }
+    if let Some(e) = pool_error {
+        return Err(e);
     }
     let seconds = start.elapsed().as_secs_f64();
     let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
