@@ -288,10 +288,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     if mo.base == MltBase::Bdpt {
         super::bidir::bdpt::check_lights(scene, "pssmlt").map_err(crate::error::Error::Usage)?;
     }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
-        .build()
-        .map_err(|e| crate::error::Error::Usage(format!("cannot start {} threads: {e}", opts.threads)))?;
+    let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let spec = &scene.integrator;
     let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
@@ -471,25 +468,11 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     stats.small_acceptance = ratio(stats.small_accepted, stats.small_proposed);
     stats.large_acceptance = ratio(stats.large_accepted, stats.large_proposed);
     stats.mutations_per_second = stats.mutations as f64 / (seconds - bootstrap_seconds).max(1e-9);
-    let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
+    let spp = (stats.mutations / pixels) as u32;
     let render_stats = RenderStats {
-        integrator: opts.integrator,
-        backend: scene.accel.backend().to_string(),
-        threads,
-        width: w,
-        height: h,
-        spp: (stats.mutations / pixels) as u32,
-        passes: 1,
-        seconds,
-        samples_per_second: counters.samples as f64 / seconds.max(1e-9),
-        rays_per_second: rays as f64 / seconds.max(1e-9),
-        counters,
-        phases: Default::default(),
         bidir: (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone()),
-        pool: None,
         mlt: Some(stats),
-        invalid_samples: film.invalid_samples,
-        interrupted,
+        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
     // The chains splatted with the bootstrap's b; the final b also counts the large steps.
     let rescale = if b > 0.0 { (stats.normalisation / b) as f32 } else { 0.0 };

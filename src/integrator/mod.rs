@@ -203,6 +203,50 @@ pub struct RenderStats {
     pub interrupted: bool,
 }
 
+impl RenderStats {
+    /// The statistics every render loop reports; the rest start empty.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        opts: &RenderOptions,
+        scene: &Scene,
+        threads: usize,
+        counters: Counters,
+        seconds: f64,
+        spp: u32,
+        invalid_samples: u64,
+        interrupted: bool,
+    ) -> RenderStats {
+        let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
+        RenderStats {
+            integrator: opts.integrator,
+            backend: scene.accel.backend().to_string(),
+            threads,
+            width: scene.film.width,
+            height: scene.film.height,
+            spp,
+            passes: 1,
+            seconds,
+            samples_per_second: counters.samples as f64 / seconds.max(1e-9),
+            rays_per_second: rays as f64 / seconds.max(1e-9),
+            counters,
+            phases: PhaseTimes::default(),
+            bidir: None,
+            pool: None,
+            mlt: None,
+            invalid_samples,
+            interrupted,
+        }
+    }
+}
+
+/// A worker pool of `threads` threads (0 = all cores).
+pub(crate) fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, crate::error::Error> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| crate::error::Error::Usage(format!("cannot start {threads} threads: {e}")))
+}
+
 /// A finished render.
 pub struct RenderOutput {
     pub image: Vec<Rgb>,
@@ -355,10 +399,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     if opts.integrator == IntegratorKind::Pssmlt {
         return mlt::render(scene, opts);
     }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
-        .build()
-        .map_err(|e| crate::error::Error::Usage(format!("cannot start {} threads: {e}", opts.threads)))?;
+    let pool = thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let (w, h) = (scene.film.width, scene.film.height);
     let est = Estimator::new(opts.integrator, scene, &opts.bidir)?;
@@ -517,25 +558,12 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         return Err(e);
     }
     let seconds = start.elapsed().as_secs_f64();
-    let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
     let stats = RenderStats {
-        integrator: opts.integrator,
-        backend: scene.accel.backend().to_string(),
-        threads,
-        width: w,
-        height: h,
-        spp: done,
         passes,
-        seconds,
-        samples_per_second: counters.samples as f64 / seconds.max(1e-9),
-        rays_per_second: rays as f64 / seconds.max(1e-9),
-        counters,
         phases,
         bidir: bidirectional.then(|| opts.bidir.clone()),
         pool: pool_size,
-        mlt: None,
-        invalid_samples: film.invalid_samples,
-        interrupted,
+        ..RenderStats::new(opts, scene, threads, counters, seconds, done, film.invalid_samples, interrupted)
     };
     let strategy_images =
         (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
