@@ -12,6 +12,7 @@ pub mod bsdf;
 pub mod camera;
 pub mod compare;
 pub mod error;
+pub mod experiment;
 pub mod film;
 pub mod image_io;
 pub mod integrator;

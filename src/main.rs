@@ -32,6 +32,20 @@ enum Command {
     Render(RenderArgs),
     /// Compare a test image with a reference: MSE, relMSE and the ratio of image means.
     Compare(CompareArgs),
+    /// Run an equal-time experiment described by a TOML file (scenes × methods).
+    Experiment(ExperimentArgs),
+}
+
+#[derive(Args)]
+struct ExperimentArgs {
+    /// The experiment file (TOML; see experiments/).
+    file: PathBuf,
+    /// Output folder (default: the file's `output`, or its name beside it).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -139,6 +153,12 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => render(a),
         Command::Compare(a) => compare_images(a),
+        Command::Experiment(a) => pcbpt::experiment::run(&a.file, a.output.as_deref(), a.quiet).map(|r| {
+            if !a.quiet {
+                eprintln!("{} runs done", r.len());
+            }
+            ExitCode::SUCCESS
+        }),
     };
     match result {
         Ok(code) => code,

@@ -15,7 +15,7 @@
 use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};
 use super::bidir::{Sink, WalkLimits};
-use super::{Budget, Counters, RenderOptions, RenderOutput, RenderStats};
+use super::{Budget, Counters, RenderOptions, RenderOutput, RenderStats, take_snapshots};
 use crate::film::{Film, Splat};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
@@ -348,6 +348,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         ..Default::default()
     };
     let mut large_sum = 0.0f64;
+    let mut snapshots = Vec::new();
     let mut interrupted = stopped();
     if b > 0.0 && !interrupted {
         let dist = Distribution1D::new(&weights);
@@ -397,6 +398,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             })
             .collect();
         let mut done = 0u64;
+        let large_boot = b * weights.len() as f64;
         pool.install(|| {
             while done < total {
                 let n = per_round.min((total - done).div_ceil(threads as u64));
@@ -437,6 +439,21 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                     }
                 });
                 done += n * threads as u64;
+                if !opts.checkpoints.is_empty() {
+                    let elapsed = start.elapsed().as_secs_f64();
+                    take_snapshots(&opts.checkpoints, &mut snapshots, elapsed, (done / pixels) as u32, || {
+                        let mut f = Film::new(w, h, scene.film.filter);
+                        let (mut sum, mut count) = (large_boot, weights.len() as f64);
+                        for ch in &chains {
+                            f.add_film_splats(&ch.film);
+                            sum += ch.large_sum;
+                            count += ch.stats.large_proposed as f64;
+                        }
+                        f.light_paths = done;
+                        let rescale = (sum / count / b) as f32;
+                        f.develop().into_iter().map(|p| p * rescale).collect()
+                    });
+                }
                 if stopped() {
                     interrupted = true;
                     break;
@@ -477,7 +494,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     // The chains splatted with the bootstrap's b; the final b also counts the large steps.
     let rescale = if b > 0.0 { (stats.normalisation / b) as f32 } else { 0.0 };
     let image = film.develop().into_iter().map(|p| p * rescale).collect();
-    Ok(RenderOutput { image, strategy_images: Vec::new(), width: w, height: h, stats: render_stats })
+    Ok(RenderOutput { image, strategy_images: Vec::new(), snapshots, width: w, height: h, stats: render_stats })
 }
 
 #[cfg(test)]

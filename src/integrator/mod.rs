@@ -154,6 +154,9 @@ pub struct RenderOptions {
     pub mlt: mlt::MltOptions,
     /// Keep one image per strategy `(s,t)` (bidirectional integrators).
     pub strategy_images: bool,
+    /// Wall-clock times (seconds, ascending) at which to keep a snapshot of the image: the
+    /// first pass that ends at or after each time is developed.
+    pub checkpoints: Vec<f64>,
 }
 
 impl RenderOptions {
@@ -169,6 +172,7 @@ impl RenderOptions {
             bidir: BidirOptions::default(),
             mlt: mlt::MltOptions::default(),
             strategy_images: false,
+            checkpoints: Vec::new(),
         }
     }
 }
@@ -247,11 +251,40 @@ pub(crate) fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, crate::er
         .map_err(|e| crate::error::Error::Usage(format!("cannot start {threads} threads: {e}")))
 }
 
+/// The image as it stood at a checkpoint.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    pub seconds: f64,
+    /// Samples (or mutations) per pixel done.
+    pub spp: u32,
+    pub image: Vec<Rgb>,
+}
+
+/// Takes the snapshots whose checkpoint time has come.
+pub(crate) fn take_snapshots(
+    checkpoints: &[f64],
+    snapshots: &mut Vec<Snapshot>,
+    seconds: f64,
+    spp: u32,
+    develop: impl FnOnce() -> Vec<Rgb>,
+) {
+    let due = checkpoints.iter().filter(|&&t| t <= seconds).count();
+    if due > snapshots.len() {
+        let image = develop();
+        // Checkpoints passed within one pass share its image.
+        while snapshots.len() < due {
+            snapshots.push(Snapshot { seconds, spp, image: image.clone() });
+        }
+    }
+}
+
 /// A finished render.
 pub struct RenderOutput {
     pub image: Vec<Rgb>,
     /// Per-strategy images `(name, pixels)` when asked for; they sum to `image`.
     pub strategy_images: Vec<(String, Vec<Rgb>)>,
+    /// Images at the requested checkpoints.
+    pub snapshots: Vec<Snapshot>,
     pub width: u32,
     pub height: u32,
     pub stats: RenderStats,
@@ -433,6 +466,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let mut interrupted = false;
     let mut pool_size = None;
     let mut pool_error = None;
+    let mut snapshots = Vec::new();
     pool.install(|| {
         // LVC's strategy counts use V̄ of the previous iteration (a pilot pool before the first).
         let mut vbar = match &est {
@@ -530,6 +564,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             phases.merge += t_merge.elapsed().as_secs_f64();
             done += count;
             passes += 1;
+            take_snapshots(&opts.checkpoints, &mut snapshots, start.elapsed().as_secs_f64(), done, || film.develop());
             if let Some(bar) = &bar {
                 match opts.budget {
                     Budget::Spp(_) => bar.set_position(done as u64),
@@ -567,7 +602,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     };
     let strategy_images =
         (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
-    Ok(RenderOutput { image: film.develop(), strategy_images, width: w, height: h, stats })
+    Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats })
 }
 
 fn progress_bar(opts: &RenderOptions, w: u32, h: u32) -> Option<indicatif::ProgressBar> {

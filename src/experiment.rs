@@ -1,0 +1,448 @@
+//! Equal-time experiments (`pcbpt experiment FILE.toml`): every method renders every scene
+//! for the same wall time (or sample count); the relMSE against a reference is recorded at
+//! checkpoints spread logarithmically over the run, so convergence curves come out of one
+//! run. Outputs, in one folder: the EXR of every run, `results.md` (the table),
+//! `convergence.csv`, one log–log plot per scene (`convergence_SCENE.svg`) and, where the
+//! scene names crops, a comparison figure (`figure_SCENE.png`).
+//!
+//! Paths in the file are relative to the file's own folder.
+
+use crate::accel::Backend;
+use crate::compare;
+use crate::error::{Error, Result};
+use crate::image_io::{self, Image};
+use crate::integrator::mlt::MltBase;
+use crate::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput};
+use crate::math::Rgb;
+use crate::scene::{LoadOptions, Scene};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// An experiment file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentFile {
+    pub name: Option<String>,
+    /// Output folder (default: the file's name without extension, beside it).
+    pub output: Option<PathBuf>,
+    /// Worker threads per run (0 = all cores).
+    #[serde(default)]
+    pub threads: usize,
+    /// Seconds per run.
+    pub time: Option<f64>,
+    /// Samples per pixel per run (instead of `time`).
+    pub spp: Option<u32>,
+    /// Checkpoints per run (time budgets only), spaced by factors of two up to the budget.
+    #[serde(default = "default_checkpoints")]
+    pub checkpoints: usize,
+    /// The method the speed-up column compares against (default: the first).
+    pub baseline: Option<String>,
+    #[serde(default)]
+    pub seed: u64,
+    pub scene: Vec<SceneEntry>,
+    pub method: Vec<MethodEntry>,
+}
+
+fn default_checkpoints() -> usize {
+    8
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneEntry {
+    pub name: String,
+    pub file: PathBuf,
+    /// `-D` parameter overrides.
+    #[serde(default)]
+    pub defines: BTreeMap<String, String>,
+    pub max_depth: Option<i32>,
+    /// A reference EXR, or:
+    pub reference: Option<PathBuf>,
+    /// a method (by name) to render the reference with, for `reference_time` seconds.
+    pub reference_method: Option<String>,
+    pub reference_time: Option<f64>,
+    /// Crops `[x, y, width, height]` for the comparison figure.
+    #[serde(default)]
+    pub crops: Vec<[u32; 4]>,
+}
+
+#[derive(Debug, Deserialize, Clone)]
+#[serde(deny_unknown_fields)]
+pub struct MethodEntry {
+    pub name: String,
+    pub integrator: String,
+    #[serde(default = "default_backend")]
+    pub backend: String,
+    pub heuristic: Option<String>,
+    pub eorr_fraction: Option<f32>,
+    pub lvc_light_paths: Option<usize>,
+    pub lvc_connections: Option<u32>,
+    pub large_step_prob: Option<f32>,
+    pub bootstrap: Option<usize>,
+    pub mlt_path_integrator: Option<String>,
+}
+
+fn default_backend() -> String {
+    "embree".into()
+}
+
+/// One run's results.
+#[derive(Clone, Debug)]
+pub struct RunResult {
+    pub scene: String,
+    pub method: String,
+    pub spp: u32,
+    pub seconds: f64,
+    pub samples_per_second: f64,
+    pub relmse: f64,
+    pub mean_ratio: f64,
+    /// `(seconds, spp, relMSE)` at each checkpoint, then at the end.
+    pub curve: Vec<(f64, u32, f64)>,
+}
+
+fn usage(file: &Path, msg: impl std::fmt::Display) -> Error {
+    Error::Usage(format!("{}: {msg}", file.display()))
+}
+
+fn value_enum<T: clap::ValueEnum>(file: &Path, what: &str, s: &str) -> Result<T> {
+    T::from_str(s, true).map_err(|_| {
+        let names: Vec<String> = T::value_variants()
+            .iter()
+            .filter_map(|v| v.to_possible_value())
+            .map(|p| p.get_name().to_string())
+            .collect();
+        usage(file, format!("unknown {what} \"{s}\" (one of: {})", names.join(", ")))
+    })
+}
+
+impl ExperimentFile {
+    pub fn load(path: &Path) -> Result<ExperimentFile> {
+        let text = std::fs::read_to_string(path).map_err(|e| usage(path, format!("cannot read: {e}")))?;
+        let f: ExperimentFile = toml::from_str(&text).map_err(|e| {
+            let line = e.span().map(|s| text[..s.start].matches('\n').count() + 1);
+            match line {
+                Some(l) => Error::Usage(format!("{}:{l}: {}", path.display(), e.message())),
+                None => usage(path, e.message()),
+            }
+        })?;
+        if f.time.is_some() == f.spp.is_some() {
+            return Err(usage(path, "give exactly one of `time` (seconds per run) and `spp`"));
+        }
+        if let Some(t) = f.time
+            && !(t > 0.0 && t.is_finite())
+        {
+            return Err(usage(path, format!("`time` must be a positive number of seconds, got {t}")));
+        }
+        if f.scene.is_empty() || f.method.is_empty() {
+            return Err(usage(path, "an experiment needs at least one [[scene]] and one [[method]]"));
+        }
+        for m in &f.method {
+            value_enum::<IntegratorKind>(path, "integrator", &m.integrator)?;
+            value_enum::<Backend>(path, "backend", &m.backend)?;
+        }
+        let named = |n: &str| f.method.iter().any(|m| m.name == n);
+        if let Some(b) = &f.baseline
+            && !named(b)
+        {
+            return Err(usage(path, format!("baseline \"{b}\" is not one of the methods")));
+        }
+        for s in &f.scene {
+            match (&s.reference, &s.reference_method, s.reference_time) {
+                (Some(_), None, None) => {}
+                (None, Some(m), Some(t)) if named(m) && t > 0.0 => {}
+                (None, Some(m), Some(_)) if !named(m) => {
+                    return Err(usage(path, format!("scene {}: reference method \"{m}\" is not a method", s.name)));
+                }
+                _ => {
+                    return Err(usage(
+                        path,
+                        format!(
+                            "scene {}: give `reference` (an EXR) or `reference_method` with `reference_time`",
+                            s.name
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(f)
+    }
+}
+
+fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usize) -> Result<RenderOptions> {
+    let mut o = RenderOptions::new(value_enum(file, "integrator", &m.integrator)?, budget);
+    o.seed = seed;
+    o.threads = threads;
+    if let Some(h) = &m.heuristic {
+        o.bidir.heuristic = value_enum(file, "heuristic", h)?;
+    }
+    if let Some(x) = m.eorr_fraction {
+        o.bidir.eorr_fraction = x;
+    }
+    if let Some(x) = m.lvc_light_paths {
+        o.bidir.lvc_light_paths = x;
+    }
+    if let Some(x) = m.lvc_connections {
+        o.bidir.lvc_connections = x;
+    }
+    if let Some(x) = m.large_step_prob {
+        o.mlt.large_step_prob = x;
+    }
+    if let Some(x) = m.bootstrap {
+        o.mlt.bootstrap = x;
+    }
+    if let Some(b) = &m.mlt_path_integrator {
+        o.mlt.base = value_enum::<MltBase>(file, "mlt_path_integrator", b)?;
+    }
+    Ok(o)
+}
+
+/// Runs an experiment file; returns the results and writes the outputs.
+pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunResult>> {
+    let f = ExperimentFile::load(path)?;
+    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let out = match output {
+        Some(o) => o.to_path_buf(),
+        None => match &f.output {
+            Some(o) => base.join(o),
+            None => base.join(path.file_stem().unwrap_or_default()),
+        },
+    };
+    std::fs::create_dir_all(&out).map_err(|e| Error::Output { path: out.clone(), msg: e.to_string() })?;
+    let budget = match (f.time, f.spp) {
+        (Some(t), _) => Budget::Time(t),
+        (_, Some(s)) => Budget::Spp(s),
+        _ => unreachable!("checked on load"),
+    };
+    let checkpoints: Vec<f64> = match f.time {
+        Some(t) => (0..f.checkpoints).rev().map(|k| t / 2f64.powi(k as i32)).filter(|&c| c < t).collect(),
+        None => Vec::new(),
+    };
+    let mut results = Vec::new();
+    for s in &f.scene {
+        let defines: Vec<(String, String)> = s.defines.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+        let load = |backend: Backend| -> Result<Scene> {
+            let mut scene = Scene::load(
+                &base.join(&s.file),
+                &LoadOptions { overrides: defines.clone(), backend, ..Default::default() },
+            )?;
+            if let Some(d) = s.max_depth {
+                scene.integrator.max_depth = d;
+            }
+            Ok(scene)
+        };
+        // The scene once per backend the methods use.
+        let mut scenes: BTreeMap<String, Scene> = BTreeMap::new();
+        for m in &f.method {
+            if !scenes.contains_key(&m.backend) {
+                let b = value_enum::<Backend>(path, "backend", &m.backend)?;
+                scenes.insert(m.backend.clone(), load(b)?);
+            }
+        }
+        let scene_for = |backend: &str| -> Result<&Scene> { Ok(&scenes[backend]) };
+        // The reference.
+        let reference = match (&s.reference, &s.reference_method, s.reference_time) {
+            (Some(r), _, _) => image_io::read_exr(&base.join(r))?,
+            (None, Some(m), Some(t)) => {
+                let me = f.method.iter().find(|x| &x.name == m).expect("checked on load");
+                let scene = scene_for(&me.backend)?;
+                let o = options(path, me, Budget::Time(t), f.seed ^ 0x0005_eed0_f7ef, f.threads)?;
+                if !quiet {
+                    eprintln!("{}: reference by {} for {t} s", s.name, me.name);
+                }
+                let r = integrator::render(scene, &o)?;
+                let img = Image::new(r.width, r.height, r.image);
+                image_io::write(&out.join(format!("{}_reference.exr", s.name)), &img)?;
+                img
+            }
+            _ => unreachable!("checked on load"),
+        };
+        let mut images: Vec<(String, Image)> = Vec::new();
+        for m in &f.method {
+            let scene = scene_for(&m.backend)?;
+            let mut o = options(path, m, budget, f.seed, f.threads)?;
+            o.checkpoints = checkpoints.clone();
+            let r: RenderOutput = integrator::render(scene, &o)?;
+            let img = Image::new(r.width, r.height, r.image.clone());
+            let metrics = compare::metrics(&reference, &img)?;
+            let mut curve = Vec::new();
+            for snap in &r.snapshots {
+                let m = compare::metrics(&reference, &Image::new(r.width, r.height, snap.image.clone()))?;
+                curve.push((snap.seconds, snap.spp, m.relmse));
+            }
+            curve.push((r.stats.seconds, r.stats.spp, metrics.relmse));
+            image_io::write(&out.join(format!("{}_{}.exr", s.name, m.name)), &img)?;
+            if !quiet {
+                eprintln!(
+                    "{} / {}: {} spp in {:.1} s, relMSE {:.5}, mean ratio {:.4}",
+                    s.name, m.name, r.stats.spp, r.stats.seconds, metrics.relmse, metrics.mean_ratio
+                );
+            }
+            results.push(RunResult {
+                scene: s.name.clone(),
+                method: m.name.clone(),
+                spp: r.stats.spp,
+                seconds: r.stats.seconds,
+                samples_per_second: r.stats.samples_per_second,
+                relmse: metrics.relmse,
+                mean_ratio: metrics.mean_ratio,
+                curve,
+            });
+            images.push((m.name.clone(), img));
+        }
+        if !s.crops.is_empty() {
+            figure(&out.join(format!("figure_{}.png", s.name)), &reference, &images, &s.crops)?;
+        }
+        plot(&out.join(format!("convergence_{}.svg", s.name)), &s.name, results.iter().filter(|r| r.scene == s.name))?;
+    }
+    let baseline = f.baseline.clone().unwrap_or_else(|| f.method[0].name.clone());
+    write_text(&out.join("results.md"), &table(f.name.as_deref().unwrap_or("experiment"), &results, &baseline))?;
+    write_text(&out.join("convergence.csv"), &csv(&results))?;
+    Ok(results)
+}
+
+/// The Markdown table: per scene and method, with the speed-up over the baseline at equal
+/// time (its relMSE over the method's) and the inefficiency `relMSE × seconds`.
+pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
+    let mut s = format!(
+        "# {name}\n\n| scene | method | spp | M samples/s | seconds | relMSE | mean ratio | speed-up over {baseline} | relMSE × s |\n|---|---|---|---|---|---|---|---|---|\n"
+    );
+    for r in results {
+        let base = results.iter().find(|b| b.scene == r.scene && b.method == baseline);
+        let speedup =
+            base.map(|b| format!("{:.2}×", b.relmse * b.seconds / (r.relmse * r.seconds))).unwrap_or_default();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.3} | {:.1} | {:.5} | {:.4} | {} | {:.4} |",
+            r.scene,
+            r.method,
+            r.spp,
+            r.samples_per_second / 1e6,
+            r.seconds,
+            r.relmse,
+            r.mean_ratio,
+            speedup,
+            r.relmse * r.seconds
+        );
+    }
+    s
+}
+
+fn csv(results: &[RunResult]) -> String {
+    let mut s = String::from("scene,method,seconds,spp,relmse\n");
+    for r in results {
+        for (t, spp, e) in &r.curve {
+            let _ = writeln!(s, "{},{},{t:.4},{spp},{e:.6e}", r.scene, r.method);
+        }
+    }
+    s
+}
+
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text)
+        .and_then(|_| std::fs::rename(&tmp, path))
+        .map_err(|e| Error::Output { path: path.to_path_buf(), msg: e.to_string() })
+}
+
+/// relMSE over time, log–log, one curve per method.
+fn plot<'a>(path: &Path, scene: &str, runs: impl Iterator<Item = &'a RunResult>) -> Result<()> {
+    use plotters::prelude::*;
+    let runs: Vec<&RunResult> = runs.collect();
+    let pts = || runs.iter().flat_map(|r| r.curve.iter()).filter(|(t, _, e)| *t > 0.0 && *e > 0.0);
+    let (t0, t1) = pts().fold((f64::MAX, f64::MIN), |(a, b), (t, _, _)| (a.min(*t), b.max(*t)));
+    let (e0, e1) = pts().fold((f64::MAX, f64::MIN), |(a, b), (_, _, e)| (a.min(*e), b.max(*e)));
+    if t0 >= t1 || e0 > e1 {
+        return Ok(());
+    }
+    let err = |e: String| Error::Output { path: path.to_path_buf(), msg: e };
+    let tmp = path.with_extension("tmp.svg");
+    {
+        let root = SVGBackend::new(&tmp, (720, 480)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("{scene}: relMSE over time"), ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d((t0 * 0.9..t1 * 1.1).log_scale(), (e0 * 0.8..e1 * 1.25).log_scale())
+            .map_err(|e| err(e.to_string()))?;
+        chart.configure_mesh().x_desc("seconds").y_desc("relMSE").draw().map_err(|e| err(e.to_string()))?;
+        for (i, r) in runs.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            chart
+                .draw_series(LineSeries::new(
+                    r.curve.iter().filter(|(t, _, e)| *t > 0.0 && *e > 0.0).map(|(t, _, e)| (*t, *e)),
+                    color.stroke_width(2),
+                ))
+                .map_err(|e| err(e.to_string()))?
+                .label(r.method.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(e.to_string()))?;
+        root.present().map_err(|e| err(e.to_string()))?;
+    }
+    std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))
+}
+
+/// The comparison figure: the first method's full image with the crops outlined, then one
+/// row per crop with the reference and every method side by side, enlarged.
+fn figure(path: &Path, reference: &Image, images: &[(String, Image)], crops: &[[u32; 4]]) -> Result<()> {
+    let (w, h) = (reference.width, reference.height);
+    for c in crops {
+        if c[2] == 0 || c[3] == 0 || c[0] + c[2] > w || c[1] + c[3] > h {
+            return Err(Error::Usage(format!("crop {c:?} is not inside the {w}×{h} image")));
+        }
+    }
+    let cols = images.len() as u32 + 1;
+    let cell = crops.iter().map(|c| c[2].max(c[3])).max().unwrap_or(1);
+    // Enlarged so that a row of crops is at least as wide as the image (and 480 pixels).
+    let zoom = (w.max(480) / cols / cell).max(1);
+    let fig_w = w.max(cols * cell * zoom + (cols - 1) * 4);
+    let row_h = crops.iter().map(|c| c[3] * zoom + 4).collect::<Vec<_>>();
+    let fig_h = h + 4 + row_h.iter().sum::<u32>();
+    let mut px = vec![Rgb::splat(1.0); (fig_w * fig_h) as usize];
+    let put = |px: &mut Vec<Rgb>, x: u32, y: u32, v: Rgb| {
+        if x < fig_w && y < fig_h {
+            px[(y * fig_w + x) as usize] = v;
+        }
+    };
+    let first = images.first().map(|(_, i)| i).unwrap_or(reference);
+    for y in 0..h {
+        for x in 0..w {
+            put(&mut px, x, y, first.pixels[(y * w + x) as usize]);
+        }
+    }
+    let red = Rgb::new(4.0, 0.0, 0.0);
+    for c in crops {
+        for x in c[0]..c[0] + c[2] {
+            put(&mut px, x, c[1], red);
+            put(&mut px, x, c[1] + c[3] - 1, red);
+        }
+        for y in c[1]..c[1] + c[3] {
+            put(&mut px, c[0], y, red);
+            put(&mut px, c[0] + c[2] - 1, y, red);
+        }
+    }
+    let mut y0 = h + 4;
+    for (c, rh) in crops.iter().zip(&row_h) {
+        let sources = std::iter::once(reference).chain(images.iter().map(|(_, i)| i));
+        for (k, img) in sources.enumerate() {
+            let x0 = k as u32 * (cell * zoom + 4);
+            for y in 0..c[3] * zoom {
+                for x in 0..c[2] * zoom {
+                    let v = img.pixels[((c[1] + y / zoom) * w + c[0] + x / zoom) as usize];
+                    put(&mut px, x0 + x, y0 + y, v);
+                }
+            }
+        }
+        y0 += rh;
+    }
+    image_io::write(path, &Image::new(fig_w, fig_h, px))
+}

@@ -1,0 +1,134 @@
+//! `pcbpt experiment` end to end on a tiny suite: outputs exist, the numbers are consistent.
+
+mod common;
+
+use common::root;
+use pcbpt::experiment;
+
+fn write(dir: &std::path::Path, name: &str, body: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let text = format!(
+        r#"name = "tiny"
+threads = 2
+baseline = "path"
+{body}
+
+[[method]]
+name = "path"
+integrator = "path"
+
+[[method]]
+name = "bdpt"
+integrator = "bdpt"
+heuristic = "balance"
+"#
+    )
+    .replace("SCENE", scene.to_str().unwrap());
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn tiny_experiment_writes_table_csv_plot_and_figure_with_consistent_numbers() {
+    let d = tempfile::tempdir().unwrap();
+    // Equal time, reference rendered by BDPT, convergence checkpoints.
+    let f = write(
+        d.path(),
+        "timed.toml",
+        r#"time = 1.2
+checkpoints = 5
+
+[[scene]]
+name = "cornell"
+file = "SCENE"
+defines = { resx = "40", resy = "40" }
+reference_method = "bdpt"
+reference_time = 3
+crops = [[8, 8, 10, 10], [25, 4, 8, 8]]"#,
+    );
+    let results = experiment::run(&f, None, true).unwrap();
+    let out = d.path().join("timed");
+    for name in [
+        "results.md",
+        "convergence.csv",
+        "convergence_cornell.svg",
+        "figure_cornell.png",
+        "cornell_reference.exr",
+        "cornell_path.exr",
+        "cornell_bdpt.exr",
+    ] {
+        assert!(out.join(name).exists(), "{name} missing");
+    }
+    assert_eq!(results.len(), 2);
+    for r in &results {
+        assert!(r.curve.len() >= 3, "{}: {:?}", r.method, r.curve);
+        // relMSE falls as the render converges: the first checkpoint is worse than the end.
+        assert!(r.curve[0].2 > r.curve.last().unwrap().2, "{}: {:?}", r.method, r.curve);
+        assert!(r.curve.windows(2).all(|w| w[0].0 <= w[1].0 && w[0].1 <= w[1].1));
+        assert!((r.mean_ratio - 1.0).abs() < 0.05, "{}: {}", r.method, r.mean_ratio);
+    }
+    let table = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(table.contains("| cornell | path |") && table.contains("1.00×"), "{table}");
+    let csv = std::fs::read_to_string(out.join("convergence.csv")).unwrap();
+    let rows = results.iter().map(|r| r.curve.len()).sum::<usize>();
+    assert_eq!(csv.lines().count(), rows + 1);
+
+    // A fixed sample count is deterministic: against its own earlier image as the
+    // reference, the same method scores a relMSE of exactly 0.
+    let first = write(
+        d.path(),
+        "fixed.toml",
+        r#"spp = 4
+
+[[scene]]
+name = "cornell"
+file = "SCENE"
+defines = { resx = "24", resy = "24" }
+reference_method = "path"
+reference_time = 0.5"#,
+    );
+    let a = experiment::run(&first, None, true).unwrap();
+    let image = d.path().join("fixed").join("cornell_bdpt.exr");
+    let again = write(
+        d.path(),
+        "again.toml",
+        &format!(
+            r#"spp = 4
+
+[[scene]]
+name = "cornell"
+file = "SCENE"
+defines = {{ resx = "24", resy = "24" }}
+reference = "{}""#,
+            image.display()
+        ),
+    );
+    let b = experiment::run(&again, None, true).unwrap();
+    assert_eq!(b[1].method, "bdpt");
+    assert_eq!(b[1].relmse, 0.0, "{:?}", b[1]);
+    assert!(b[0].relmse > 0.0);
+    assert_eq!(a[1].spp, 4);
+}
+
+#[test]
+fn experiment_file_errors_name_the_file_and_line() {
+    let d = tempfile::tempdir().unwrap();
+    let f = write(
+        d.path(),
+        "bad.toml",
+        "time = 1\nsppp = 3\n[[scene]]\nname = \"x\"\nfile = \"SCENE\"\nreference = \"r.exr\"",
+    );
+    let e = experiment::run(&f, None, true).unwrap_err().to_string();
+    assert!(e.contains("bad.toml:5") && e.contains("sppp"), "{e}");
+    let f = write(
+        d.path(),
+        "both.toml",
+        "time = 1\nspp = 3\n[[scene]]\nname = \"x\"\nfile = \"SCENE\"\nreference = \"r.exr\"",
+    );
+    let e = experiment::run(&f, None, true).unwrap_err().to_string();
+    assert!(e.contains("both.toml") && e.contains("exactly one"), "{e}");
+    let f = write(d.path(), "noref.toml", "time = 1\n[[scene]]\nname = \"x\"\nfile = \"SCENE\"");
+    let e = experiment::run(&f, None, true).unwrap_err().to_string();
+    assert!(e.contains("noref.toml") && e.contains("reference"), "{e}");
+}
