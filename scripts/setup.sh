@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Installs what pcbpt needs to build on Debian/Ubuntu: the system Embree (headers and
-# library), libclang for bindgen, pkg-config. Idempotent: installs only what is missing.
+# library), libclang for bindgen, pkg-config, g++ (the FLIP metric's C++ core). Idempotent: installs only what is missing.
 set -euo pipefail
 
-packages=(libembree-dev libclang-dev pkg-config)
+packages=(libembree-dev libclang-dev pkg-config g++)
 missing=()
 for p in "${packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

@@ -97,6 +97,8 @@ pub struct RunResult {
     pub seconds: f64,
     pub samples_per_second: f64,
     pub relmse: f64,
+    /// FLIP of the final image (LDR, see [`compare::flip`]).
+    pub flip: f64,
     pub mean_ratio: f64,
     /// `(seconds, spp, relMSE)` at each checkpoint, then at the end.
     pub curve: Vec<(f64, u32, f64)>,
@@ -286,6 +288,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                 seconds: r.stats.seconds,
                 samples_per_second: r.stats.samples_per_second,
                 relmse: metrics.relmse,
+                flip: compare::flip(&reference, &img, None)?,
                 mean_ratio: metrics.mean_ratio,
                 curve,
             });
@@ -306,7 +309,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
 /// time (its relMSE over the method's) and the inefficiency `relMSE × seconds`.
 pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
     let mut s = format!(
-        "# {name}\n\n| scene | method | spp | M samples/s | seconds | relMSE | mean ratio | speed-up over {baseline} | relMSE × s |\n|---|---|---|---|---|---|---|---|---|\n"
+        "# {name}\n\n| scene | method | spp | M samples/s | seconds | relMSE | FLIP | mean ratio | speed-up over {baseline} | relMSE × s |\n|---|---|---|---|---|---|---|---|---|---|\n"
     );
     for r in results {
         let base = results.iter().find(|b| b.scene == r.scene && b.method == baseline);
@@ -314,13 +317,14 @@ pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
             base.map(|b| format!("{:.2}×", b.relmse * b.seconds / (r.relmse * r.seconds))).unwrap_or_default();
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.3} | {:.1} | {:.5} | {:.4} | {} | {:.4} |",
+            "| {} | {} | {} | {:.3} | {:.1} | {:.5} | {:.4} | {:.4} | {} | {:.4} |",
             r.scene,
             r.method,
             r.spp,
             r.samples_per_second / 1e6,
             r.seconds,
             r.relmse,
+            r.flip,
             r.mean_ratio,
             speedup,
             r.relmse * r.seconds

@@ -138,6 +138,23 @@ struct CompareArgs {
     /// Print the metrics as JSON.
     #[arg(long)]
     json: bool,
+    /// Print only this metric's value (`flip` is computed only when asked for).
+    #[arg(long, value_enum)]
+    metric: Option<compare::Metric>,
+    /// Compare only this part of the images: x,y,width,height.
+    #[arg(long, value_parser = parse_crop)]
+    crop: Option<[u32; 4]>,
+    /// Compare only the pixels that are white (brighter than 0.5) in this image.
+    #[arg(long)]
+    mask: Option<PathBuf>,
+}
+
+fn parse_crop(s: &str) -> std::result::Result<[u32; 4], String> {
+    let v: Vec<u32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<u32>().map_err(|_| format!("\"{s}\" is not x,y,width,height")))
+        .collect::<std::result::Result<_, _>>()?;
+    v.try_into().map_err(|_| format!("\"{s}\" is not x,y,width,height"))
 }
 
 fn parse_define(s: &str) -> std::result::Result<(String, String), String> {
@@ -319,10 +336,38 @@ fn write_text(path: &Path, text: &str) -> Result<()> {
 }
 
 fn compare_images(a: CompareArgs) -> Result<ExitCode> {
-    let r = image_io::read(&a.reference)?;
-    let t = image_io::read(&a.test)?;
-    let m = compare::metrics(&r, &t)?;
-    if a.json {
+    let mut r = image_io::read(&a.reference)?;
+    let mut t = image_io::read(&a.test)?;
+    compare::check_same_size(&r, &t)?;
+    let mut keep = match &a.mask {
+        Some(p) => {
+            let m = image_io::read(p)?;
+            compare::check_same_size(&r, &m).map_err(|e| Error::Usage(format!("{}: {e}", p.display())))?;
+            Some(compare::mask(&m))
+        }
+        None => None,
+    };
+    if let Some(c) = a.crop {
+        if let Some(k) = &keep {
+            let img = Image::new(r.width, r.height, k.iter().map(|&x| glam::Vec3::splat(x as u8 as f32)).collect());
+            keep = Some(compare::mask(&compare::crop(&img, c)?));
+        }
+        r = compare::crop(&r, c)?;
+        t = compare::crop(&t, c)?;
+    }
+    let m = compare::metrics_masked(&r, &t, keep.as_deref())?;
+    if let Some(metric) = a.metric {
+        let v = match metric {
+            compare::Metric::Relmse => m.relmse,
+            compare::Metric::Mse => m.mse,
+            compare::Metric::Flip => compare::flip(&r, &t, keep.as_deref())?,
+        };
+        if a.json {
+            println!("{}", serde_json::json!({ "metric": metric, "value": v }));
+        } else {
+            println!("{v:.6e}");
+        }
+    } else if a.json {
         println!("{}", serde_json::to_string_pretty(&m).unwrap_or_default());
     } else {
         println!("MSE        {:.6e}", m.mse);

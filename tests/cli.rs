@@ -333,3 +333,32 @@ fn light_pool_over_the_memory_limit_is_refused_before_rendering() {
     assert!(err.contains("--max-pool-mb") && err.contains("4096 paths"), "{err}");
     assert!(!err.contains("panicked") && !out.exists());
 }
+
+#[test]
+fn compare_reports_one_metric_over_a_crop_or_a_mask() {
+    let d = tempfile::tempdir().unwrap();
+    let (r, t, m) = (d.path().join("r.exr"), d.path().join("t.exr"), d.path().join("mask.png"));
+    let px = |v: f32| vec![glam::Vec3::splat(0.5); 8].into_iter().chain(vec![glam::Vec3::splat(v); 8]).collect();
+    use pcbpt::image_io::{Image, write};
+    // Top half equal, bottom half differs; the mask keeps the top half only.
+    write(&r, &Image::new(4, 4, px(0.5))).unwrap();
+    write(&t, &Image::new(4, 4, px(0.8))).unwrap();
+    write(&m, &Image::new(4, 4, vec![glam::Vec3::ONE; 8].into_iter().chain(vec![glam::Vec3::ZERO; 8]).collect()))
+        .unwrap();
+    let value = |extra: &[&str]| {
+        let mut args = vec!["compare", r.to_str().unwrap(), t.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let o = pcbpt(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).trim().parse::<f64>().unwrap()
+    };
+    assert!(value(&["--metric", "relmse"]) > 0.0);
+    assert_eq!(value(&["--metric", "relmse", "--crop", "0,0,4,2"]), 0.0);
+    assert_eq!(value(&["--metric", "mse", "--mask", m.to_str().unwrap()]), 0.0);
+    assert!(value(&["--metric", "mse", "--crop", "0,2,4,2"]) > 0.08);
+    let flip = value(&["--metric", "flip"]);
+    assert!(flip > 0.0 && flip < 1.0);
+    let o = pcbpt(&["compare", r.to_str().unwrap(), t.to_str().unwrap(), "--crop", "2,2,4,4"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not inside"));
+}
