@@ -66,7 +66,12 @@ pub struct SceneEntry {
     /// Crops `[x, y, width, height]` for the comparison figure.
     #[serde(default)]
     pub crops: Vec<[u32; 4]>,
+    /// The same scene in LuxCore's format, for the LuxCore peer methods.
+    pub luxcore_scene: Option<PathBuf>,
 }
+
+/// Peer renderers an experiment can run as methods (through `scripts/peer_render.py`).
+const PEERS: [&str; 3] = ["mitsuba", "luxcore-path", "luxcore-bidir"];
 
 #[derive(Debug, Deserialize, Clone)]
 #[serde(deny_unknown_fields)]
@@ -141,6 +146,14 @@ impl ExperimentFile {
             return Err(usage(path, "an experiment needs at least one [[scene]] and one [[method]]"));
         }
         for m in &f.method {
+            if PEERS.contains(&m.integrator.as_str()) {
+                if m.integrator.starts_with("luxcore")
+                    && let Some(s) = f.scene.iter().find(|s| s.luxcore_scene.is_none())
+                {
+                    return Err(usage(path, format!("method {} needs `luxcore_scene` in scene {}", m.name, s.name)));
+                }
+                continue;
+            }
             value_enum::<IntegratorKind>(path, "integrator", &m.integrator)?;
             value_enum::<Backend>(path, "backend", &m.backend)?;
         }
@@ -236,7 +249,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
         };
         // The scene once per backend the methods use.
         let mut scenes: BTreeMap<String, Scene> = BTreeMap::new();
-        for m in &f.method {
+        for m in f.method.iter().filter(|m| !PEERS.contains(&m.integrator.as_str())) {
             if !scenes.contains_key(&m.backend) {
                 let b = value_enum::<Backend>(path, "backend", &m.backend)?;
                 scenes.insert(m.backend.clone(), load(b)?);
@@ -262,6 +275,35 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
         };
         let mut images: Vec<(String, Image)> = Vec::new();
         for m in &f.method {
+            if PEERS.contains(&m.integrator.as_str()) {
+                let Some(t) = f.time else {
+                    return Err(usage(path, format!("peer method {} needs a `time` budget", m.name)));
+                };
+                let exr = out.join(format!("{}_{}.exr", s.name, m.name));
+                let Some(peer) = run_peer(&base, s, m, t, &f, &exr, (reference.width, reference.height), quiet)? else {
+                    continue;
+                };
+                let metrics = compare::metrics(&reference, &peer.image)?;
+                if !quiet {
+                    eprintln!(
+                        "{} / {}: {} spp in {:.1} s, relMSE {:.5}",
+                        s.name, m.name, peer.spp, peer.seconds, metrics.relmse
+                    );
+                }
+                results.push(RunResult {
+                    scene: s.name.clone(),
+                    method: m.name.clone(),
+                    spp: peer.spp,
+                    seconds: peer.seconds,
+                    samples_per_second: peer.samples_per_second,
+                    relmse: metrics.relmse,
+                    flip: compare::flip(&reference, &peer.image, None)?,
+                    mean_ratio: metrics.mean_ratio,
+                    curve: vec![(peer.seconds, peer.spp, metrics.relmse)],
+                });
+                images.push((m.name.clone(), peer.image));
+                continue;
+            }
             let scene = scene_for(&m.backend)?;
             let mut o = options(path, m, budget, f.seed, f.threads)?;
             o.checkpoints = checkpoints.clone();
@@ -303,6 +345,127 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
     write_text(&out.join("results.md"), &table(f.name.as_deref().unwrap_or("experiment"), &results, &baseline))?;
     write_text(&out.join("convergence.csv"), &csv(&results))?;
     Ok(results)
+}
+
+struct PeerRun {
+    image: Image,
+    spp: u32,
+    seconds: f64,
+    samples_per_second: f64,
+}
+
+/// Runs a peer renderer through `scripts/peer_render.py` (or `$PCBPT_PEER_SCRIPT`) for `time`
+/// seconds; `None` (with a message) when the peer is not installed.
+#[allow(clippy::too_many_arguments)]
+fn run_peer(
+    base: &Path,
+    s: &SceneEntry,
+    m: &MethodEntry,
+    time: f64,
+    f: &ExperimentFile,
+    exr: &Path,
+    size: (u32, u32),
+    quiet: bool,
+) -> Result<Option<PeerRun>> {
+    let script = std::env::var_os("PCBPT_PEER_SCRIPT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/peer_render.py"));
+    let pfm = exr.with_extension("pfm");
+    let scene = match m.integrator.as_str() {
+        "mitsuba" => base.join(&s.file),
+        _ => base.join(s.luxcore_scene.as_ref().expect("checked on load")),
+    };
+    let mut cmd = std::process::Command::new("python3");
+    cmd.arg(&script)
+        .args(["--renderer", &m.integrator, "--time", &time.to_string(), "--threads", &f.threads.to_string()])
+        .args(["--width", &size.0.to_string(), "--height", &size.1.to_string(), "--seed", &f.seed.to_string()])
+        .arg("--scene")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&pfm);
+    for (k, v) in &s.defines {
+        cmd.arg("--define").arg(format!("{k}={v}"));
+    }
+    if let Some(d) = s.max_depth {
+        cmd.arg("--max-depth").arg(d.to_string());
+    }
+    let out = cmd.output().map_err(|e| Error::Usage(format!("cannot run python3 {}: {e}", script.display())))?;
+    if out.status.code() == Some(3) {
+        if !quiet {
+            eprintln!("{} / {}: skipped: {}", s.name, m.name, String::from_utf8_lossy(&out.stderr).trim());
+        }
+        return Ok(None);
+    }
+    if !out.status.success() {
+        return Err(Error::Usage(format!(
+            "peer {} failed on {}: {}",
+            m.integrator,
+            scene.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        )));
+    }
+    // The statistics are the last line (a peer may print its own messages before).
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stats: serde_json::Value = serde_json::from_str(stdout.trim().lines().last().unwrap_or(""))
+        .map_err(|e| Error::Usage(format!("peer {}: unreadable statistics: {e}", m.integrator)))?;
+    let image = read_pfm(&pfm)?;
+    let _ = std::fs::remove_file(&pfm);
+    if (image.width, image.height) != size {
+        return Err(Error::Usage(format!(
+            "peer {} rendered {}×{}, the reference is {}×{}",
+            m.integrator, image.width, image.height, size.0, size.1
+        )));
+    }
+    image_io::write(exr, &image)?;
+    Ok(Some(PeerRun {
+        image,
+        spp: stats["spp"].as_f64().unwrap_or(0.0) as u32,
+        seconds: stats["seconds"].as_f64().unwrap_or(time),
+        samples_per_second: stats["samples_per_second"].as_f64().unwrap_or(0.0),
+    }))
+}
+
+/// Reads a little-endian float RGB PFM (rows bottom first).
+fn read_pfm(path: &Path) -> Result<Image> {
+    let bad = |msg: &str| Error::Usage(format!("{}: {msg}", path.display()));
+    let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
+    let mut fields = Vec::new();
+    let mut pos = 0;
+    while fields.len() < 4 {
+        while pos < data.len() && data[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        let start = pos;
+        while pos < data.len() && !data[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        if start == pos {
+            return Err(bad("truncated PFM header"));
+        }
+        fields.push(String::from_utf8_lossy(&data[start..pos]).into_owned());
+    }
+    pos += 1;
+    let (w, h): (u32, u32) = match (fields[1].parse(), fields[2].parse()) {
+        (Ok(w), Ok(h)) if fields[0] == "PF" => (w, h),
+        _ => return Err(bad("not an RGB PFM")),
+    };
+    if !fields[3].starts_with('-') {
+        return Err(bad("big-endian PFM is not supported"));
+    }
+    let n = w as usize * h as usize;
+    if data.len() < pos + n * 12 {
+        return Err(bad("truncated PFM data"));
+    }
+    let f = |i: usize| f32::from_le_bytes(data[pos + 4 * i..pos + 4 * i + 4].try_into().expect("4 bytes"));
+    let mut pixels = vec![Rgb::ZERO; n];
+    for y in 0..h as usize {
+        let src = (h as usize - 1 - y) * w as usize;
+        for x in 0..w as usize {
+            let k = (src + x) * 3;
+            pixels[y * w as usize + x] = Rgb::new(f(k), f(k + 1), f(k + 2));
+        }
+    }
+    Ok(Image::new(w, h, pixels))
 }
 
 /// The Markdown table: per scene and method, with the speed-up over the baseline at equal
