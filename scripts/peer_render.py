@@ -76,8 +76,9 @@ def luxcore(a, engine):
         sys.exit(3)
 
     pyluxcore.Init(lambda msg: None)
+    scene = os.path.abspath(a.scene)
     cwd = os.getcwd()
-    os.chdir(os.path.dirname(os.path.abspath(a.scene)))
+    os.chdir(os.path.dirname(scene))
     try:
         props = pyluxcore.Properties()
         depth = a.max_depth if a.max_depth and a.max_depth > 0 else 1024
@@ -95,7 +96,7 @@ light.maxdepth = {depth}
 eye.maxdepth = {depth}
 batch.halttime = {a.time}
 """)
-        props.Set(pyluxcore.Property("scene.file", os.path.abspath(a.scene)))
+        props.Set(pyluxcore.Property("scene.file", scene))
         session = pyluxcore.RenderSession(pyluxcore.RenderConfig(props))
         t0 = time.perf_counter()
         session.Start()
