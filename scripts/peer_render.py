@@ -8,7 +8,7 @@
 Mitsuba 3 (`pip install mitsuba`): the `path` integrator of the XML scene (variant
 scalar_rgb), rendered in chunks of spp with different seeds until the time is spent; the
 chunks are averaged. The image is written as PFM (float RGB). LuxCore (`pip install pyluxcore`): a LuxCore scene (.scn) rendered with
-PATHCPU or BIDIRCPU for the wall time. Prints one JSON line: spp, seconds, samples per second.
+PATHCPU or BIDIRCPU, with the RANDOM or the METROPOLIS sampler, for the wall time. Prints one JSON line: spp, seconds, samples per second.
 Exit status 3 when the renderer is not installed.
 """
 import argparse
@@ -66,7 +66,7 @@ def mitsuba(a):
     return spp, elapsed, spp * w * h / elapsed
 
 
-def luxcore(a, engine):
+def luxcore(a, engine, sampler):
     import numpy as np  # before pyluxcore: the other order crashes in its TBB start-up
 
     try:
@@ -84,7 +84,7 @@ def luxcore(a, engine):
         depth = a.max_depth if a.max_depth and a.max_depth > 0 else 1024
         props.SetFromString(f"""
 renderengine.type = "{engine}"
-sampler.type = "RANDOM"
+sampler.type = "{sampler}"
 native.threads.count = {a.threads}
 film.width = {a.width}
 film.height = {a.height}
@@ -119,7 +119,8 @@ batch.halttime = {a.time}
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--renderer", required=True, choices=["mitsuba", "luxcore-path", "luxcore-bidir"])
+    ap.add_argument("--renderer", required=True, choices=["mitsuba", "luxcore-path", "luxcore-bidir",
+                                                          "luxcore-path-metropolis", "luxcore-bidir-metropolis"])
     ap.add_argument("--scene", required=True)
     ap.add_argument("--time", type=float, required=True)
     ap.add_argument("--threads", type=int, default=0)
@@ -133,7 +134,9 @@ def main():
     if a.renderer == "mitsuba":
         spp, secs, rate = mitsuba(a)
     else:
-        spp, secs, rate = luxcore(a, "PATHCPU" if a.renderer == "luxcore-path" else "BIDIRCPU")
+        engine = "PATHCPU" if a.renderer.startswith("luxcore-path") else "BIDIRCPU"
+        sampler = "METROPOLIS" if a.renderer.endswith("metropolis") else "RANDOM"
+        spp, secs, rate = luxcore(a, engine, sampler)
     print(json.dumps({"spp": spp, "seconds": secs, "samples_per_second": rate}), flush=True)
     # pyluxcore's log callback crashes the interpreter's shutdown; everything is written.
     os._exit(0)

@@ -71,7 +71,8 @@ pub struct SceneEntry {
 }
 
 /// Peer renderers an experiment can run as methods (through `scripts/peer_render.py`).
-const PEERS: [&str; 3] = ["mitsuba", "luxcore-path", "luxcore-bidir"];
+const PEERS: [&str; 5] =
+    ["mitsuba", "luxcore-path", "luxcore-bidir", "luxcore-path-metropolis", "luxcore-bidir-metropolis"];
 
 #[derive(Debug, Deserialize, Clone)]
 #[serde(deny_unknown_fields)]
