@@ -15,13 +15,12 @@ median rate counts.
     python3 scripts/bench_vs_luxcore.py --seconds 20 --threads 2
 """
 import argparse
-import json
 import os
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
+
+from pcbpt_stats import render_stats
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "scenes", "cornell-ply", "cornell_mi.xml")
@@ -75,13 +74,8 @@ batch.halttime = 0
 
 
 def pcbpt_rate(binary, seconds, threads, depth, integrator):
-    with tempfile.TemporaryDirectory() as d:
-        stats = os.path.join(d, "stats.json")
-        subprocess.run([binary, "render", SCENE, "--integrator", integrator, "--time", str(seconds), "--threads",
-                        str(threads), "--max-depth", str(depth), "-o", os.path.join(d, "out.exr"), "--stats", stats,
-                        "--quiet"], check=True)
-        with open(stats) as f:
-            return json.load(f)["render"]["samples_per_second"]
+    return render_stats(binary, SCENE, "--integrator", integrator, "--time", seconds, "--threads", threads,
+                        "--max-depth", depth)["samples_per_second"]
 
 
 def main():

@@ -12,12 +12,11 @@ excluded for both. Each renderer runs `--repeats` times, alternating; the best t
     python3 scripts/bench_vs_mitsuba.py --spp 64 --threads 2
 """
 import argparse
-import json
 import os
-import subprocess
 import sys
-import tempfile
 import time
+
+from pcbpt_stats import render_stats
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "scenes", "cornell-ply", "cornell_mi.xml")
@@ -39,12 +38,8 @@ def mitsuba_seconds(spp, threads, variant):
 
 
 def pcbpt_seconds(binary, spp, threads, rr_depth):
-    with tempfile.TemporaryDirectory() as d:
-        stats = os.path.join(d, "stats.json")
-        subprocess.run([binary, "render", SCENE, "--integrator", "path", "--spp", str(spp), "--threads", str(threads),
-                        "-o", os.path.join(d, "out.exr"), "--stats", stats, "--quiet", "--rr-depth", str(rr_depth)], check=True)
-        with open(stats) as f:
-            return json.load(f)["render"]["seconds"]
+    return render_stats(binary, SCENE, "--integrator", "path", "--spp", spp, "--threads", threads,
+                        "--rr-depth", rr_depth)["seconds"]
 
 
 def main():
