@@ -279,7 +279,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     }
     image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
     if let Some(path) = &a.stats {
-        let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "render": s });
+        let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "degenerate_triangles": scene.stats.degenerate_triangles, "render": s });
         write_text(path, &serde_json::to_string_pretty(&json).unwrap_or_default())?;
     }
     if !a.quiet || s.interrupted {

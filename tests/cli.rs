@@ -362,3 +362,33 @@ fn compare_reports_one_metric_over_a_crop_or_a_mask() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("not inside"));
 }
+
+#[test]
+fn degenerate_triangles_are_counted_with_a_warning_and_the_render_goes_on() {
+    let d = tempfile::tempdir().unwrap();
+    // Two triangles: one proper, one with all three corners on a line.
+    std::fs::write(d.path().join("tri.obj"), "v 0 0 3\nv 1 0 3\nv 0 1 3\nv 2 0 3\nf 1 2 3\nf 1 2 4\n").unwrap();
+    let s = scene(
+        d.path(),
+        "degenerate.xml",
+        &format!("{LIGHT}\n    <shape type=\"obj\"><string name=\"filename\" value=\"tri.obj\"/></shape>"),
+    );
+    let out = d.path().join("degenerate.exr");
+    let stats = d.path().join("stats.json");
+    let o = pcbpt(&[
+        "render",
+        s.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--spp",
+        "1",
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("warning:") && err.contains("1 degenerate (zero-area) triangles"), "{err}");
+    assert!(out.exists());
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["degenerate_triangles"], 1);
+}
