@@ -130,14 +130,17 @@ impl Camera {
         }
     }
 
+    /// `We = 1 / (A cos⁴θ)` for a direction at angle θ to the viewing axis.
+    #[inline]
+    fn we(&self, cos: f32) -> f32 {
+        1.0 / (self.image_plane_area() * cos * cos * cos * cos)
+    }
+
     /// Importance `We = 1 / (A cos⁴θ)` of a direction (unit) leaving the camera, normalised
-    /// so that it integrates to one over the image.
+    /// so that `∫ We cos θ dω = 1` over the image.
     #[inline]
     pub fn importance(&self, d: Vec3) -> f32 {
-        match self.raster_of(d) {
-            Some((_, cos)) => 1.0 / (self.image_plane_area() * cos * cos * cos * cos),
-            None => 0.0,
-        }
+        self.raster_of(d).map_or(0.0, |(_, cos)| self.we(cos))
     }
 
     /// Connects a world point to the pinhole: `None` when the point is behind the camera,
@@ -156,8 +159,7 @@ impl Camera {
         if depth < self.near_clip || depth > self.far_clip {
             return None;
         }
-        let we = 1.0 / (self.image_plane_area() * cos * cos * cos * cos);
-        Some(CameraConnection { raster, wi: -dir, dist2, we_cos: we * cos })
+        Some(CameraConnection { raster, wi: -dir, dist2, we_cos: self.we(cos) * cos })
     }
 
     /// The primary ray through a film position in pixel units (`(0,0)` is the top-left

@@ -256,13 +256,12 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                 scenes.insert(m.backend.clone(), load(b)?);
             }
         }
-        let scene_for = |backend: &str| -> Result<&Scene> { Ok(&scenes[backend]) };
         // The reference.
         let reference = match (&s.reference, &s.reference_method, s.reference_time) {
             (Some(r), _, _) => image_io::read_exr(&base.join(r))?,
             (None, Some(m), Some(t)) => {
                 let me = f.method.iter().find(|x| &x.name == m).expect("checked on load");
-                let scene = scene_for(&me.backend)?;
+                let scene = &scenes[&me.backend];
                 let o = options(path, me, Budget::Time(t), f.seed ^ 0x0005_eed0_f7ef, f.threads)?;
                 if !quiet {
                     eprintln!("{}: reference by {} for {t} s", s.name, me.name);
@@ -305,7 +304,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                 images.push((m.name.clone(), peer.image));
                 continue;
             }
-            let scene = scene_for(&m.backend)?;
+            let scene = &scenes[&m.backend];
             let mut o = options(path, m, budget, f.seed, f.threads)?;
             o.checkpoints = checkpoints.clone();
             let r: RenderOutput = integrator::render(scene, &o)?;
@@ -343,8 +342,11 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
         plot(&out.join(format!("convergence_{}.svg", s.name)), &s.name, results.iter().filter(|r| r.scene == s.name))?;
     }
     let baseline = f.baseline.clone().unwrap_or_else(|| f.method[0].name.clone());
-    write_text(&out.join("results.md"), &table(f.name.as_deref().unwrap_or("experiment"), &results, &baseline))?;
-    write_text(&out.join("convergence.csv"), &csv(&results))?;
+    image_io::write_text(
+        &out.join("results.md"),
+        &table(f.name.as_deref().unwrap_or("experiment"), &results, &baseline),
+    )?;
+    image_io::write_text(&out.join("convergence.csv"), &csv(&results))?;
     Ok(results)
 }
 
@@ -505,13 +507,6 @@ fn csv(results: &[RunResult]) -> String {
         }
     }
     s
-}
-
-fn write_text(path: &Path, text: &str) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text)
-        .and_then(|_| std::fs::rename(&tmp, path))
-        .map_err(|e| Error::Output { path: path.to_path_buf(), msg: e.to_string() })
 }
 
 /// relMSE over time, log–log, one curve per method.

@@ -112,6 +112,14 @@ pub struct Splat {
     pub layer: u16,
 }
 
+impl Splat {
+    /// A splat of strategy `(s,t)`, in its layer when per-strategy layers are kept.
+    #[inline]
+    pub fn of_strategy(s: usize, t: usize, pos: Vec2, value: Rgb, layers: bool) -> Splat {
+        Splat { pos, value, layer: if layers { strategy_layer(s, t) as u16 } else { 0 } }
+    }
+}
+
 /// Longest path (in segments) with an image of its own among the per-strategy images;
 /// longer paths share one.
 pub const STRATEGY_MAX_DEPTH: usize = 8;
@@ -348,16 +356,14 @@ impl Film {
         if self.light_paths == 0 { 0.0 } else { (self.width as f64 * self.height as f64) / self.light_paths as f64 }
     }
 
-    fn develop_with(&self, camera: &[[f64; 3]], splats: &[[f64; 3]]) -> Vec<Rgb> {
+    fn develop_with(&self, camera: impl Fn(usize) -> [f64; 3], splats: &[[f64; 3]]) -> Vec<Rgb> {
         let scale = self.splat_scale();
         (0..self.data.len())
             .map(|i| {
                 let wsum = self.data[i][3];
                 let mut v = [0.0f64; 3];
                 if wsum > 0.0 {
-                    for c in 0..3 {
-                        v[c] = camera[i][c] / wsum;
-                    }
+                    v = camera(i).map(|x| x / wsum);
                 }
                 if let Some(sp) = splats.get(i) {
                     for c in 0..3 {
@@ -371,8 +377,7 @@ impl Film {
 
     /// The developed image: linear RGB, row-major from the top-left.
     pub fn develop(&self) -> Vec<Rgb> {
-        let camera: Vec<[f64; 3]> = self.data.iter().map(|d| [d[0], d[1], d[2]]).collect();
-        self.develop_with(&camera, &self.splats)
+        self.develop_with(|i| [self.data[i][0], self.data[i][1], self.data[i][2]], &self.splats)
     }
 
     /// The developed image of one strategy layer (they sum to [`Film::develop`]).
@@ -380,7 +385,7 @@ impl Film {
         let n = self.width as usize * self.height as usize;
         let splats =
             if self.layer_splats.is_empty() { &[][..] } else { &self.layer_splats[layer * n..(layer + 1) * n] };
-        self.develop_with(&self.layer_data[layer * n..(layer + 1) * n], splats)
+        self.develop_with(|i| self.layer_data[layer * n + i], splats)
     }
 
     pub fn layers(&self) -> usize {

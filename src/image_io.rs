@@ -59,6 +59,14 @@ fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
 }
 
+/// Writes a text file atomically (temporary file, then rename).
+pub fn write_text(path: &Path, text: &str) -> Result<()> {
+    let tmp = temp_path(path);
+    std::fs::write(&tmp, text)
+        .and_then(|_| std::fs::rename(&tmp, path))
+        .map_err(|e| Error::Output { path: path.to_path_buf(), msg: e.to_string() })
+}
+
 /// Writes `image` to `path` (EXR or PNG by extension) atomically.
 pub fn write(path: &Path, image: &Image) -> Result<()> {
     let format = Format::from_path(path)?;

@@ -9,7 +9,7 @@ use pcbpt::integrator::bidir::mis::Heuristic;
 use pcbpt::integrator::mlt::{MltBase, MltOptions};
 use pcbpt::integrator::{self, BidirOptions, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::{LoadOptions, Scene};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -280,7 +280,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
     if let Some(path) = &a.stats {
         let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "degenerate_triangles": scene.stats.degenerate_triangles, "render": s });
-        write_text(path, &serde_json::to_string_pretty(&json).unwrap_or_default())?;
+        image_io::write_text(path, &serde_json::to_string_pretty(&json).unwrap_or_default())?;
     }
     if !a.quiet || s.interrupted {
         eprintln!(
@@ -326,13 +326,6 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         );
     }
     Ok(if s.interrupted { ExitCode::from(INTERRUPTED) } else { ExitCode::SUCCESS })
-}
-
-fn write_text(path: &Path, text: &str) -> Result<()> {
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, text)
-        .and_then(|_| std::fs::rename(&tmp, path))
-        .map_err(|e| Error::Output { path: path.to_path_buf(), msg: e.to_string() })
 }
 
 fn compare_images(a: CompareArgs) -> Result<ExitCode> {

@@ -270,6 +270,34 @@ fn deposit(film: &mut Film, contributions: &Contributions, weight: f32, buf: &mu
     film.add_splats(buf);
 }
 
+/// One Markov chain with its own film.
+struct Chain {
+    rng: PrimarySampler,
+    decide: Sampler,
+    current: Contributions,
+    f: f32,
+    scratch: Scratch,
+    film: Film,
+    counters: Counters,
+    stats: MltStats,
+    /// Sum of the contributions of large-step proposals.
+    large_sum: f64,
+}
+
+/// The chains' films added in order (into `film`), and the normalisation refined with
+/// every large step: the bootstrap's `n_boot` samples of mean `b` and the large-step
+/// proposals are all independent uniform samples.
+fn merge_chains(chains: &[Chain], film: &mut Film, b: f64, n_boot: usize) -> f64 {
+    let (mut sum, mut count) = (b * n_boot as f64, n_boot as f64);
+    for ch in chains {
+        film.add_film_splats(&ch.film);
+        film.invalid_samples += ch.film.invalid_samples;
+        sum += ch.large_sum;
+        count += ch.stats.large_proposed as f64;
+    }
+    sum / count
+}
+
 const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 
@@ -347,7 +375,6 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         bootstrap_seconds,
         ..Default::default()
     };
-    let mut large_sum = 0.0f64;
     let mut snapshots = Vec::new();
     let mut interrupted = stopped();
     if b > 0.0 && !interrupted {
@@ -359,18 +386,6 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         // Rounds of about one mutation per pixel, so that time budgets and Ctrl-C are
         // checked regularly; every chain runs the same number of mutations per round.
         let per_round = pixels.div_ceil(threads as u64);
-        struct Chain {
-            rng: PrimarySampler,
-            decide: Sampler,
-            current: Contributions,
-            f: f32,
-            scratch: Scratch,
-            film: Film,
-            counters: Counters,
-            stats: MltStats,
-            /// Sum of the contributions of large-step proposals.
-            large_sum: f64,
-        }
         let mut chains: Vec<Chain> = (0..threads as u64)
             .map(|i| {
                 let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
@@ -398,7 +413,6 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             })
             .collect();
         let mut done = 0u64;
-        let large_boot = b * weights.len() as f64;
         pool.install(|| {
             while done < total {
                 let n = per_round.min((total - done).div_ceil(threads as u64));
@@ -443,14 +457,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                     let elapsed = start.elapsed().as_secs_f64();
                     take_snapshots(&opts.checkpoints, &mut snapshots, elapsed, (done / pixels) as u32, || {
                         let mut f = Film::new(w, h, scene.film.filter);
-                        let (mut sum, mut count) = (large_boot, weights.len() as f64);
-                        for ch in &chains {
-                            f.add_film_splats(&ch.film);
-                            sum += ch.large_sum;
-                            count += ch.stats.large_proposed as f64;
-                        }
+                        let refined = merge_chains(&chains, &mut f, b, weights.len());
                         f.light_paths = done;
-                        let rescale = (sum / count / b) as f32;
+                        let rescale = (refined / b) as f32;
                         f.develop().into_iter().map(|p| p * rescale).collect()
                     });
                 }
@@ -465,18 +474,14 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 }
             }
         });
+        stats.normalisation = merge_chains(&chains, &mut film, b, weights.len());
         for ch in &chains {
-            film.add_film_splats(&ch.film);
             counters += ch.counters;
             stats.small_proposed += ch.stats.small_proposed;
             stats.small_accepted += ch.stats.small_accepted;
             stats.large_proposed += ch.stats.large_proposed;
             stats.large_accepted += ch.stats.large_accepted;
-            film.invalid_samples += ch.film.invalid_samples;
-            large_sum += ch.large_sum;
         }
-        let n = weights.len() as f64 + stats.large_proposed as f64;
-        stats.normalisation = (b * weights.len() as f64 + large_sum) / n;
         stats.mutations = done;
         film.light_paths = done;
     }

@@ -356,8 +356,7 @@ impl Sink for PixelSink<'_> {
 
     #[inline]
     fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
-        let layer = if self.layers { strategy_layer(s, t) as u16 } else { 0 };
-        self.splats.push(Splat { pos, value, layer });
+        self.splats.push(Splat::of_strategy(s, t, pos, value, self.layers));
     }
 }
 
@@ -456,10 +455,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         Budget::Time(_) => (1, u32::MAX),
     };
     let pixels = w as f32 * h as f32;
-    let counts = match (opts.integrator, &est) {
-        (IntegratorKind::Lighttrace, _) => Counts::LightTrace,
-        _ => Counts::Bdpt,
-    };
+    let counts = if opts.integrator == IntegratorKind::Lighttrace { Counts::LightTrace } else { Counts::Bdpt };
     let bar = progress_bar(opts, w, h);
     let mut done = 0u32;
     let mut passes = 0u32;

@@ -32,6 +32,19 @@ pub fn reference(name: &str) -> Image {
     image_io::read_exr(&root().join("tests/data").join(name)).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// The relMSE noise of one render, from two independent renders `a` and `b` of the same
+/// estimator: `relMSE(a, b) / 2`, relative to the reference's values.
+fn render_noise(reference: &Image, a: &Image, b: &Image) -> f64 {
+    a.pixels
+        .iter()
+        .zip(&b.pixels)
+        .zip(&reference.pixels)
+        .map(|((x, y), r)| (0..3).map(|c| ((x[c] - y[c]) as f64).powi(2) / ((r[c] as f64).powi(2) + 0.01)).sum::<f64>())
+        .sum::<f64>()
+        / (3.0 * a.pixels.len() as f64)
+        / 2.0
+}
+
 /// The verdict of a render against a reference: the image mean must agree within
 /// `mean_tol`, and the relMSE must not exceed what the noise of the two renders explains.
 ///
@@ -50,17 +63,7 @@ pub struct Verdict {
 impl Verdict {
     pub fn new(reference: &Image, a: &Image, b: &Image, spp: u32, ref_spp: u32) -> Verdict {
         let metrics = compare::metrics(reference, a).unwrap();
-        let noise = a
-            .pixels
-            .iter()
-            .zip(&b.pixels)
-            .zip(&reference.pixels)
-            .map(|((x, y), r)| {
-                (0..3).map(|c| ((x[c] - y[c]) as f64).powi(2) / ((r[c] as f64).powi(2) + 0.01)).sum::<f64>()
-            })
-            .sum::<f64>()
-            / (3.0 * a.pixels.len() as f64)
-            / 2.0;
+        let noise = render_noise(reference, a, b);
         let expected = noise * (1.0 + spp as f64 / ref_spp as f64);
         Verdict { metrics, noise, expected, excluded: 0 }
     }
@@ -71,11 +74,9 @@ impl Verdict {
     /// the noise of one render: `expected = relMSE(a, b) / 4 + ref_noise`.
     pub fn averaged(reference: &Image, a: &Image, b: &Image, ref_noise: f64) -> (Verdict, Image) {
         let avg = Image::new(a.width, a.height, a.pixels.iter().zip(&b.pixels).map(|(x, y)| (*x + *y) * 0.5).collect());
-        let mut v = Verdict::new(reference, a, b, 1, u32::MAX);
-        v.metrics = compare::metrics(reference, &avg).unwrap();
-        v.noise /= 2.0;
-        v.expected = v.noise + ref_noise;
-        (v, avg)
+        let metrics = compare::metrics(reference, &avg).unwrap();
+        let noise = render_noise(reference, a, b) / 2.0;
+        (Verdict { metrics, noise, expected: noise + ref_noise, excluded: 0 }, avg)
     }
 
     /// Compares image means over the pixels whose reference value stays below `cutoff`:

@@ -110,6 +110,12 @@ impl Vertex {
         }
     }
 
+    /// The BSDF of a surface vertex.
+    #[inline]
+    pub fn bsdf<'a>(&self, scene: &'a Scene) -> &'a crate::bsdf::Bsdf {
+        &scene.bsdfs[scene.shapes[self.shape as usize].bsdf]
+    }
+
     /// The emitter this vertex lies on: a light endpoint, or a surface of an area light.
     #[inline]
     pub fn light_index(&self, scene: &Scene) -> Option<usize> {
@@ -155,7 +161,7 @@ impl Vertex {
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
         match self.kind {
             VertexKind::Surface => {
-                let bsdf = &scene.bsdfs[scene.shapes[self.shape as usize].bsdf];
+                let bsdf = self.bsdf(scene);
                 let wo = self.frame.to_local(self.wo);
                 let wi = self.frame.to_local(w);
                 let mut f = bsdf.eval(wo, wi, self.uv, mode) * wi.z.abs();
@@ -192,7 +198,7 @@ impl Vertex {
             VertexKind::Surface => {
                 let Some(prev) = prev else { return 0.0 };
                 let wo = (prev.p - self.p).normalize_or_zero();
-                let bsdf = &scene.bsdfs[scene.shapes[self.shape as usize].bsdf];
+                let bsdf = self.bsdf(scene);
                 bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.uv, TransportMode::Radiance)
             }
         };

@@ -46,8 +46,7 @@ impl Sink for SplatSink<'_> {
 
     #[inline]
     fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: crate::math::Rgb) {
-        let layer = if self.layers { crate::film::strategy_layer(s, t) as u16 } else { 0 };
-        self.splats.push(Splat { pos, value, layer });
+        self.splats.push(Splat::of_strategy(s, t, pos, value, self.layers));
     }
 }
 

@@ -90,7 +90,7 @@ fn as_surface(scene: &Scene, v: &Vertex) -> Option<Vertex> {
     s.kind = VertexKind::Surface;
     s.shape = *shape as u32;
     s.frame = Frame::from_normal(v.ng);
-    s.connectible = !scene.bsdfs[scene.shapes[*shape].bsdf].is_delta();
+    s.connectible = !s.bsdf(scene).is_delta();
     Some(s)
 }
 
@@ -105,7 +105,7 @@ fn as_light(scene: &Scene, v: &Vertex) -> Vertex {
 }
 
 fn is_delta_surface(scene: &Scene, v: &Vertex) -> bool {
-    v.kind == VertexKind::Surface && scene.bsdfs[scene.shapes[v.shape as usize].bsdf].is_delta()
+    v.kind == VertexKind::Surface && v.bsdf(scene).is_delta()
 }
 
 /// The subpaths strategy `s` uses for the full path `x` (light end first), with the
