@@ -6,6 +6,7 @@ use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
 use pcbpt::integrator::bidir::mis::Heuristic;
+use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions};
 use pcbpt::integrator::mlt::{MltBase, MltOptions};
 use pcbpt::integrator::{self, BidirOptions, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::{LoadOptions, Scene};
@@ -109,9 +110,39 @@ struct RenderArgs {
     /// PSSMLT: the estimator the Markov chains drive.
     #[arg(long, value_enum, default_value_t = MltBase::Bdpt)]
     mlt_path_integrator: MltBase,
-    /// Memory limit of a light pool (lvc), in MiB.
+    /// Memory limit of a light pool (lvc, pcbpt), in MiB.
     #[arg(long, default_value_t = 4096)]
     max_pool_mb: usize,
+    /// PCBPT: light paths per iteration (M).
+    #[arg(long, default_value_t = PcOptions::default().light_paths)]
+    pc_light_paths: usize,
+    /// PCBPT: connections drawn per camera vertex (N).
+    #[arg(long, default_value_t = PcOptions::default().connections)]
+    pc_connections: u32,
+    /// PCBPT: one cache record pixel per stride × stride tile.
+    #[arg(long, default_value_t = PcOptions::default().stride)]
+    pc_cache_stride: u32,
+    /// PCBPT: camera vertices per record pixel that become records.
+    #[arg(long, default_value_t = PcOptions::default().cache_depth)]
+    pc_cache_depth: u32,
+    /// PCBPT: shadow rays in the cache's target (true/false).
+    #[arg(long, default_value_t = PcOptions::default().visibility, action = clap::ArgAction::Set)]
+    pc_visibility: bool,
+    /// PCBPT: weight of the uniform distribution blended into every lookup.
+    #[arg(long, default_value_t = PcOptions::default().uniform_blend)]
+    pc_uniform_blend: f32,
+    /// PCBPT: nearest records blended per lookup.
+    #[arg(long, default_value_t = PcOptions::default().neighbours)]
+    pc_neighbours: usize,
+    /// PCBPT: distance term of the interpolation weights.
+    #[arg(long, value_enum, default_value_t = PcOptions::default().distance_term)]
+    pc_distance_term: DistanceTerm,
+    /// PCBPT: MIS strategy counts of the probabilistic connections.
+    #[arg(long, value_enum, default_value_t = PcOptions::default().mis)]
+    pc_mis: PcMis,
+    /// PCBPT: memory limit of the cache (records × pool vertices floats), in MiB.
+    #[arg(long, default_value_t = PcOptions::default().max_cache_mb)]
+    pc_max_cache_mb: usize,
     /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
     #[arg(long, value_name = "DIR")]
     strategy_images: Option<PathBuf>,
@@ -260,6 +291,18 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         lvc_light_paths: a.lvc_light_paths,
         lvc_connections: a.lvc_connections,
         max_pool_mb: a.max_pool_mb,
+        pc: PcOptions {
+            light_paths: a.pc_light_paths,
+            connections: a.pc_connections,
+            stride: a.pc_cache_stride,
+            cache_depth: a.pc_cache_depth,
+            visibility: a.pc_visibility,
+            uniform_blend: a.pc_uniform_blend,
+            neighbours: a.pc_neighbours,
+            distance_term: a.pc_distance_term,
+            mis: a.pc_mis,
+            max_cache_mb: a.pc_max_cache_mb,
+        },
     };
     opts.mlt = MltOptions { large_step_prob: a.large_step_prob, bootstrap: a.bootstrap, base: a.mlt_path_integrator };
     opts.strategy_images = a.strategy_images.is_some();
@@ -314,16 +357,26 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     } else if !a.quiet && s.bidir.is_some() {
         let c = &s.counters;
         eprintln!(
-            "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette){}; time: light pool {:.2} s, camera pass {:.2} s, merge {:.2} s",
+            "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette){}; time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",
             c.light_paths,
             c.connections,
             c.connections_occluded,
             c.connections_skipped,
             s.pool.map(|(m, v)| format!(", pool of {m} paths with {v} connectible vertices")).unwrap_or_default(),
             s.phases.light_pool,
+            if s.cache.is_some() { format!("cache {:.2} s, ", s.phases.cache) } else { String::new() },
             s.phases.camera_pass,
-            s.phases.merge
+            s.phases.merge,
+            s.shadow_rays.light_pool,
+            if s.cache.is_some() { format!("cache {}, ", s.shadow_rays.cache) } else { String::new() },
+            s.shadow_rays.camera_pass,
         );
+        if let Some(k) = &s.cache {
+            eprintln!(
+                "  PCBPT cache: {} records ({} empty, {} dropped for the memory limit) × {} pool vertices, {:.1} MiB",
+                k.records, k.empty_records, k.dropped_records, k.pool_vertices, k.megabytes
+            );
+        }
     }
     Ok(if s.interrupted { ExitCode::from(INTERRUPTED) } else { ExitCode::SUCCESS })
 }

@@ -22,7 +22,8 @@ use crate::math::Rgb;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
-use bidir::mis::{Counts, Heuristic};
+use bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
+use bidir::pcbpt::{Blend, Cache, PcCounts, PcMis, PcOptions, Pcbpt};
 use bidir::pool::{LightPool, Lvc};
 use bidir::{Sink, WalkLimits};
 use glam::Vec2;
@@ -48,6 +49,8 @@ pub enum IntegratorKind {
     Lvc,
     /// Primary-sample-space Metropolis light transport over BDPT (or the path tracer).
     Pssmlt,
+    /// Probabilistic connections: a shared pool, connections drawn from cached PMFs.
+    Pcbpt,
 }
 
 impl IntegratorKind {
@@ -105,6 +108,8 @@ pub struct BidirOptions {
     pub lvc_connections: u32,
     /// Memory limit of a light pool, in MiB: settings whose pool would need more are refused.
     pub max_pool_mb: usize,
+    /// PCBPT's options.
+    pub pc: PcOptions,
 }
 
 impl Default for BidirOptions {
@@ -115,6 +120,7 @@ impl Default for BidirOptions {
             lvc_light_paths: 0,
             lvc_connections: 1,
             max_pool_mb: 4096,
+            pc: PcOptions::default(),
         }
     }
 }
@@ -124,10 +130,32 @@ impl Default for BidirOptions {
 pub struct PhaseTimes {
     /// Tracing light pools (and their light-tracing splats).
     pub light_pool: f64,
+    /// Tracing the record pixels and evaluating the cache's PMFs (PCBPT).
+    pub cache: f64,
     /// Camera samples (tiles).
     pub camera_pass: f64,
-    /// Merging blocks and splats into the film.
+    /// Merging blocks into the film and splatting.
     pub merge: f64,
+}
+
+/// Shadow rays traced in each phase of the render loop.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PhaseRays {
+    pub light_pool: u64,
+    pub cache: u64,
+    pub camera_pass: u64,
+}
+
+/// PCBPT's cache in the last iteration.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct CacheStats {
+    pub records: usize,
+    /// Records whose PMF is all zero (uniform fallback).
+    pub empty_records: usize,
+    /// Records left out to stay within `--pc-max-cache-mb`.
+    pub dropped_records: usize,
+    pub pool_vertices: usize,
+    pub megabytes: f64,
 }
 
 /// How much to render.
@@ -192,6 +220,10 @@ pub struct RenderStats {
     pub rays_per_second: f64,
     pub counters: Counters,
     pub phases: PhaseTimes,
+    pub shadow_rays: PhaseRays,
+    /// PCBPT's cache (when PCBPT ran).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cache: Option<CacheStats>,
     /// Options of the bidirectional integrators (when one ran).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bidir: Option<BidirOptions>,
@@ -234,6 +266,8 @@ impl RenderStats {
             rays_per_second: rays as f64 / seconds.max(1e-9),
             counters,
             phases: PhaseTimes::default(),
+            shadow_rays: PhaseRays::default(),
+            cache: None,
             bidir: None,
             pool: None,
             mlt: None,
@@ -295,12 +329,56 @@ enum Estimator {
     Path(path::PathTracer),
     Bdpt(Bdpt),
     Lvc(Lvc),
+    Pcbpt(Pcbpt),
+}
+
+impl Estimator {
+    /// The light-pool integrators' light paths per iteration.
+    fn pool_paths(&self) -> Option<(usize, &Bdpt)> {
+        match self {
+            Estimator::Lvc(l) => Some((l.light_paths, &l.bdpt)),
+            Estimator::Pcbpt(p) => Some((p.opts.light_paths, &p.bdpt)),
+            _ => None,
+        }
+    }
+}
+
+/// The strategy counts of a pass.
+#[derive(Clone, Copy)]
+enum PassCounts<'a> {
+    Fixed(Counts),
+    Pc(PcCounts<'a>),
+}
+
+impl StrategyCounts for PassCounts<'_> {
+    #[inline]
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+        match self {
+            PassCounts::Fixed(c) => c.count(path, s, t),
+            PassCounts::Pc(c) => c.count(path, s, t),
+        }
+    }
+
+    fn path_dependent(&self) -> bool {
+        match self {
+            PassCounts::Fixed(_) => false,
+            PassCounts::Pc(c) => c.path_dependent(),
+        }
+    }
+
+    fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
+        match self {
+            PassCounts::Fixed(c) => c.fill(path, needed, out),
+            PassCounts::Pc(c) => c.fill(path, needed, out),
+        }
+    }
 }
 
 /// What a pass shares between its tiles.
 struct PassData<'a> {
     pool: Option<&'a LightPool>,
-    counts: Counts,
+    cache: Option<&'a Cache>,
+    counts: PassCounts<'a>,
     roulette: Option<RouletteMap<'a>>,
     heuristic: Heuristic,
     layers: bool,
@@ -325,6 +403,10 @@ impl Estimator {
             IntegratorKind::Lighttrace => Estimator::Bdpt(bdpt(true)),
             IntegratorKind::Bdpt | IntegratorKind::Eorr => Estimator::Bdpt(bdpt(false)),
             IntegratorKind::Pssmlt => unreachable!("PSSMLT has its own render loop"),
+            IntegratorKind::Pcbpt => {
+                opts.pc.validate().map_err(crate::error::Error::Usage)?;
+                Estimator::Pcbpt(Pcbpt { bdpt: bdpt(false), opts: opts.pc.clone() })
+            }
             IntegratorKind::Lvc => {
                 if opts.lvc_connections == 0 {
                     return Err(crate::error::Error::Usage("--lvc-connections must be at least 1".into()));
@@ -410,6 +492,12 @@ fn render_tile(
                         lvc.sample(&conn, pool, pos, &mut sampler, &mut scratch, &mut sink, &mut counters);
                         block.put_layers(pos, sink.l, &sink.parts);
                     }
+                    Estimator::Pcbpt(pc) => {
+                        let pool = pass.pool.expect("a pool integrator has a pool");
+                        let cache = pass.cache.expect("PCBPT has a cache");
+                        pc.sample(&conn, pool, cache, pos, &mut sampler, &mut scratch, &mut sink, &mut counters);
+                        block.put_layers(pos, sink.l, &sink.parts);
+                    }
                 }
                 counters.samples += 1;
             }
@@ -425,6 +513,67 @@ fn pool_vertex_bytes() -> usize {
 
 /// Key of the pilot pool that measures `V̄` before the first iteration.
 const PILOT_ITERATION: u64 = u64::MAX;
+
+/// Checks a pool integrator's light pool (and PCBPT's cache) against their memory limits,
+/// from the size per path measured on the pilot pool `pilot`, with a margin.
+fn check_memory(
+    est: &Estimator,
+    opts: &BidirOptions,
+    pilot: &LightPool,
+    w: u32,
+    h: u32,
+) -> Result<(), crate::error::Error> {
+    const MIB: f64 = 1024.0 * 1024.0;
+    let Some((m, _)) = est.pool_paths() else { return Ok(()) };
+    let per_path = pilot.vertices.len() as f64 / pilot.paths.max(1) as f64;
+    let mb = 1.5 * m as f64 * per_path.max(1.0) * pool_vertex_bytes() as f64 / MIB;
+    let option = if matches!(est, Estimator::Pcbpt(_)) { "--pc-light-paths" } else { "--lvc-light-paths" };
+    if mb > opts.max_pool_mb as f64 {
+        return Err(crate::error::Error::Usage(format!(
+            "the light pool of {m} paths ({per_path:.1} vertices per path) needs about {mb:.0} MiB, over the limit of {} MiB \
+             (--max-pool-mb); use fewer light paths ({option}) or raise the limit",
+            opts.max_pool_mb
+        )));
+    }
+    if let Estimator::Pcbpt(pc) = est {
+        let records = pc.opts.max_records(w, h);
+        let v = (1.5 * m as f64 * pilot.mean_vertices() as f64).ceil() as usize;
+        let mb = Cache::bytes(records, v) / MIB;
+        if mb > pc.opts.max_cache_mb as f64 {
+            return Err(crate::error::Error::Usage(format!(
+                "the PCBPT cache of up to {records} records × about {v} pool vertices needs about {mb:.0} MiB, over the \
+                 limit of {} MiB (--pc-max-cache-mb); raise --pc-cache-stride, lower --pc-cache-depth or \
+                 --pc-light-paths, or raise the limit",
+                pc.opts.max_cache_mb
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Traces PCBPT's record pixels for iteration `iteration` and evaluates their PMFs over
+/// `pool`. Records beyond what `--pc-max-cache-mb` holds (possible only when a pool is much
+/// larger than the pilot promised) are left out: lookups then blend fewer records.
+fn build_cache(scene: &Scene, pc: &Pcbpt, pool: &LightPool, seed: u64, iteration: u64) -> (Cache, CacheStats, Counters) {
+    let (mut records, mut counters) =
+        bidir::pcbpt::trace_records(scene, &pc.bdpt.limits, &pc.opts, seed, iteration);
+    let v = pool.connectible.len();
+    let fit = (pc.opts.max_cache_mb as f64 * 1024.0 * 1024.0 / Cache::bytes(1, v)).floor() as usize;
+    let dropped = records.len().saturating_sub(fit);
+    records.truncate(fit);
+    let blend =
+        Blend { neighbours: pc.opts.neighbours, uniform: pc.opts.uniform_blend, distance_term: pc.opts.distance_term };
+    let (cache, c) = Cache::build(scene, pool, records, blend, pc.opts.visibility);
+    counters += c;
+    let stats = CacheStats {
+        records: cache.records.len(),
+        empty_records: cache.totals.iter().filter(|&&q| q <= 0.0).count(),
+        dropped_records: dropped,
+        pool_vertices: v,
+        megabytes: cache.memory() / (1024.0 * 1024.0),
+    };
+    (cache, stats, counters)
+}
 
 /// Renders the scene's image.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate::error::Error> {
@@ -442,7 +591,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let mut counters = Counters::default();
     let mut phases = PhaseTimes::default();
     let start = Instant::now();
-    let one_per_pass = matches!(est, Estimator::Lvc(_));
+    let one_per_pass = est.pool_paths().is_some();
     let (pass_spp, total_passes) = match opts.budget {
         Budget::Spp(spp) if one_per_pass => (1, spp),
         Budget::Spp(spp) => {
@@ -455,7 +604,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         Budget::Time(_) => (1, u32::MAX),
     };
     let pixels = w as f32 * h as f32;
-    let counts = if opts.integrator == IntegratorKind::Lighttrace { Counts::LightTrace } else { Counts::Bdpt };
+    let counts =
+        PassCounts::Fixed(if opts.integrator == IntegratorKind::Lighttrace { Counts::LightTrace } else { Counts::Bdpt });
     let bar = progress_bar(opts, w, h);
     let mut done = 0u32;
     let mut passes = 0u32;
@@ -463,35 +613,27 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let mut pool_size = None;
     let mut pool_error = None;
     let mut snapshots = Vec::new();
+    let mut shadow = PhaseRays::default();
+    let mut cache_stats = None;
     pool.install(|| {
-        // LVC's strategy counts use V̄ of the previous iteration (a pilot pool before the first).
-        let mut vbar = match &est {
-            Estimator::Lvc(lvc) => {
-                let (p, _, _) = LightPool::trace::<Counts>(
-                    scene,
-                    &lvc.bdpt.limits,
-                    lvc.light_paths,
-                    opts.seed,
-                    PILOT_ITERATION,
-                    None,
-                );
-                // The pool is checked against the memory limit before the first real one
-                // is traced: its size per path measured on the pilot, with a margin.
-                let per_path = p.vertices.len() as f64 / p.paths.max(1) as f64;
-                let bytes = 1.5 * lvc.light_paths as f64 * per_path.max(1.0) * pool_vertex_bytes() as f64;
-                let mb = bytes / (1024.0 * 1024.0);
-                if mb > opts.bidir.max_pool_mb as f64 {
-                    pool_error = Some(crate::error::Error::Usage(format!(
-                        "the light pool of {} paths ({:.1} vertices per path) needs about {:.0} MiB, over the limit of {} MiB \
-                         (--max-pool-mb); use fewer light paths (--lvc-light-paths) or raise the limit",
-                        lvc.light_paths, per_path, mb, opts.bidir.max_pool_mb
-                    )));
-                    return;
+        // The pool integrators' strategy counts use V̄ of the previous iteration (a pilot
+        // pool before the first).
+        let mut vbar = match est.pool_paths() {
+            Some((m, bdpt)) => {
+                let (p, _, _) =
+                    LightPool::trace::<Counts>(scene, &bdpt.limits, m, opts.seed, PILOT_ITERATION, None);
+                match check_memory(&est, &opts.bidir, &p, w, h) {
+                    Ok(()) => p.mean_vertices(),
+                    Err(e) => {
+                        pool_error = Some(e);
+                        return;
+                    }
                 }
-                p.mean_vertices()
             }
-            _ => 0.0,
+            None => 0.0,
         };
+        // PCBPT's resampling weights use the previous iteration's cache.
+        let mut previous: Option<Cache> = None;
         while passes < total_passes {
             let count = match opts.budget {
                 Budget::Spp(spp) => pass_spp.min(spp - done),
@@ -503,20 +645,23 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             let mut pool_data = None;
             let mut pool_splats = Vec::new();
             let mut pool_counters = Counters::default();
-            if let Estimator::Lvc(lvc) = &est {
-                pass_counts = Counts::Pool {
-                    light_trace: lvc.light_paths as f32 / pixels,
-                    connect: if vbar > 0.0 { lvc.connections as f32 / vbar } else { 0.0 },
+            if let Some((m, bdpt)) = est.pool_paths() {
+                pass_counts = match &est {
+                    Estimator::Pcbpt(pc) => PassCounts::Pc(PcCounts {
+                        scene,
+                        light_trace: m as f32 / pixels,
+                        uniform: if vbar > 0.0 { pc.opts.connections as f32 / vbar } else { 0.0 },
+                        connections_times_paths: pc.opts.connections as f32 * m as f32,
+                        previous: previous.as_ref().filter(|_| pc.opts.mis == PcMis::Resampling),
+                    }),
+                    _ => PassCounts::Fixed(Counts::Pool {
+                        light_trace: m as f32 / pixels,
+                        connect: if vbar > 0.0 { opts.bidir.lvc_connections as f32 / vbar } else { 0.0 },
+                    }),
                 };
                 let conn = Connector { scene, heuristic: opts.bidir.heuristic, counts: &pass_counts, roulette: None };
-                let (p, sp, c) = LightPool::trace(
-                    scene,
-                    &lvc.bdpt.limits,
-                    lvc.light_paths,
-                    opts.seed,
-                    passes as u64,
-                    Some((&conn, &lvc.bdpt, layers)),
-                );
+                let (p, sp, c) =
+                    LightPool::trace(scene, &bdpt.limits, m, opts.seed, passes as u64, Some((&conn, bdpt, layers)));
                 vbar = p.mean_vertices();
                 pool_size = Some((p.paths, p.connectible.len()));
                 pool_data = Some(p);
@@ -524,12 +669,27 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 pool_counters = c;
             }
             phases.light_pool += t_pool.elapsed().as_secs_f64();
+            shadow.light_pool += pool_counters.shadow_rays;
+            // PCBPT: records and their PMFs over this pool.
+            let t_cache = Instant::now();
+            let cache = match (&est, &pool_data) {
+                (Estimator::Pcbpt(pc), Some(p)) => {
+                    let (c, stats, cc) = build_cache(scene, pc, p, opts.seed, passes as u64);
+                    cache_stats = Some(stats);
+                    shadow.cache += cc.shadow_rays;
+                    counters += cc;
+                    Some(c)
+                }
+                _ => None,
+            };
+            phases.cache += t_cache.elapsed().as_secs_f64();
             // EORR: thresholds from the image of the passes so far (none before the first).
             let tau: Option<Vec<f32>> = (opts.integrator == IntegratorKind::Eorr && passes > 0).then(|| {
                 film.develop().iter().map(|c| crate::math::luminance(*c).max(0.0) * opts.bidir.eorr_fraction).collect()
             });
             let pass = PassData {
                 pool: pool_data.as_ref(),
+                cache: cache.as_ref(),
                 counts: pass_counts,
                 roulette: tau.as_deref().map(|tau| RouletteMap { tau, width: w, height: h }),
                 heuristic: opts.bidir.heuristic,
@@ -556,6 +716,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 film.add_splats(&r.splats);
                 film.light_paths += r.counters.light_paths;
                 counters += r.counters;
+                shadow.camera_pass += r.counters.shadow_rays;
             }
             phases.merge += t_merge.elapsed().as_secs_f64();
             done += count;
@@ -570,6 +731,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 }
                 let secs = start.elapsed().as_secs_f64().max(1e-9);
                 bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
+            }
+            if cache.is_some() {
+                previous = cache;
             }
             if stopped() {
                 interrupted = true;
@@ -594,6 +758,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         phases,
         bidir: bidirectional.then(|| opts.bidir.clone()),
         pool: pool_size,
+        shadow_rays: shadow,
+        cache: cache_stats,
         ..RenderStats::new(opts, scene, threads, counters, seconds, done, film.invalid_samples, interrupted)
     };
     let strategy_images =

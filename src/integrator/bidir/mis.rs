@@ -143,6 +143,22 @@ impl FullPath<'_> {
 /// How many times per camera sample each strategy is used (`n(s,t)`).
 pub trait StrategyCounts {
     fn count(&self, path: &FullPath, s: usize, t: usize) -> f32;
+
+    /// Whether the counts are costly functions of the path, better evaluated together by
+    /// [`StrategyCounts::fill`] once per weight.
+    fn path_dependent(&self) -> bool {
+        false
+    }
+
+    /// The counts of the strategies `s'` of the path for which `needed(s')`, into `out[s']`.
+    fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
+        let n = path.len();
+        for (s, o) in out.iter_mut().enumerate().take(n) {
+            if needed(s) {
+                *o = self.count(path, s, n - s);
+            }
+        }
+    }
 }
 
 /// The counts of the integrators without probabilistic selection.
@@ -254,6 +270,13 @@ pub fn mis_weight_with(
 ) -> f32 {
     let full = FullPath { light, camera };
     let n = full.len();
+    let s = light.len();
+    if counts.path_dependent() {
+        let p = path_pdfs::<CAP>(scene, light, camera, conn);
+        let mut table = [0.0f32; CAP];
+        counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
+        return weight_from_pdfs(&p, s, heuristic, &|i| table[i]);
+    }
     let count = |sp| counts.count(&full, sp, n - sp);
     // Most paths are short: a small array is cheaper to set up.
     if n <= SHORT {

@@ -9,6 +9,7 @@
 
 pub mod bdpt;
 pub mod mis;
+pub mod pcbpt;
 pub mod pool;
 
 use super::Counters;
@@ -161,14 +162,9 @@ impl Vertex {
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
         match self.kind {
             VertexKind::Surface => {
-                let bsdf = self.bsdf(scene);
-                let wo = self.frame.to_local(self.wo);
-                let wi = self.frame.to_local(w);
-                let mut f = bsdf.eval(wo, wi, self.uv, mode) * wi.z.abs();
-                if mode == TransportMode::Importance {
-                    f *= shading_correction(self.ng, self.frame.n, self.wo, w);
-                }
-                let (pdf_fwd, pdf_rev) = bsdf.pdf_pair(wo, wi, self.uv, mode);
+                let f = self.scatter(scene, self.wo, w, mode);
+                let (wo, wi) = (self.frame.to_local(self.wo), self.frame.to_local(w));
+                let (pdf_fwd, pdf_rev) = self.bsdf(scene).pdf_pair(wo, wi, self.uv, mode);
                 End { f, pdf_fwd, pdf_rev }
             }
             VertexKind::Light(l) => {
@@ -181,6 +177,19 @@ impl Vertex {
             }
             VertexKind::Camera => End { f: Rgb::ZERO, pdf_fwd: scene.camera.pdf_direction(w), pdf_rev: 0.0 },
         }
+    }
+
+    /// The BSDF of a surface vertex times the shading cosine towards `wi`, for light
+    /// travelling between the unit world directions `wo` (its own side) and `wi`, with the
+    /// adjoint shading-normal correction in importance mode.
+    #[inline]
+    pub fn scatter(&self, scene: &Scene, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        let (lo, li) = (self.frame.to_local(wo), self.frame.to_local(wi));
+        let mut f = self.bsdf(scene).eval(lo, li, self.uv, mode) * li.z.abs();
+        if mode == TransportMode::Importance {
+            f *= shading_correction(self.ng, self.frame.n, wo, wi);
+        }
+        f
     }
 
     /// Area density at `next` of this vertex generating it, given the vertex `prev` before

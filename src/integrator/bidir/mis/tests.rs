@@ -4,6 +4,8 @@
 //! weights computed from full path densities.
 
 use super::*;
+use crate::integrator::bidir::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcOptions, trace_records};
+use crate::integrator::bidir::pool::LightPool;
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::integrator::Counters;
@@ -205,12 +207,42 @@ impl StrategyCounts for Positional {
     }
 }
 
+/// A PCBPT cache over a pool of `m` light paths, with stride-8 records.
+fn pc_cache(scene: &Scene, m: usize, term: DistanceTerm) -> Cache {
+    let limits = WalkLimits::new(8, 3);
+    let (pool, _, _) = LightPool::trace::<Counts>(scene, &limits, m, 7, 0, None);
+    let opts = PcOptions { stride: 8, ..PcOptions::default() };
+    let (records, _) = trace_records(scene, &limits, &opts, 7, 0);
+    let blend = Blend { neighbours: 6, uniform: 0.5, distance_term: term };
+    let (cache, _) = Cache::build(scene, &pool, records, blend, true);
+    assert!(cache.records.len() > 20 && cache.v > 50, "{} records, {} vertices", cache.records.len(), cache.v);
+    cache
+}
+
 fn check_variant(variant: Variant, seed: u64) {
     let scene = scene(variant);
     let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
+    let caches = [pc_cache(&scene, 120, DistanceTerm::Falloff), pc_cache(&scene, 40, DistanceTerm::Printed)];
+    let pc = |previous, n: f32, m: f32| PcCounts {
+        scene: &scene,
+        light_trace: m / (48.0 * 40.0),
+        uniform: n / 3.1,
+        connections_times_paths: n * m,
+        previous,
+    };
+    let pc_options = [
+        ("pc uniform", pc(None, 3.0, 120.0)),
+        ("pc resampling", pc(Some(&caches[0]), 3.0, 120.0)),
+        ("pc resampling printed", pc(Some(&caches[1]), 5.0, 40.0)),
+    ];
     let mut checked = 0;
     let mut with_delta = 0;
+    let mut resampled = Vec::new();
     for x in paths(&scene, seed, 300) {
+        if x.len() >= 4 && !x.iter().any(|v| is_delta_surface(&scene, v)) {
+            let (l, c) = subpaths(&scene, &x, 2).unwrap();
+            resampled.push(pc_options[1].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
+        }
         let n = x.len();
         let has_delta = x.iter().any(|v| is_delta_surface(&scene, v));
         with_delta += has_delta as usize;
@@ -252,6 +284,10 @@ fn check_variant(variant: Variant, seed: u64) {
             check(&|l, c| mis_weight(&scene, l, c, heuristic, &pool), b, "pool");
             let b = brute(brute_force_weights(&scene, &x0, heuristic, &Positional));
             check(&|l, c| mis_weight(&scene, l, c, heuristic, &Positional), b, "positional");
+            for (what, counts) in &pc_options {
+                let b = brute(brute_force_weights(&scene, &x0, heuristic, counts));
+                check(&|l, c| mis_weight(&scene, l, c, heuristic, counts), b, what);
+            }
             // Light tracing alone: the t = 1 strategy carries everything it can sample.
             let lt: f32 = (1..n)
                 .filter_map(|s| subpaths(&scene, &x, s))
@@ -262,6 +298,9 @@ fn check_variant(variant: Variant, seed: u64) {
         checked += 1;
     }
     assert_eq!(checked, 300);
+    // The resampling counts follow the cached PMFs: far from constant.
+    let (lo, hi) = resampled.iter().fold((f32::MAX, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
+    assert!(resampled.len() > 20 && lo > 0.0 && hi > 20.0 * lo, "{variant:?}: resampling counts {lo}..{hi}");
     if variant == Variant::Mirror {
         assert!(with_delta > 10, "only {with_delta} paths through the mirror");
     }

@@ -1,0 +1,786 @@
+//! Probabilistic connections for bidirectional path tracing (Popov et al. 2015; contract §3).
+//!
+//! One iteration renders one camera sample per pixel against a pool of `M` light subpaths
+//! ([`LightPool`]). Instead of joining a camera vertex to its own light subpath, PCBPT draws
+//! `N` pool vertices for it with a probability close to each connection's contribution:
+//!
+//! 1. **Records.** Camera subpaths through one jittered pixel per `k × k` tile give, at up to
+//!    `D` depths, the cache records: position, normal, incoming direction and BSDF.
+//! 2. **PMFs.** For every record `c` and pool vertex `v` the target
+//!    `q_c(v) = lum(α_L(v) f_L(v → x_c) G(v, x_c) f_E(x_c; v → ω_c)) Vis(v, x_c)` is evaluated
+//!    (in parallel over records) and stored as the record's normalised CMF.
+//! 3. **Lookup.** A camera vertex blends the CMFs of its nearest records (a `kiddo` kd-tree)
+//!    with weights `w_i = max(0, n·n_i) max(0, ω·ω_i) D_i` and the uniform distribution
+//!    (supplemental Eq. 1–2). The blended CMF is never built: the binary search that inverts
+//!    it evaluates it at the probed indices only, and the drawn vertex's probability is the
+//!    difference of two such evaluations — exactly the probability with which it was drawn.
+//! 4. **Connections.** `F(z) = (1/N) Σ_k w C(v_k, z) / (M PMF(z, v_k))`, on the shared
+//!    [`Connector`]; `s = 0`, NEE and light tracing from the pool are BDPT's.
+//!
+//! MIS strategy counts ([`PcCounts`]): `N/V̄` (uniform) or `N M P(y | z)` with `P` the blended
+//! PMF of the *previous* iteration's cache evaluated on the path (resampling); both are
+//! functions of the path alone, so the weights of a path's strategies sum to one.
+
+use super::bdpt::{Bdpt, Connector, Scratch};
+use super::mis::{FullPath, StrategyCounts};
+use super::pool::LightPool;
+use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, visible};
+use crate::bsdf::TransportMode;
+use crate::film::tiles;
+use crate::integrator::Counters;
+use crate::math::{Rgb, luminance};
+use crate::sampling::{Random, Sampler};
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+use kiddo::{KdTree, SquaredEuclidean};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Key word that separates the record pixels' random streams from the others.
+const CACHE_STREAM: u64 = 0x6361_6368;
+/// Most records one lookup blends.
+pub const MAX_NEIGHBOURS: usize = 16;
+/// The target's geometry term is clamped at distances below this fraction of the scene's
+/// bounding radius (the `1/d²` singularity).
+const CLAMP_FRACTION: f32 = 0.01;
+
+/// The distance term `D_i` of the interpolation weights (supplemental Eq. 1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DistanceTerm {
+    /// `d_i / max_j d_j`, as printed (grows with distance).
+    Printed,
+    /// `1 - d_i / max_j d_j` (falls off with distance).
+    Falloff,
+}
+
+/// How MIS counts PCBPT's connection strategies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PcMis {
+    /// `n = N / V̄`: the selection probability is ignored (as in light-vertex-cache BDPT).
+    Uniform,
+    /// `n = N M P(y | z)`, `P` the blended PMF of the previous iteration's cache.
+    Resampling,
+}
+
+/// Options of PCBPT.
+#[derive(Clone, Debug, Serialize)]
+pub struct PcOptions {
+    /// Light subpaths per iteration (`M`).
+    pub light_paths: usize,
+    /// Connections per camera vertex (`N`).
+    pub connections: u32,
+    /// One record pixel per `stride × stride` tile.
+    pub stride: u32,
+    /// Records per record pixel: camera vertices `z_1..z_D`.
+    pub cache_depth: u32,
+    /// Shadow rays in the target (`Vis`).
+    pub visibility: bool,
+    /// Weight of the uniform distribution in the blend (Eq. 2).
+    pub uniform_blend: f32,
+    /// Records blended per lookup.
+    pub neighbours: usize,
+    pub distance_term: DistanceTerm,
+    pub mis: PcMis,
+    /// Memory limit of the cache (`records × V` floats), in MiB.
+    pub max_cache_mb: usize,
+}
+
+impl Default for PcOptions {
+    fn default() -> PcOptions {
+        PcOptions {
+            light_paths: 1000,
+            connections: 3,
+            stride: 16,
+            cache_depth: 5,
+            visibility: true,
+            uniform_blend: 0.5,
+            neighbours: 6,
+            distance_term: DistanceTerm::Falloff,
+            mis: PcMis::Uniform,
+            max_cache_mb: 1024,
+        }
+    }
+}
+
+impl PcOptions {
+    /// Checks the options, naming the one at fault.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.light_paths == 0 {
+            return Err("--pc-light-paths must be at least 1".into());
+        }
+        if self.connections == 0 {
+            return Err("--pc-connections must be at least 1".into());
+        }
+        if self.stride == 0 {
+            return Err("--pc-cache-stride must be at least 1".into());
+        }
+        if !(self.uniform_blend > 0.0 && self.uniform_blend.is_finite()) {
+            return Err(format!(
+                "--pc-uniform-blend must be positive and finite (it keeps every vertex reachable), not {}",
+                self.uniform_blend
+            ));
+        }
+        if !(1..=MAX_NEIGHBOURS).contains(&self.neighbours) {
+            return Err(format!("--pc-neighbours must be between 1 and {MAX_NEIGHBOURS}, not {}", self.neighbours));
+        }
+        Ok(())
+    }
+
+    /// Most records an iteration can make for a film of `width × height`.
+    pub fn max_records(&self, width: u32, height: u32) -> usize {
+        let per_axis = |n: u32| n.div_ceil(self.stride) as usize;
+        per_axis(width) * per_axis(height) * self.cache_depth as usize
+    }
+}
+
+/// A cache record: a camera vertex and its normal turned towards its incoming direction.
+#[derive(Clone, Copy, Debug)]
+pub struct Record {
+    pub vertex: Vertex,
+    pub n: Vec3,
+}
+
+/// `n` turned to the side of `w`.
+#[inline]
+fn facing(n: Vec3, w: Vec3) -> Vec3 {
+    if n.dot(w) < 0.0 { -n } else { n }
+}
+
+impl Record {
+    pub fn new(v: &Vertex) -> Record {
+        Record { vertex: *v, n: facing(v.frame.n, v.wo) }
+    }
+}
+
+/// Traces the record pixels of one iteration: one jittered pixel per `stride × stride` tile,
+/// its connectible camera vertices `z_1..z_D` in tile order.
+pub fn trace_records(
+    scene: &Scene,
+    limits: &WalkLimits,
+    opts: &PcOptions,
+    seed: u64,
+    iteration: u64,
+) -> (Vec<Record>, Counters) {
+    let limits = WalkLimits {
+        camera_vertices: limits.camera_vertices.min(opts.cache_depth as usize + 1),
+        ..*limits
+    };
+    let tile_list = tiles(scene.film.width, scene.film.height, opts.stride);
+    let parts: Vec<(Vec<Record>, Counters)> = tile_list
+        .par_chunks(64)
+        .enumerate()
+        .map(|(c, chunk)| {
+            crate::accel::embree::set_flush_denormals();
+            let mut records = Vec::new();
+            let mut counters = Counters::default();
+            let mut path = Vec::new();
+            for (i, tile) in chunk.iter().enumerate() {
+                let mut rng = Sampler::new(&[seed, CACHE_STREAM, iteration, (c * 64 + i) as u64]);
+                let u = rng.next_2d();
+                let pos = Vec2::new(tile.x0 as f32 + u.x * tile.width as f32, tile.y0 as f32 + u.y * tile.height as f32);
+                camera_subpath(scene, pos, &limits, &mut rng, &mut path, &mut counters);
+                records.extend(
+                    path.iter().skip(1).filter(|v| v.kind == VertexKind::Surface && v.is_connectible()).map(Record::new),
+                );
+            }
+            (records, counters)
+        })
+        .collect();
+    let mut records = Vec::new();
+    let mut counters = Counters::default();
+    for (r, c) in parts {
+        records.extend(r);
+        counters += c;
+    }
+    (records, counters)
+}
+
+/// How a lookup blends records.
+#[derive(Clone, Copy, Debug)]
+pub struct Blend {
+    pub neighbours: usize,
+    pub uniform: f32,
+    pub distance_term: DistanceTerm,
+}
+
+/// The records a camera vertex blends and their weights.
+#[derive(Clone, Copy, Debug)]
+pub struct Neighbours {
+    pub index: [u32; MAX_NEIGHBOURS],
+    pub weight: [f64; MAX_NEIGHBOURS],
+    pub len: usize,
+    /// `Σ w_i + uniform`.
+    pub norm: f64,
+}
+
+/// The records nearest to a point and their squared distances.
+#[derive(Clone, Copy, Debug)]
+pub struct Nearest {
+    pub index: [u32; MAX_NEIGHBOURS],
+    pub dist2: [f32; MAX_NEIGHBOURS],
+    pub len: usize,
+}
+
+/// The PCBPT cache of one iteration: records, their kd-tree and their CMFs over the pool.
+pub struct Cache {
+    /// Unique per cache built (keys the lookup memo).
+    id: u64,
+    pub records: Vec<Record>,
+    tree: Option<KdTree<f32, 3>>,
+    /// `records × v` normalised CMFs, record after record.
+    cmf: Vec<f32>,
+    /// `Q_c` of each record (0: the record falls back to uniform).
+    pub totals: Vec<f64>,
+    /// Pool vertices `V`.
+    pub v: usize,
+    pub blend: Blend,
+    clamp2: f32,
+}
+
+/// A fresh cache identity.
+fn next_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
+
+/// The target `q_c(v)` without visibility: `α_L` times both ends' BSDF and cosine terms over
+/// the clamped squared distance. `alpha` and `wo` stand for the light vertex's throughput
+/// and direction to its predecessor.
+#[inline]
+fn target(scene: &Scene, y: &Vertex, alpha: Rgb, wo: Vec3, rec: &Record, clamp2: f32) -> f32 {
+    let d = rec.vertex.p - y.p;
+    let dist2 = d.length_squared();
+    if dist2 == 0.0 || !dist2.is_finite() {
+        return 0.0;
+    }
+    let w = d / dist2.sqrt();
+    let fl = y.scatter(scene, wo, w, TransportMode::Importance);
+    if fl == Rgb::ZERO {
+        return 0.0;
+    }
+    let fe = rec.vertex.scatter(scene, rec.vertex.wo, -w, TransportMode::Radiance);
+    luminance(alpha * fl * fe).max(0.0) / dist2.max(clamp2)
+}
+
+impl Cache {
+    /// An empty cache over a pool of `v` vertices: every lookup is uniform.
+    pub fn uniform(v: usize, blend: Blend) -> Cache {
+        Cache { id: next_id(), records: Vec::new(), tree: None, cmf: Vec::new(), totals: Vec::new(), v, blend, clamp2: 0.0 }
+    }
+
+    /// Bytes the CMFs of `records` records over `v` vertices take.
+    pub fn bytes(records: usize, v: usize) -> f64 {
+        records as f64 * (v as f64 * 4.0 + 8.0 + std::mem::size_of::<Record>() as f64)
+    }
+
+    /// Evaluates every record's PMF over the pool (in parallel over records, shadow rays
+    /// included when `visibility` is set) and builds the kd-tree.
+    pub fn build(
+        scene: &Scene,
+        pool: &LightPool,
+        records: Vec<Record>,
+        blend: Blend,
+        visibility: bool,
+    ) -> (Cache, Counters) {
+        let v = pool.connectible.len();
+        let clamp2 = (CLAMP_FRACTION * scene.bounds.radius).powi(2);
+        let mut cmf = vec![0.0f32; records.len() * v];
+        let results: Vec<(f64, Counters)> = if v == 0 {
+            vec![(0.0, Counters::default()); records.len()]
+        } else {
+            cmf.par_chunks_mut(v)
+                .zip(records.par_iter())
+                .map(|(row, rec)| {
+                    crate::accel::embree::set_flush_denormals();
+                    let mut counters = Counters::default();
+                    let mut total = 0.0f64;
+                    for (k, &g) in pool.connectible.iter().enumerate() {
+                        let y = &pool.vertices[g as usize];
+                        let mut q = target(scene, y, y.beta, y.wo, rec, clamp2);
+                        if q > 0.0 && visibility && !visible(scene, y, &rec.vertex, &mut counters) {
+                            q = 0.0;
+                        }
+                        row[k] = q;
+                        total += q as f64;
+                    }
+                    if total > 0.0 {
+                        let inv = 1.0 / total;
+                        let mut acc = 0.0f64;
+                        for c in row.iter_mut() {
+                            acc += *c as f64;
+                            *c = (acc * inv) as f32;
+                        }
+                        row[v - 1] = 1.0;
+                    } else {
+                        for (k, c) in row.iter_mut().enumerate() {
+                            *c = ((k + 1) as f64 / v as f64) as f32;
+                        }
+                    }
+                    (total, counters)
+                })
+                .collect()
+        };
+        let mut counters = Counters::default();
+        let mut totals = Vec::with_capacity(results.len());
+        for (t, c) in results {
+            totals.push(t);
+            counters += c;
+        }
+        let points: Vec<[f32; 3]> = records.iter().map(|r| r.vertex.p.to_array()).collect();
+        let tree = (!points.is_empty()).then(|| KdTree::from(&points));
+        (Cache { id: next_id(), records, tree, cmf, totals, v, blend, clamp2 }, counters)
+    }
+
+    /// Bytes the cache holds.
+    pub fn memory(&self) -> f64 {
+        Cache::bytes(self.records.len(), self.v)
+    }
+
+    /// The stored CMF of record `c`.
+    pub fn row(&self, c: usize) -> &[f32] {
+        &self.cmf[c * self.v..(c + 1) * self.v]
+    }
+
+    /// The records blended for a vertex at `p` with normal `n` (turned towards `wo`) and
+    /// incoming direction `wo`, with their weights (supplemental Eq. 1).
+    pub fn lookup(&self, p: Vec3, n: Vec3, wo: Vec3) -> Neighbours {
+        self.weigh(&self.nearest(p), n, wo)
+    }
+
+    /// The nearest records of `p` and their squared distances, through a per-thread
+    /// direct-mapped memo: pool vertices are looked up from every pixel that connects to them,
+    /// camera vertices by every weight of their sample.
+    pub fn nearest(&self, p: Vec3) -> Nearest {
+        const SLOTS: usize = 1 << 13;
+        type Slot = Option<((u64, [u32; 3]), Nearest)>;
+        thread_local! {
+            static MEMO: std::cell::RefCell<Vec<Slot>> = const { std::cell::RefCell::new(Vec::new()) };
+        }
+        let bits = p.to_array().map(f32::to_bits);
+        let key = (self.id, bits);
+        let h = (bits[0] as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (bits[1] as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+            ^ (bits[2] as u64).wrapping_mul(0x1656_67B1_9E37_79F9)
+            ^ self.id.wrapping_mul(0x27D4_EB2F_1656_67C5);
+        let slot = (h >> 51) as usize & (SLOTS - 1);
+        MEMO.with(|m| {
+            let mut m = m.borrow_mut();
+            if m.is_empty() {
+                m.resize(SLOTS, None);
+            }
+            if let Some((k, near)) = &m[slot]
+                && *k == key
+            {
+                return *near;
+            }
+            let near = self.nearest_uncached(p);
+            m[slot] = Some((key, near));
+            near
+        })
+    }
+
+    /// The nearest records of `p` from the kd-tree.
+    pub fn nearest_uncached(&self, p: Vec3) -> Nearest {
+        let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
+        let Some(tree) = &self.tree else { return near };
+        let found = tree.nearest_n::<SquaredEuclidean>(&p.to_array(), self.blend.neighbours.clamp(1, MAX_NEIGHBOURS));
+        for f in found.iter().take(MAX_NEIGHBOURS) {
+            near.index[near.len] = f.item as u32;
+            near.dist2[near.len] = f.distance;
+            near.len += 1;
+        }
+        near
+    }
+
+    /// The weights of the nearest records for a vertex with normal `n` (turned towards
+    /// `wo`) and incoming direction `wo` (supplemental Eq. 1).
+    pub fn weigh(&self, near: &Nearest, n: Vec3, wo: Vec3) -> Neighbours {
+        let mut nb = Neighbours {
+            index: [0; MAX_NEIGHBOURS],
+            weight: [0.0; MAX_NEIGHBOURS],
+            len: 0,
+            norm: self.blend.uniform as f64,
+        };
+        let dmax = near.dist2[..near.len].iter().fold(0.0f32, |a, &b| a.max(b)).sqrt();
+        for k in 0..near.len {
+            let c = near.index[k] as usize;
+            let rec = &self.records[c];
+            let dist = if dmax > 0.0 {
+                let ratio = near.dist2[k].sqrt() / dmax;
+                match self.blend.distance_term {
+                    DistanceTerm::Printed => ratio,
+                    DistanceTerm::Falloff => 1.0 - ratio,
+                }
+            } else {
+                1.0
+            };
+            let w = n.dot(rec.n).max(0.0) * wo.dot(rec.vertex.wo).max(0.0) * dist;
+            if w > 0.0 {
+                nb.index[nb.len] = c as u32;
+                nb.weight[nb.len] = w as f64;
+                nb.norm += w as f64;
+                nb.len += 1;
+            }
+        }
+        nb
+    }
+
+    /// The lookup of a camera vertex.
+    #[inline]
+    pub fn lookup_vertex(&self, z: &Vertex) -> Neighbours {
+        self.lookup(z.p, facing(z.frame.n, z.wo), z.wo)
+    }
+
+    /// The blended CMF at index `i` (Eq. 2), evaluated from the blended records only.
+    #[inline]
+    pub fn cmf_at(&self, nb: &Neighbours, i: usize) -> f64 {
+        if i + 1 >= self.v {
+            return 1.0;
+        }
+        let mut sum = self.blend.uniform as f64 * (i + 1) as f64 / self.v as f64;
+        for k in 0..nb.len {
+            sum += nb.weight[k] * self.cmf[nb.index[k] as usize * self.v + i] as f64;
+        }
+        sum / nb.norm
+    }
+
+    /// The blended PMF of index `i`: the mass between two CMF entries.
+    #[inline]
+    pub fn pmf(&self, nb: &Neighbours, i: usize) -> f64 {
+        let below = if i == 0 { 0.0 } else { self.cmf_at(nb, i - 1) };
+        self.cmf_at(nb, i) - below
+    }
+
+    /// Inverts the blended CMF for `u ∈ [0, 1)` by binary search (`O(neighbours log V)`):
+    /// the smallest index whose CMF exceeds `u`, and its probability.
+    pub fn sample(&self, nb: &Neighbours, u: f64) -> (usize, f64) {
+        debug_assert!(self.v > 0);
+        let (mut lo, mut hi) = (0usize, self.v - 1);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if self.cmf_at(nb, mid) > u { hi = mid } else { lo = mid + 1 }
+        }
+        (lo, self.pmf(nb, lo))
+    }
+
+    /// `P(y | z)` for MIS: the blended PMF of the light vertex `y = x_{s-1}` for the camera
+    /// vertex `z = x_s` of a full path, with the target evaluated on the path (visibility 1,
+    /// `alpha` the light throughput at `y` from [`light_throughputs`]) and this cache's records
+    /// and normalisers. A function of the path alone.
+    pub fn selection_pmf(&self, scene: &Scene, path: &FullPath, s: usize, alpha: Rgb) -> f32 {
+        let (y, z) = (path.get(s - 1), path.get(s));
+        let dir = |a: &Vertex, b: &Vertex| (b.p - a.p).normalize_or_zero();
+        let wz = dir(z, path.get(s + 1));
+        let nb = self.lookup(z.p, facing(z.frame.n, wz), wz);
+        let uniform = 1.0 / self.v.max(1) as f64;
+        let mut sum = self.blend.uniform as f64 * uniform;
+        let wo = dir(y, path.get(s - 2));
+        for k in 0..nb.len {
+            let c = nb.index[k] as usize;
+            let pmf = if self.totals[c] <= 0.0 {
+                uniform
+            } else if alpha == Rgb::ZERO {
+                0.0
+            } else {
+                target(scene, y, alpha, wo, &self.records[c], self.clamp2) as f64 / self.totals[c]
+            };
+            sum += nb.weight[k] * pmf;
+        }
+        (sum / nb.norm) as f32
+    }
+
+}
+
+/// The throughputs `α_L(x_k)`, `1 <= k < out.len()`, that a light subpath along the full
+/// path's vertices would carry: emission and BSDFs with their cosines over the solid-angle
+/// densities of sampling them, from positions alone (Russian roulette left out).
+pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
+    out.fill(Rgb::ZERO);
+    if out.len() < 2 {
+        return;
+    }
+    let x0 = path.get(0);
+    let Some(l) = x0.light_index(scene) else { return };
+    let light = &scene.lights[l];
+    let w = (path.get(1).p - x0.p).normalize_or_zero();
+    let pdf = x0.pdf_light_origin(scene) * light.pdf_emission_direction(x0.ng, w);
+    if pdf <= 0.0 {
+        return;
+    }
+    let mut alpha = light.emitted(x0.ng, x0.uv, w) * x0.cos_area(w) / pdf;
+    out[1] = alpha;
+    for i in 1..out.len() - 1 {
+        let x = path.get(i);
+        let wo = (path.get(i - 1).p - x.p).normalize_or_zero();
+        let wi = (path.get(i + 1).p - x.p).normalize_or_zero();
+        let f = x.scatter(scene, wo, wi, TransportMode::Importance);
+        let pdf = x.bsdf(scene).pdf(x.frame.to_local(wo), x.frame.to_local(wi), x.uv, TransportMode::Importance);
+        if pdf <= 0.0 || f == Rgb::ZERO {
+            return;
+        }
+        alpha = alpha * f / pdf;
+        out[i + 1] = alpha;
+    }
+}
+
+/// PCBPT's strategy counts, relative to one camera sample per pixel: `M/(W·H)` for light
+/// tracing from the pool, 1 for `s = 0` and NEE, and for pool connections `N / V̄` (uniform)
+/// or `N M P(y | z)` from the previous iteration's cache (resampling).
+#[derive(Clone, Copy)]
+pub struct PcCounts<'a> {
+    pub scene: &'a Scene,
+    pub light_trace: f32,
+    /// `N / V̄`, V̄ from the previous iteration.
+    pub uniform: f32,
+    /// `N M`.
+    pub connections_times_paths: f32,
+    /// The previous iteration's cache (resampling weights), `None` for uniform.
+    pub previous: Option<&'a Cache>,
+}
+
+impl StrategyCounts for PcCounts<'_> {
+    #[inline]
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+        match (s, t) {
+            (_, 1) => self.light_trace,
+            (0 | 1, _) => 1.0,
+            _ => match self.previous {
+                None => self.uniform,
+                Some(cache) => {
+                    let mut alpha = [Rgb::ZERO; super::mis::CAP];
+                    light_throughputs(self.scene, path, &mut alpha[..s]);
+                    self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha[s - 1])
+                }
+            },
+        }
+    }
+
+    fn path_dependent(&self) -> bool {
+        self.previous.is_some()
+    }
+
+    /// Resampling counts of a whole path with one pass for the light throughputs.
+    fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
+        let n = path.len();
+        let Some(cache) = self.previous else {
+            for (s, o) in out.iter_mut().enumerate().take(n) {
+                *o = self.count(path, s, n - s);
+            }
+            return;
+        };
+        let last = (2..n.saturating_sub(1)).rev().find(|&s| needed(s));
+        let mut alpha = [Rgb::ZERO; super::mis::CAP];
+        if let Some(last) = last {
+            light_throughputs(self.scene, path, &mut alpha[..last]);
+        }
+        for (s, o) in out.iter_mut().enumerate().take(n) {
+            if !needed(s) {
+                continue;
+            }
+            *o = match (s, n - s) {
+                (_, 1) => self.light_trace,
+                (0 | 1, _) => 1.0,
+                _ => self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha[s - 1]),
+            };
+        }
+    }
+}
+
+/// The PCBPT camera pass: BDPT's `s = 0` and NEE per camera vertex, and `N` connections to
+/// pool vertices drawn from the cache.
+#[derive(Clone, Debug)]
+pub struct Pcbpt {
+    pub bdpt: Bdpt,
+    pub opts: PcOptions,
+}
+
+impl Pcbpt {
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample<R: Random, C: StrategyCounts>(
+        &self,
+        conn: &Connector<C>,
+        pool: &LightPool,
+        cache: &Cache,
+        pos: Vec2,
+        rng: &mut R,
+        scratch: &mut Scratch,
+        sink: &mut impl Sink,
+        counters: &mut Counters,
+    ) {
+        let scene = conn.scene;
+        camera_subpath(scene, pos, &self.bdpt.limits, rng, &mut scratch.camera, counters);
+        let camera = &scratch.camera;
+        let n = self.opts.connections;
+        let m = pool.paths.max(1) as f64;
+        for t in 2..=camera.len() {
+            if self.bdpt.allowed(0, t) {
+                conn.emission(&camera[..t], sink);
+            }
+            if self.bdpt.allowed(1, t) {
+                conn.next_event(&camera[..t], pos, rng, sink, counters);
+            }
+            if cache.v == 0 || !camera[t - 1].is_connectible() {
+                continue;
+            }
+            let nb = cache.lookup_vertex(&camera[t - 1]);
+            for k in 0..n {
+                // Stratified draws with 48 random bits each.
+                let xi = rng.next_1d() as f64 + rng.next_1d() as f64 * (1.0 / 16_777_216.0);
+                let (i, pmf) = cache.sample(&nb, (k as f64 + xi) / n as f64);
+                let light = pool.prefix(i);
+                if pmf > 0.0 && self.bdpt.allowed(light.len(), t) {
+                    let scale = (1.0 / (n as f64 * m * pmf)) as f32;
+                    conn.connect(light, &camera[..t], scale, pos, rng, sink, counters);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrator::bidir::mis::Counts;
+    use crate::sampling::chi2::discrete_chi2;
+    use crate::scene::LoadOptions;
+
+    fn scene() -> Scene {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box/scene.xml");
+        let overrides = vec![("resx".into(), "64".into()), ("resy".into(), "48".into())];
+        Scene::load(&path, &LoadOptions { overrides, ..Default::default() }).unwrap()
+    }
+
+    fn cache(scene: &Scene, paths: usize, term: DistanceTerm) -> (Cache, LightPool) {
+        let limits = WalkLimits::new(8, 3);
+        let (pool, _, _) = LightPool::trace::<Counts>(scene, &limits, paths, 3, 0, None);
+        let opts = PcOptions { stride: 8, ..PcOptions::default() };
+        let (records, _) = trace_records(scene, &limits, &opts, 3, 0);
+        let blend = Blend { neighbours: 6, uniform: 0.5, distance_term: term };
+        let (cache, _) = Cache::build(scene, &pool, records, blend, true);
+        (cache, pool)
+    }
+
+    /// The blended CMF built eagerly, entry by entry over whole rows.
+    fn eager(cache: &Cache, nb: &Neighbours) -> Vec<f64> {
+        (0..cache.v)
+            .map(|i| {
+                let mut sum = cache.blend.uniform as f64 * (i + 1) as f64 / cache.v as f64;
+                for k in 0..nb.len {
+                    sum += nb.weight[k] * cache.row(nb.index[k] as usize)[i] as f64;
+                }
+                sum / nb.norm
+            })
+            .collect()
+    }
+
+    /// Lookups at camera vertices of the scene.
+    fn lookups(scene: &Scene, cache: &Cache, count: usize) -> Vec<Neighbours> {
+        let limits = WalkLimits::new(4, 3);
+        let mut out = Vec::new();
+        let mut path = Vec::new();
+        let mut counters = Counters::default();
+        for i in 0..count as u64 * 4 {
+            let mut rng = Sampler::new(&[99, i]);
+            let pos = rng.next_2d() * Vec2::new(64.0, 48.0);
+            camera_subpath(scene, pos, &limits, &mut rng, &mut path, &mut counters);
+            if let Some(z) = path.get(1 + (i as usize % 3)).filter(|v| v.is_connectible()) {
+                out.push(cache.lookup_vertex(z));
+            }
+            if out.len() == count {
+                break;
+            }
+        }
+        assert_eq!(out.len(), count);
+        out
+    }
+
+    #[test]
+    fn lazy_cmf_is_monotone_ends_at_one_and_equals_the_eager_blend() {
+        let scene = scene();
+        for term in [DistanceTerm::Falloff, DistanceTerm::Printed] {
+            let (cache, _) = cache(&scene, 300, term);
+            assert!(cache.v > 300 && cache.records.len() > 30, "{} × {}", cache.records.len(), cache.v);
+            let mut blended = 0;
+            for nb in lookups(&scene, &cache, 40) {
+                blended += (nb.len > 0) as usize;
+                let e = eager(&cache, &nb);
+                let mut prev = 0.0;
+                for (i, &ei) in e.iter().enumerate() {
+                    let lazy = cache.cmf_at(&nb, i);
+                    assert!(lazy >= prev, "{term:?}: CMF decreases at {i}: {prev} → {lazy}");
+                    assert!((lazy - ei).abs() < 1e-6, "{term:?}: lazy {lazy} vs eager {ei} at {i}");
+                    let pmf = cache.pmf(&nb, i);
+                    // The uniform blend keeps every vertex reachable.
+                    let floor = cache.blend.uniform as f64 / (cache.v as f64 * nb.norm);
+                    assert!(pmf >= floor * (1.0 - 1e-3), "{term:?}: vertex {i} has probability {pmf} < {floor}");
+                    prev = lazy;
+                }
+                assert_eq!(cache.cmf_at(&nb, cache.v - 1), 1.0);
+                assert!((e[cache.v - 1] - 1.0).abs() < 1e-6);
+            }
+            assert!(blended > 20, "only {blended} lookups found records");
+        }
+    }
+
+    #[test]
+    fn drawn_vertices_follow_the_blended_pmf() {
+        let scene = scene();
+        let (cache, _) = cache(&scene, 60, DistanceTerm::Falloff);
+        let nbs: Vec<Neighbours> = lookups(&scene, &cache, 40).into_iter().filter(|nb| nb.len >= 2).take(3).collect();
+        assert_eq!(nbs.len(), 3);
+        let n = 400_000u64;
+        let mut rng = Sampler::new(&[5]);
+        for nb in &nbs {
+            let mut counts = vec![0u64; cache.v];
+            for _ in 0..n {
+                let u = rng.next_1d() as f64 + rng.next_1d() as f64 / 16_777_216.0;
+                let (i, pmf) = cache.sample(nb, u);
+                assert!((pmf - cache.pmf(nb, i)).abs() < 1e-12);
+                counts[i] += 1;
+            }
+            let expected: Vec<f64> = (0..cache.v).map(|i| cache.pmf(nb, i) * n as f64).collect();
+            discrete_chi2(&counts, &expected).assert_pass();
+            // Negative control: the rows' own PMFs without the uniform blend are rejected.
+            let unblended: Vec<f64> = (0..cache.v)
+                .map(|i| {
+                    let mut sum = 0.0;
+                    for k in 0..nb.len {
+                        let row = cache.row(nb.index[k] as usize);
+                        let below = if i == 0 { 0.0 } else { row[i - 1] as f64 };
+                        sum += nb.weight[k] * (row[i] as f64 - below);
+                    }
+                    sum / (nb.norm - cache.blend.uniform as f64) * n as f64
+                })
+                .collect();
+            assert!(!discrete_chi2(&counts, &unblended).passed(), "the unblended PMF was not rejected");
+        }
+    }
+
+    #[test]
+    fn records_without_light_fall_back_to_uniform() {
+        let scene = scene();
+        let (full, pool) = cache(&scene, 200, DistanceTerm::Falloff);
+        // A record that faces away from every pool vertex (seen from behind a wall).
+        let mut rec = full.records[0];
+        rec.vertex.p = Vec3::new(0.0, 0.0, -50.0);
+        let blend = full.blend;
+        let (cache, _) = Cache::build(&scene, &pool, vec![rec], blend, true);
+        assert_eq!(cache.totals[0], 0.0);
+        for (i, &c) in cache.row(0).iter().enumerate() {
+            assert!((c as f64 - (i + 1) as f64 / cache.v as f64).abs() < 1e-6);
+        }
+        let nb = cache.lookup(rec.vertex.p, rec.n, rec.vertex.wo);
+        assert_eq!(nb.len, 1);
+        for i in [0, cache.v / 2, cache.v - 1] {
+            assert!((cache.pmf(&nb, i) - 1.0 / cache.v as f64).abs() < 1e-6);
+        }
+        // No records at all: the uniform distribution alone.
+        let empty = Cache::uniform(10, blend);
+        let nb = empty.lookup(Vec3::ZERO, Vec3::Z, Vec3::Z);
+        assert_eq!(nb.len, 0);
+        assert!((0..10).all(|i| (empty.pmf(&nb, i) - 0.1).abs() < 1e-12));
+        assert_eq!(empty.sample(&nb, 0.55).0, 5);
+    }
+}
