@@ -88,6 +88,15 @@ pub struct MethodEntry {
     pub large_step_prob: Option<f32>,
     pub bootstrap: Option<usize>,
     pub mlt_path_integrator: Option<String>,
+    pub pc_light_paths: Option<usize>,
+    pub pc_connections: Option<u32>,
+    pub pc_cache_stride: Option<u32>,
+    pub pc_cache_depth: Option<u32>,
+    pub pc_visibility: Option<bool>,
+    pub pc_uniform_blend: Option<f32>,
+    pub pc_neighbours: Option<usize>,
+    pub pc_distance_term: Option<String>,
+    pub pc_mis: Option<String>,
 }
 
 fn default_backend() -> String {
@@ -108,6 +117,8 @@ pub struct RunResult {
     pub mean_ratio: f64,
     /// `(seconds, spp, relMSE)` at each checkpoint, then at the end.
     pub curve: Vec<(f64, u32, f64)>,
+    /// Seconds in light pools, cache, camera passes and merging (our integrators).
+    pub phases: Option<integrator::PhaseTimes>,
 }
 
 fn usage(file: &Path, msg: impl std::fmt::Display) -> Error {
@@ -211,6 +222,21 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     if let Some(b) = &m.mlt_path_integrator {
         o.mlt.base = value_enum::<MltBase>(file, "mlt_path_integrator", b)?;
     }
+    let pc = &mut o.bidir.pc;
+    pc.light_paths = m.pc_light_paths.unwrap_or(pc.light_paths);
+    pc.connections = m.pc_connections.unwrap_or(pc.connections);
+    pc.stride = m.pc_cache_stride.unwrap_or(pc.stride);
+    pc.cache_depth = m.pc_cache_depth.unwrap_or(pc.cache_depth);
+    pc.visibility = m.pc_visibility.unwrap_or(pc.visibility);
+    pc.uniform_blend = m.pc_uniform_blend.unwrap_or(pc.uniform_blend);
+    pc.neighbours = m.pc_neighbours.unwrap_or(pc.neighbours);
+    if let Some(t) = &m.pc_distance_term {
+        pc.distance_term = value_enum(file, "pc_distance_term", t)?;
+    }
+    if let Some(x) = &m.pc_mis {
+        pc.mis = value_enum(file, "pc_mis", x)?;
+    }
+    pc.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
     Ok(o)
 }
 
@@ -300,6 +326,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                     flip: compare::flip(&reference, &peer.image, None)?,
                     mean_ratio: metrics.mean_ratio,
                     curve: vec![(peer.seconds, peer.spp, metrics.relmse)],
+                    phases: None,
                 });
                 images.push((m.name.clone(), peer.image));
                 continue;
@@ -333,6 +360,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                 flip: compare::flip(&reference, &img, None)?,
                 mean_ratio: metrics.mean_ratio,
                 curve,
+                phases: Some(r.stats.phases),
             });
             images.push((m.name.clone(), img));
         }
@@ -475,7 +503,7 @@ fn read_pfm(path: &Path) -> Result<Image> {
 /// time (its relMSE over the method's) and the inefficiency `relMSE × seconds`.
 pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
     let mut s = format!(
-        "# {name}\n\n| scene | method | spp | M samples/s | seconds | relMSE | FLIP | mean ratio | speed-up over {baseline} | relMSE × s |\n|---|---|---|---|---|---|---|---|---|---|\n"
+        "# {name}\n\n| scene | method | spp | M samples/s | seconds | relMSE | FLIP | mean ratio | speed-up over {baseline} | relMSE × s | seconds in pool / cache / camera / merge |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
     );
     for r in results {
         let base = results.iter().find(|b| b.scene == r.scene && b.method == baseline);
@@ -483,7 +511,7 @@ pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
             base.map(|b| format!("{:.2}×", b.relmse * b.seconds / (r.relmse * r.seconds))).unwrap_or_default();
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.3} | {:.1} | {:.5} | {:.4} | {:.4} | {} | {:.4} |",
+            "| {} | {} | {} | {:.3} | {:.1} | {:.5} | {:.4} | {:.4} | {} | {:.4} | {} |",
             r.scene,
             r.method,
             r.spp,
@@ -493,7 +521,10 @@ pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
             r.flip,
             r.mean_ratio,
             speedup,
-            r.relmse * r.seconds
+            r.relmse * r.seconds,
+            r.phases
+                .map(|p| format!("{:.1} / {:.1} / {:.1} / {:.1}", p.light_pool, p.cache, p.camera_pass, p.merge))
+                .unwrap_or_default()
         );
     }
     s

@@ -297,7 +297,7 @@ fn bidirectional_integrators_refuse_lights_at_infinity_clearly() {
     let d = tempfile::tempdir().unwrap();
     let s = scene(d.path(), "sky.xml", r#"    <emitter type="constant"><rgb name="radiance" value="1"/></emitter>"#);
     let out = d.path().join("sky.exr");
-    for integrator in ["bdpt", "lighttrace", "eorr", "lvc"] {
+    for integrator in ["bdpt", "lighttrace", "eorr", "lvc", "pcbpt"] {
         let o = pcbpt(&["render", s.to_str().unwrap(), "--integrator", integrator, "-o", out.to_str().unwrap(), "-q"]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{err}");
@@ -391,4 +391,66 @@ fn degenerate_triangles_are_counted_with_a_warning_and_the_render_goes_on() {
     assert!(out.exists());
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     assert_eq!(json["degenerate_triangles"], 1);
+}
+
+#[test]
+fn pcbpt_cache_over_the_memory_limit_is_refused_and_bad_options_are_named() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("pc.exr");
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["render", scene.to_str().unwrap(), "-D", "resx=64", "-D", "resy=64", "--integrator"];
+        args.extend_from_slice(&["pcbpt", "--spp", "2", "-o", out.to_str().unwrap(), "-q"]);
+        args.extend_from_slice(extra);
+        pcbpt(&args)
+    };
+    let o = run(&["--pc-cache-stride", "1", "--pc-max-cache-mb", "1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("--pc-max-cache-mb") && err.contains("20480 records"), "{err}");
+    assert!(!err.contains("panicked") && !out.exists());
+    for (flag, value) in [("--pc-uniform-blend", "0"), ("--pc-connections", "0"), ("--pc-neighbours", "40")] {
+        let o = run(&[flag, value]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(err.contains(flag) && !err.contains("panicked") && !out.exists(), "{err}");
+    }
+}
+
+#[test]
+fn pcbpt_reports_its_phases_cache_and_shadow_rays() {
+    let d = tempfile::tempdir().unwrap();
+    let (out, stats) = (d.path().join("pc.exr"), d.path().join("pc.json"));
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let o = pcbpt(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-D",
+        "resx=64",
+        "-D",
+        "resy=48",
+        "--integrator",
+        "pcbpt",
+        "--pc-cache-stride",
+        "16",
+        "--spp",
+        "3",
+        "-o",
+        out.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("PCBPT cache:") && err.contains("cache "), "{err}");
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let r = &json["render"];
+    let cache = &r["cache"];
+    assert!(cache["records"].as_u64().unwrap() > 0 && cache["pool_vertices"].as_u64().unwrap() > 0, "{cache}");
+    assert!(cache["megabytes"].as_f64().unwrap() > 0.0);
+    for phase in ["light_pool", "cache", "camera_pass"] {
+        assert!(r["shadow_rays"][phase].as_u64().unwrap() > 0, "no shadow rays in {phase}: {r}");
+        assert!(r["phases"][phase].as_f64().unwrap() > 0.0, "no time in {phase}: {r}");
+    }
+    assert_eq!(r["bidir"]["pc"]["light_paths"].as_u64(), Some(1000));
 }

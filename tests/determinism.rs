@@ -21,7 +21,13 @@ fn path_tracer_is_bit_identical_with_1_and_2_threads() {
 #[test]
 fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
-    for kind in [IntegratorKind::Lighttrace, IntegratorKind::Bdpt, IntegratorKind::Eorr, IntegratorKind::Lvc] {
+    for kind in [
+        IntegratorKind::Lighttrace,
+        IntegratorKind::Bdpt,
+        IntegratorKind::Eorr,
+        IntegratorKind::Lvc,
+        IntegratorKind::Pcbpt,
+    ] {
         // Several passes, so EORR's thresholds and LVC's pools come from earlier passes.
         let one = render(&scene, kind, 4, 42, 1);
         let two = render(&scene, kind, 4, 42, 2);

@@ -48,14 +48,14 @@ const VEACH_AJAR: Case = Case {
     reference: "veach-ajar.exr",
     ref_noise: 4.5e-3,
     mean_cutoff: None,
-    spp: 64,
+    spp: 128,
 };
 
 fn render(case: &Case, mis: PcMis, term: DistanceTerm, seed: u64) -> Image {
     let scene = load(&root().join(case.scene), case.defines, Backend::Embree);
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(case.spp));
     o.seed = seed;
-    o.bidir.pc = PcOptions { mis, distance_term: term, light_paths: 400, ..PcOptions::default() };
+    o.bidir.pc = PcOptions { mis, distance_term: term, ..PcOptions::default() };
     let out = integrator::render(&scene, &o).unwrap();
     Image::new(out.width, out.height, out.image)
 }

@@ -554,9 +554,14 @@ fn check_memory(
 /// Traces PCBPT's record pixels for iteration `iteration` and evaluates their PMFs over
 /// `pool`. Records beyond what `--pc-max-cache-mb` holds (possible only when a pool is much
 /// larger than the pilot promised) are left out: lookups then blend fewer records.
-fn build_cache(scene: &Scene, pc: &Pcbpt, pool: &LightPool, seed: u64, iteration: u64) -> (Cache, CacheStats, Counters) {
-    let (mut records, mut counters) =
-        bidir::pcbpt::trace_records(scene, &pc.bdpt.limits, &pc.opts, seed, iteration);
+fn build_cache(
+    scene: &Scene,
+    pc: &Pcbpt,
+    pool: &LightPool,
+    seed: u64,
+    iteration: u64,
+) -> (Cache, CacheStats, Counters) {
+    let (mut records, mut counters) = bidir::pcbpt::trace_records(scene, &pc.bdpt.limits, &pc.opts, seed, iteration);
     let v = pool.connectible.len();
     let fit = (pc.opts.max_cache_mb as f64 * 1024.0 * 1024.0 / Cache::bytes(1, v)).floor() as usize;
     let dropped = records.len().saturating_sub(fit);
@@ -604,8 +609,11 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         Budget::Time(_) => (1, u32::MAX),
     };
     let pixels = w as f32 * h as f32;
-    let counts =
-        PassCounts::Fixed(if opts.integrator == IntegratorKind::Lighttrace { Counts::LightTrace } else { Counts::Bdpt });
+    let counts = PassCounts::Fixed(if opts.integrator == IntegratorKind::Lighttrace {
+        Counts::LightTrace
+    } else {
+        Counts::Bdpt
+    });
     let bar = progress_bar(opts, w, h);
     let mut done = 0u32;
     let mut passes = 0u32;
@@ -620,8 +628,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         // pool before the first).
         let mut vbar = match est.pool_paths() {
             Some((m, bdpt)) => {
-                let (p, _, _) =
-                    LightPool::trace::<Counts>(scene, &bdpt.limits, m, opts.seed, PILOT_ITERATION, None);
+                let (p, _, _) = LightPool::trace::<Counts>(scene, &bdpt.limits, m, opts.seed, PILOT_ITERATION, None);
                 match check_memory(&est, &opts.bidir, &p, w, h) {
                     Ok(()) => p.mean_vertices(),
                     Err(e) => {

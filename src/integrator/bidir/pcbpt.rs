@@ -92,7 +92,7 @@ impl Default for PcOptions {
         PcOptions {
             light_paths: 1000,
             connections: 3,
-            stride: 16,
+            stride: 64,
             cache_depth: 5,
             visibility: true,
             uniform_blend: 0.5,
@@ -163,10 +163,7 @@ pub fn trace_records(
     seed: u64,
     iteration: u64,
 ) -> (Vec<Record>, Counters) {
-    let limits = WalkLimits {
-        camera_vertices: limits.camera_vertices.min(opts.cache_depth as usize + 1),
-        ..*limits
-    };
+    let limits = WalkLimits { camera_vertices: limits.camera_vertices.min(opts.cache_depth as usize + 1), ..*limits };
     let tile_list = tiles(scene.film.width, scene.film.height, opts.stride);
     let parts: Vec<(Vec<Record>, Counters)> = tile_list
         .par_chunks(64)
@@ -179,10 +176,14 @@ pub fn trace_records(
             for (i, tile) in chunk.iter().enumerate() {
                 let mut rng = Sampler::new(&[seed, CACHE_STREAM, iteration, (c * 64 + i) as u64]);
                 let u = rng.next_2d();
-                let pos = Vec2::new(tile.x0 as f32 + u.x * tile.width as f32, tile.y0 as f32 + u.y * tile.height as f32);
+                let pos =
+                    Vec2::new(tile.x0 as f32 + u.x * tile.width as f32, tile.y0 as f32 + u.y * tile.height as f32);
                 camera_subpath(scene, pos, &limits, &mut rng, &mut path, &mut counters);
                 records.extend(
-                    path.iter().skip(1).filter(|v| v.kind == VertexKind::Surface && v.is_connectible()).map(Record::new),
+                    path.iter()
+                        .skip(1)
+                        .filter(|v| v.kind == VertexKind::Surface && v.is_connectible())
+                        .map(Record::new),
                 );
             }
             (records, counters)
@@ -267,7 +268,16 @@ fn target(scene: &Scene, y: &Vertex, alpha: Rgb, wo: Vec3, rec: &Record, clamp2:
 impl Cache {
     /// An empty cache over a pool of `v` vertices: every lookup is uniform.
     pub fn uniform(v: usize, blend: Blend) -> Cache {
-        Cache { id: next_id(), records: Vec::new(), tree: None, cmf: Vec::new(), totals: Vec::new(), v, blend, clamp2: 0.0 }
+        Cache {
+            id: next_id(),
+            records: Vec::new(),
+            tree: None,
+            cmf: Vec::new(),
+            totals: Vec::new(),
+            v,
+            blend,
+            clamp2: 0.0,
+        }
     }
 
     /// Bytes the CMFs of `records` records over `v` vertices take.
@@ -490,7 +500,6 @@ impl Cache {
         }
         (sum / nb.norm) as f32
     }
-
 }
 
 /// The throughputs `α_L(x_k)`, `1 <= k < out.len()`, that a light subpath along the full

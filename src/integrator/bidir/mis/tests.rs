@@ -4,11 +4,11 @@
 //! weights computed from full path densities.
 
 use super::*;
-use crate::integrator::bidir::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcOptions, trace_records};
-use crate::integrator::bidir::pool::LightPool;
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::integrator::Counters;
+use crate::integrator::bidir::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcOptions, trace_records};
+use crate::integrator::bidir::pool::LightPool;
 use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
 use crate::light::{Light, LightSampler};
 use crate::math::{Frame, Rgb};
