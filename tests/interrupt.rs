@@ -30,8 +30,8 @@ fn interrupt_with(signal: &str) {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // Let it load the scene and render a few passes.
-    std::thread::sleep(Duration::from_millis(1500));
+    // Let it load the scene and render a few passes, with room for a loaded machine.
+    std::thread::sleep(Duration::from_millis(3000));
     let status = Command::new("kill").args([signal, &child.id().to_string()]).status().unwrap();
     assert!(status.success());
     let start = Instant::now();

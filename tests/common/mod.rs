@@ -109,3 +109,63 @@ impl Verdict {
         Ok(())
     }
 }
+
+/// A test scene and its Mitsuba 3 path-tracer reference in `tests/data`.
+///
+/// The references are path-traced, so their noise is the path tracer's at the reference
+/// sample count, measured with our path tracer (same estimator): cornell-ply 5.09e-3 at 64 spp
+/// → 8.0e-5 at 4096; veach-mis 2.82e-3 at 64 spp → 2.2e-5 at 8192; veach-ajar 0.29 at 256 spp
+/// → 4.5e-3 at 16384.
+pub struct Case {
+    pub name: &'static str,
+    pub scene: &'static str,
+    pub defines: &'static [(&'static str, &'static str)],
+    pub reference: &'static str,
+    pub ref_noise: f64,
+    /// Pixels brighter than this in the reference are left out of the mean (tiny emitters).
+    pub mean_cutoff: Option<f32>,
+}
+
+pub const CORNELL_PLY: Case = Case {
+    name: "cornell-ply",
+    scene: "scenes/cornell-ply/cornell_mi.xml",
+    defines: &[],
+    reference: "cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr",
+    ref_noise: 8.0e-5,
+    mean_cutoff: None,
+};
+
+pub const VEACH_MIS: Case = Case {
+    name: "veach-mis",
+    scene: "scenes/veach-mis/scene.xml",
+    defines: &[("resx", "192"), ("resy", "108")],
+    reference: "veach-mis.exr",
+    ref_noise: 2.2e-5,
+    mean_cutoff: Some(100.0),
+};
+
+pub const VEACH_AJAR: Case = Case {
+    name: "veach-ajar",
+    scene: "scenes/veach-ajar/scene.xml",
+    defines: &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
+    reference: "veach-ajar.exr",
+    ref_noise: 4.5e-3,
+    mean_cutoff: None,
+};
+
+impl Case {
+    pub fn scene(&self) -> Scene {
+        load(&root().join(self.scene), self.defines, Backend::Embree)
+    }
+
+    /// Two renders `a` and `b` with different seeds, averaged, against the reference: image
+    /// mean within 0.5% and relMSE within 1.3× of half their noise plus the reference's.
+    pub fn check(&self, a: &Image, b: &Image, what: &str) {
+        let reference = reference(self.reference);
+        let (mut v, avg) = Verdict::averaged(&reference, a, b, self.ref_noise);
+        if let Some(cutoff) = self.mean_cutoff {
+            v = v.excluding_emitters(&reference, &avg, cutoff);
+        }
+        v.check(&format!("{}, {what}", self.name), 0.005, 1.3).unwrap();
+    }
+}

@@ -162,9 +162,10 @@ impl Vertex {
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
         match self.kind {
             VertexKind::Surface => {
-                let f = self.scatter(scene, self.wo, w, mode);
-                let (wo, wi) = (self.frame.to_local(self.wo), self.frame.to_local(w));
-                let (pdf_fwd, pdf_rev) = self.bsdf(scene).pdf_pair(wo, wi, self.uv, mode);
+                let bsdf = self.bsdf(scene);
+                let (lo, li) = (self.frame.to_local(self.wo), self.frame.to_local(w));
+                let f = self.scatter_local(bsdf, self.wo, w, lo, li, mode);
+                let (pdf_fwd, pdf_rev) = bsdf.pdf_pair(lo, li, self.uv, mode);
                 End { f, pdf_fwd, pdf_rev }
             }
             VertexKind::Light(l) => {
@@ -185,7 +186,22 @@ impl Vertex {
     #[inline]
     pub fn scatter(&self, scene: &Scene, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
         let (lo, li) = (self.frame.to_local(wo), self.frame.to_local(wi));
-        let mut f = self.bsdf(scene).eval(lo, li, self.uv, mode) * li.z.abs();
+        self.scatter_local(self.bsdf(scene), wo, wi, lo, li, mode)
+    }
+
+    /// [`Vertex::scatter`] with `bsdf` looked up and the directions also given in the shading
+    /// frame (`lo`, `li`), for callers that need them for densities too.
+    #[inline]
+    pub fn scatter_local(
+        &self,
+        bsdf: &crate::bsdf::Bsdf,
+        wo: Vec3,
+        wi: Vec3,
+        lo: Vec3,
+        li: Vec3,
+        mode: TransportMode,
+    ) -> Rgb {
+        let mut f = bsdf.eval(lo, li, self.uv, mode) * li.z.abs();
         if mode == TransportMode::Importance {
             f *= shading_correction(self.ng, self.frame.n, wo, wi);
         }

@@ -23,7 +23,7 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::mis::{FullPath, StrategyCounts};
-use super::pool::LightPool;
+use super::pool::{LightPool, PoolPass, PoolSelection};
 use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, visible};
 use crate::bsdf::TransportMode;
 use crate::film::tiles;
@@ -524,8 +524,10 @@ pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
         let x = path.get(i);
         let wo = (path.get(i - 1).p - x.p).normalize_or_zero();
         let wi = (path.get(i + 1).p - x.p).normalize_or_zero();
-        let f = x.scatter(scene, wo, wi, TransportMode::Importance);
-        let pdf = x.bsdf(scene).pdf(x.frame.to_local(wo), x.frame.to_local(wi), x.uv, TransportMode::Importance);
+        let bsdf = x.bsdf(scene);
+        let (lo, li) = (x.frame.to_local(wo), x.frame.to_local(wi));
+        let f = x.scatter_local(bsdf, wo, wi, lo, li, TransportMode::Importance);
+        let pdf = bsdf.pdf(lo, li, x.uv, TransportMode::Importance);
         if pdf <= 0.0 || f == Rgb::ZERO {
             return;
         }
@@ -549,50 +551,48 @@ pub struct PcCounts<'a> {
     pub previous: Option<&'a Cache>,
 }
 
-impl StrategyCounts for PcCounts<'_> {
+impl PcCounts<'_> {
+    /// `n(s,t)`; `alpha` gives the light throughput at `y_{s-1}` (asked only for resampling).
     #[inline]
-    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+    fn count_with(&self, path: &FullPath, s: usize, t: usize, alpha: impl FnOnce() -> Rgb) -> f32 {
         match (s, t) {
             (_, 1) => self.light_trace,
             (0 | 1, _) => 1.0,
             _ => match self.previous {
                 None => self.uniform,
-                Some(cache) => {
-                    let mut alpha = [Rgb::ZERO; super::mis::CAP];
-                    light_throughputs(self.scene, path, &mut alpha[..s]);
-                    self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha[s - 1])
-                }
+                Some(cache) => self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha()),
             },
         }
+    }
+}
+
+impl StrategyCounts for PcCounts<'_> {
+    #[inline]
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+        self.count_with(path, s, t, || {
+            let mut alpha = [Rgb::ZERO; super::mis::CAP];
+            light_throughputs(self.scene, path, &mut alpha[..s]);
+            alpha[s - 1]
+        })
     }
 
     fn path_dependent(&self) -> bool {
         self.previous.is_some()
     }
 
-    /// Resampling counts of a whole path with one pass for the light throughputs.
+    /// Counts of a whole path with one pass for the light throughputs.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
         let n = path.len();
-        let Some(cache) = self.previous else {
-            for (s, o) in out.iter_mut().enumerate().take(n) {
-                *o = self.count(path, s, n - s);
-            }
-            return;
-        };
-        let last = (2..n.saturating_sub(1)).rev().find(|&s| needed(s));
         let mut alpha = [Rgb::ZERO; super::mis::CAP];
-        if let Some(last) = last {
+        if self.previous.is_some()
+            && let Some(last) = (2..n.saturating_sub(1)).rev().find(|&s| needed(s))
+        {
             light_throughputs(self.scene, path, &mut alpha[..last]);
         }
         for (s, o) in out.iter_mut().enumerate().take(n) {
-            if !needed(s) {
-                continue;
+            if needed(s) {
+                *o = self.count_with(path, s, n - s, || alpha[s - 1]);
             }
-            *o = match (s, n - s) {
-                (_, 1) => self.light_trace,
-                (0 | 1, _) => 1.0,
-                _ => self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha[s - 1]),
-            };
         }
     }
 }
@@ -618,33 +618,32 @@ impl Pcbpt {
         sink: &mut impl Sink,
         counters: &mut Counters,
     ) {
-        let scene = conn.scene;
-        camera_subpath(scene, pos, &self.bdpt.limits, rng, &mut scratch.camera, counters);
-        let camera = &scratch.camera;
-        let n = self.opts.connections;
-        let m = pool.paths.max(1) as f64;
-        for t in 2..=camera.len() {
-            if self.bdpt.allowed(0, t) {
-                conn.emission(&camera[..t], sink);
-            }
-            if self.bdpt.allowed(1, t) {
-                conn.next_event(&camera[..t], pos, rng, sink, counters);
-            }
-            if cache.v == 0 || !camera[t - 1].is_connectible() {
-                continue;
-            }
-            let nb = cache.lookup_vertex(&camera[t - 1]);
-            for k in 0..n {
-                // Stratified draws with 48 random bits each.
-                let xi = rng.next_1d() as f64 + rng.next_1d() as f64 * (1.0 / 16_777_216.0);
-                let (i, pmf) = cache.sample(&nb, (k as f64 + xi) / n as f64);
-                let light = pool.prefix(i);
-                if pmf > 0.0 && self.bdpt.allowed(light.len(), t) {
-                    let scale = (1.0 / (n as f64 * m * pmf)) as f32;
-                    conn.connect(light, &camera[..t], scale, pos, rng, sink, counters);
-                }
-            }
-        }
+        let select = CacheSelection { cache, paths: pool.paths.max(1) as f64 };
+        let pass = PoolPass { bdpt: &self.bdpt, connections: self.opts.connections, conn, pool };
+        pass.sample(&select, pos, rng, scratch, sink, counters);
+    }
+}
+
+/// Selection from the cache's blended PMFs: stratified draws, each weighing
+/// `1 / (N M PMF)`.
+struct CacheSelection<'a> {
+    cache: &'a Cache,
+    paths: f64,
+}
+
+impl PoolSelection for CacheSelection<'_> {
+    type Lookup = Neighbours;
+
+    fn lookup(&self, z: &Vertex) -> Neighbours {
+        self.cache.lookup_vertex(z)
+    }
+
+    #[inline]
+    fn draw<R: Random>(&self, nb: &Neighbours, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)> {
+        // Stratified draws with 48 random bits each.
+        let xi = rng.next_1d() as f64 + rng.next_1d() as f64 * (1.0 / 16_777_216.0);
+        let (i, pmf) = self.cache.sample(nb, (k as f64 + xi) / n as f64);
+        (pmf > 0.0).then(|| (i, (1.0 / (n as f64 * self.paths * pmf)) as f32))
     }
 }
 

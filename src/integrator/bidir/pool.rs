@@ -149,25 +149,78 @@ impl Lvc {
         sink: &mut impl Sink,
         counters: &mut Counters,
     ) {
-        let scene = conn.scene;
-        camera_subpath(scene, pos, &self.bdpt.limits, rng, &mut scratch.camera, counters);
-        let camera = &scratch.camera;
         let v = pool.connectible.len();
-        let scale = v as f32 / (pool.paths.max(1) as f32 * self.connections as f32);
+        let select = Uniform { v, scale: v as f32 / (pool.paths.max(1) as f32 * self.connections as f32) };
+        let pass = PoolPass { bdpt: &self.bdpt, connections: self.connections, conn, pool };
+        pass.sample(&select, pos, rng, scratch, sink, counters);
+    }
+}
+
+/// How a pool integrator picks the pool vertices a camera vertex connects to.
+pub trait PoolSelection {
+    /// What the draws of one camera vertex share.
+    type Lookup;
+    fn lookup(&self, z: &Vertex) -> Self::Lookup;
+    /// Draw `k` of `n` for a camera vertex: a connectible pool index and the factor
+    /// `1 / (N M P)` of its contribution, or `None` when the draw is wasted.
+    fn draw<R: Random>(&self, lookup: &Self::Lookup, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)>;
+}
+
+/// Uniform selection over the pool's `v` vertices (LVC): each draw weighs `V / (N M)`.
+struct Uniform {
+    v: usize,
+    scale: f32,
+}
+
+impl PoolSelection for Uniform {
+    type Lookup = ();
+
+    fn lookup(&self, _z: &Vertex) {}
+
+    #[inline]
+    fn draw<R: Random>(&self, _: &(), _k: u32, _n: u32, rng: &mut R) -> Option<(usize, f32)> {
+        Some((((rng.next_1d() * self.v as f32) as usize).min(self.v - 1), self.scale))
+    }
+}
+
+/// The camera pass of the pool integrators: per camera sample, BDPT's `s = 0` and `s = 1`
+/// strategies at every camera vertex and `connections` connections to pool vertices chosen
+/// by a [`PoolSelection`].
+pub struct PoolPass<'a, C> {
+    pub bdpt: &'a Bdpt,
+    pub connections: u32,
+    pub conn: &'a Connector<'a, C>,
+    pub pool: &'a LightPool,
+}
+
+impl<C: StrategyCounts> PoolPass<'_, C> {
+    pub fn sample<R: Random, P: PoolSelection>(
+        &self,
+        select: &P,
+        pos: Vec2,
+        rng: &mut R,
+        scratch: &mut Scratch,
+        sink: &mut impl Sink,
+        counters: &mut Counters,
+    ) {
+        let (conn, bdpt) = (self.conn, self.bdpt);
+        camera_subpath(conn.scene, pos, &bdpt.limits, rng, &mut scratch.camera, counters);
+        let camera = &scratch.camera;
         for t in 2..=camera.len() {
-            if self.bdpt.allowed(0, t) {
+            if bdpt.allowed(0, t) {
                 conn.emission(&camera[..t], sink);
             }
-            if self.bdpt.allowed(1, t) {
+            if bdpt.allowed(1, t) {
                 conn.next_event(&camera[..t], pos, rng, sink, counters);
             }
-            if v == 0 || !camera[t - 1].is_connectible() {
+            if self.pool.connectible.is_empty() || !camera[t - 1].is_connectible() {
                 continue;
             }
-            for _ in 0..self.connections {
-                let k = ((rng.next_1d() * v as f32) as usize).min(v - 1);
-                let light = pool.prefix(k);
-                if self.bdpt.allowed(light.len(), t) {
+            let lookup = select.lookup(&camera[t - 1]);
+            for k in 0..self.connections {
+                let Some((i, scale)) = select.draw(&lookup, k, self.connections, rng) else { continue };
+                let light = self.pool.prefix(i);
+                if bdpt.allowed(light.len(), t) {
                     conn.connect(light, &camera[..t], scale, pos, rng, sink, counters);
                 }
             }
