@@ -47,7 +47,16 @@ pub const MAX_PIXELS: u64 = 1 << 28;
 impl Scene {
     /// Loads a Mitsuba XML scene and builds its accelerator.
     pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
-        let doc = xml::parse_file(path, &options.overrides)?;
+        Scene::from_document(xml::parse_file(path, &options.overrides)?, path, options)
+    }
+
+    /// Loads scene text as if read from `path` (messages name it; meshes, textures and
+    /// includes resolve against its folder).
+    pub fn load_str(text: &str, path: &Path, options: &LoadOptions) -> Result<Scene> {
+        Scene::from_document(xml::parse_str(text, path, &options.overrides)?, path, options)
+    }
+
+    fn from_document(doc: Document, path: &Path, options: &LoadOptions) -> Result<Scene> {
         let mut b = Builder {
             doc: &doc,
             base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
@@ -524,6 +533,15 @@ impl<'d> Builder<'d> {
             }
             Some(b) => self.bsdf(b)?,
         };
+        let placed = match &geometry {
+            ShapeGeometry::Mesh(m) => m.position_out_of_range().map(|i| mesh::out_of_range_message(i, m.positions[i])),
+            ShapeGeometry::Sphere { center, radius } => (!(center.is_finite()
+                && center.abs().max_element() + radius <= mesh::MAX_COORDINATE))
+                .then(|| format!("the sphere reaches beyond ±{:e}", mesh::MAX_COORDINATE)),
+        };
+        if let Some(msg) = placed {
+            return Err(Error::input(&node.loc, format!("after to_world, {msg}")));
+        }
         let mut shape = Shape::new(geometry, bsdf, flip_normals, name);
         if let ShapeGeometry::Mesh(m) = &shape.geometry {
             self.stats.triangles += m.indices.len();

@@ -56,7 +56,14 @@ impl TriangleMesh {
             .count()
     }
 
-    fn check(&self, file: &Path) -> Result<()> {
+    /// The first vertex that is not finite or lies beyond ±[`MAX_COORDINATE`].
+    pub fn position_out_of_range(&self) -> Option<usize> {
+        self.positions.iter().position(|p| !(p.is_finite() && p.abs().max_element() <= MAX_COORDINATE))
+    }
+
+    /// Checks what every loaded mesh guarantees: triangles, indices in range, finite
+    /// positions, one normal and one uv per vertex where present (errors name `file`).
+    pub fn validate(&self, file: &Path) -> Result<()> {
         if self.indices.is_empty() {
             return Err(Error::in_file(file, "the mesh has no triangles"));
         }
@@ -70,8 +77,8 @@ impl TriangleMesh {
                 ),
             ));
         }
-        if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(Error::in_file(file, format!("vertex {i} is not finite ({})", self.positions[i])));
+        if let Some(i) = self.position_out_of_range() {
+            return Err(Error::in_file(file, out_of_range_message(i, self.positions[i])));
         }
         if let Some(ns) = &self.normals
             && ns.len() != n
@@ -87,11 +94,32 @@ impl TriangleMesh {
     }
 }
 
+/// The largest vertex coordinate accepted: edge vectors and their cross products (the
+/// triangle areas light sampling needs) stay finite in single precision below it.
+pub const MAX_COORDINATE: f32 = 1e16;
+
+/// The error message for a vertex rejected by [`TriangleMesh::position_out_of_range`].
+pub fn out_of_range_message(i: usize, p: Vec3) -> String {
+    if p.is_finite() {
+        format!("vertex {i} at {p} lies beyond ±{MAX_COORDINATE:e}, the range of single-precision geometry")
+    } else {
+        format!("vertex {i} is not finite ({p})")
+    }
+}
+
 /// Loads a Wavefront OBJ file (all its objects merged into one mesh).
 pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
+    let bytes = std::fs::read(path).map_err(|e| Error::in_file(path, format!("cannot load OBJ: {e}")))?;
+    obj_from_bytes(&bytes, path)
+}
+
+/// Parses OBJ text as if read from `path` (messages name it). Material libraries are
+/// not read: materials come from the scene file.
+pub fn obj_from_bytes(bytes: &[u8], path: &Path) -> Result<TriangleMesh> {
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true };
     let (models, _materials) =
-        tobj::load_obj(path, &opts).map_err(|e| Error::in_file(path, format!("cannot load OBJ: {e}")))?;
+        tobj::load_obj_buf(&mut std::io::Cursor::new(bytes), &opts, |_| Err(tobj::LoadError::OpenFileFailed))
+            .map_err(|e| Error::in_file(path, format!("cannot load OBJ: {e}")))?;
     let mut mesh = TriangleMesh::default();
     let all_normals = models.iter().all(|m| !m.mesh.normals.is_empty());
     let all_uvs = models.iter().all(|m| !m.mesh.texcoords.is_empty());
@@ -117,7 +145,7 @@ pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
     if all_uvs && !uvs.is_empty() {
         mesh.uvs = Some(uvs);
     }
-    mesh.check(path)?;
+    mesh.validate(path)?;
     Ok(mesh)
 }
 
@@ -125,9 +153,14 @@ pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
 /// optional `nx ny nz` and `u v` (or `s t`, `texture_u texture_v`); `face` with a
 /// `vertex_indices` (or `vertex_index`) list, polygons fanned into triangles.
 pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
+    let bytes = std::fs::read(path).map_err(|e| Error::in_file(path, format!("cannot open PLY file: {e}")))?;
+    ply_from_bytes(&bytes, path)
+}
+
+/// Parses PLY data as if read from `path` (messages name it).
+pub fn ply_from_bytes(bytes: &[u8], path: &Path) -> Result<TriangleMesh> {
     use ply_rs_bw::{parser::Parser, ply::DefaultElement, ply::Property};
-    let file = std::fs::File::open(path).map_err(|e| Error::in_file(path, format!("cannot open PLY file: {e}")))?;
-    let mut reader = std::io::BufReader::new(file);
+    let mut reader = std::io::Cursor::new(bytes);
     let ply = Parser::<DefaultElement>::new()
         .read_ply(&mut reader)
         .map_err(|e| Error::in_file(path, format!("cannot parse PLY: {e}")))?;
@@ -193,7 +226,7 @@ pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
     if uv_key.is_some() {
         mesh.uvs = Some(uvs);
     }
-    mesh.check(path)?;
+    mesh.validate(path)?;
     Ok(mesh)
 }
 

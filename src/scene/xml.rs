@@ -239,8 +239,18 @@ impl Document {
     }
 }
 
+/// The longest attribute value `$parameter` substitution may produce (nested `<default>`s
+/// could otherwise grow a value exponentially).
+const MAX_SUBSTITUTED: usize = 1 << 20;
+
 /// Reads and parses a scene file with command-line parameter overrides.
 pub fn parse_file(path: &Path, overrides: &[(String, String)]) -> Result<Document> {
+    parse_str(&Parser::read(path)?, path, overrides)
+}
+
+/// Parses scene text as if read from `path`: messages name `path`, and `<include>`s
+/// resolve against its folder.
+pub fn parse_str(text: &str, path: &Path, overrides: &[(String, String)]) -> Result<Document> {
     let mut p = Parser {
         nodes: Vec::new(),
         ids: HashMap::new(),
@@ -249,7 +259,7 @@ pub fn parse_file(path: &Path, overrides: &[(String, String)]) -> Result<Documen
         pending_refs: Vec::new(),
         include_depth: 0,
     };
-    let root = p.parse_root(path)?;
+    let root = p.parse_root(path, text)?;
     p.resolve_refs()?;
     Ok(Document { nodes: p.nodes, root, path: path.to_path_buf(), params: p.params })
 }
@@ -314,9 +324,8 @@ impl Parser {
         })
     }
 
-    fn parse_root(&mut self, path: &Path) -> Result<NodeId> {
-        let text = Self::read(path)?;
-        let doc = roxmltree::Document::parse(&text).map_err(|e| xml_error(path, &e))?;
+    fn parse_root(&mut self, path: &Path, text: &str) -> Result<NodeId> {
+        let doc = roxmltree::Document::parse(text).map_err(|e| xml_error(path, &e))?;
         let root = doc.root_element();
         let ctx0 = FileCtx { path: Arc::new(path.to_path_buf()), upgrade: false };
         let loc = ctx0.loc(&doc, root);
@@ -363,6 +372,12 @@ impl Parser {
                 let name = &after[..len];
                 let v = self.overrides.get(name).or_else(|| self.params.get(name)).ok_or_else(|| Error::input(loc, format!("undefined parameter \"${name}\" (declare it with <default name=\"{name}\" …/> or pass -D {name}=…)")))?;
                 out.push_str(v);
+                if out.len() > MAX_SUBSTITUTED {
+                    return Err(Error::input(
+                        loc,
+                        format!("parameter substitution in \"{value}\" grows beyond {MAX_SUBSTITUTED} bytes"),
+                    ));
+                }
                 rest = &after[len..];
             }
             out.push_str(rest);
