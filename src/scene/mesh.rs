@@ -159,11 +159,26 @@ pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
 
 /// Parses PLY data as if read from `path` (messages name it).
 pub fn ply_from_bytes(bytes: &[u8], path: &Path) -> Result<TriangleMesh> {
-    use ply_rs_bw::{parser::Parser, ply::DefaultElement, ply::Property};
-    let mut reader = std::io::Cursor::new(bytes);
-    let ply = Parser::<DefaultElement>::new()
-        .read_ply(&mut reader)
-        .map_err(|e| Error::in_file(path, format!("cannot parse PLY: {e}")))?;
+    use ply_rs_bw::{parser::Parser, parser::Reader, ply::DefaultElement, ply::Property};
+    let parse_error = |e: ply_rs_bw::parser::ParseError| Error::in_file(path, format!("cannot parse PLY: {e}"));
+    let mut reader = Reader::new(std::io::Cursor::new(bytes));
+    let parser = Parser::<DefaultElement>::new();
+    let header = parser.read_header(&mut reader).map_err(parse_error)?;
+    // Every element takes at least one byte, but one without properties takes none and
+    // would be read `count` times from nothing: refuse counts the file cannot hold.
+    if let Some(e) = header.elements.values().find(|e| e.count > bytes.len()) {
+        return Err(Error::in_file(
+            path,
+            format!(
+                "PLY element \"{}\" claims {} entries, more than the file's {} bytes",
+                e.name,
+                e.count,
+                bytes.len()
+            ),
+        ));
+    }
+    let payload = parser.read_payload(&mut reader, &header).map_err(parse_error)?;
+    let ply = ply_rs_bw::ply::Ply { header, payload };
     let verts = ply.payload.get("vertex").ok_or_else(|| Error::in_file(path, "PLY file has no \"vertex\" element"))?;
     let faces = ply.payload.get("face").ok_or_else(|| Error::in_file(path, "PLY file has no \"face\" element"))?;
     let scalar = |e: &DefaultElement, k: &str| e.get(k).and_then(|p| p.to_f32_lossy());
