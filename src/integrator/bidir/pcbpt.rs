@@ -40,6 +40,13 @@ use serde::Serialize;
 const CACHE_STREAM: u64 = 0x6361_6368;
 /// Most records one lookup blends.
 pub const MAX_NEIGHBOURS: usize = 16;
+
+/// Caches of at most this many records find neighbours by a linear scan.
+const LINEAR_SCAN: usize = 128;
+
+/// CMF entries per block of the two-level search: the blended CMF is first searched over
+/// the block ends (a compact copy of every record's CMF at them), then inside one block.
+const BLOCK: usize = 64;
 /// The target's geometry term is clamped at distances below this fraction of the scene's
 /// bounding radius (the `1/d²` singularity).
 const CLAMP_FRACTION: f32 = 0.01;
@@ -230,14 +237,40 @@ pub struct Cache {
     id: u64,
     pub records: Vec<Record>,
     tree: Option<KdTree<f32, 3>>,
+    /// Record positions by axis, for the linear scan of small caches.
+    axes: [Vec<f32>; 3],
     /// `records × v` normalised CMFs, record after record.
     cmf: Vec<f32>,
+    /// `records × blocks`: each record's CMF at the last index of every [`BLOCK`].
+    block_ends: Vec<f32>,
     /// `Q_c` of each record (0: the record falls back to uniform).
     pub totals: Vec<f64>,
     /// Pool vertices `V`.
     pub v: usize,
+    /// `1 / V`.
+    inv_v: f64,
     pub blend: Blend,
     clamp2: f32,
+}
+
+/// The smallest `i < n` with `f(i) > target` for a non-decreasing `f` with `f(n - 1) > target`,
+/// by a binary search whose steps are branch-free selects.
+#[inline(always)]
+fn first_above(n: usize, target: f64, f: impl Fn(usize) -> f64) -> usize {
+    let (mut base, mut len) = (0usize, n);
+    while len > 1 {
+        let half = len / 2;
+        let mid = base + half;
+        base = if f(mid - 1) <= target { mid } else { base };
+        len -= half;
+    }
+    base
+}
+
+/// The last CMF index of block `j` over `v` entries.
+#[inline]
+fn block_end(j: usize, v: usize) -> usize {
+    ((j + 1) * BLOCK).min(v) - 1
 }
 
 /// A fresh cache identity.
@@ -272,7 +305,10 @@ impl Cache {
             id: next_id(),
             records: Vec::new(),
             tree: None,
+            axes: Default::default(),
             cmf: Vec::new(),
+            block_ends: Vec::new(),
+            inv_v: 1.0 / v.max(1) as f64,
             totals: Vec::new(),
             v,
             blend,
@@ -282,7 +318,7 @@ impl Cache {
 
     /// Bytes the CMFs of `records` records over `v` vertices take.
     pub fn bytes(records: usize, v: usize) -> f64 {
-        records as f64 * (v as f64 * 4.0 + 8.0 + std::mem::size_of::<Record>() as f64)
+        records as f64 * ((v + v.div_ceil(BLOCK)) as f64 * 4.0 + 8.0 + std::mem::size_of::<Record>() as f64)
     }
 
     /// Evaluates every record's PMF over the pool (in parallel over records, shadow rays
@@ -340,7 +376,14 @@ impl Cache {
         }
         let points: Vec<[f32; 3]> = records.iter().map(|r| r.vertex.p.to_array()).collect();
         let tree = (!points.is_empty()).then(|| KdTree::from(&points));
-        (Cache { id: next_id(), records, tree, cmf, totals, v, blend, clamp2 }, counters)
+        let block_ends = if v == 0 {
+            Vec::new()
+        } else {
+            cmf.chunks_exact(v).flat_map(|row| (0..v.div_ceil(BLOCK)).map(|j| row[block_end(j, v)])).collect()
+        };
+        let inv_v = 1.0 / v.max(1) as f64;
+        let axes = [0, 1, 2].map(|a| points.iter().map(|p| p[a]).collect());
+        (Cache { id: next_id(), records, tree, axes, cmf, block_ends, totals, v, inv_v, blend, clamp2 }, counters)
     }
 
     /// Bytes the cache holds.
@@ -357,6 +400,12 @@ impl Cache {
     /// incoming direction `wo`, with their weights (supplemental Eq. 1).
     pub fn lookup(&self, p: Vec3, n: Vec3, wo: Vec3) -> Neighbours {
         self.weigh(&self.nearest(p), n, wo)
+    }
+
+    /// [`Cache::lookup`] without the memo, for points looked up once (camera vertices
+    /// choosing their connections).
+    pub fn lookup_once(&self, p: Vec3, n: Vec3, wo: Vec3) -> Neighbours {
+        self.weigh(&self.nearest_uncached(p), n, wo)
     }
 
     /// The nearest records of `p` and their squared distances, through a per-thread
@@ -391,8 +440,12 @@ impl Cache {
         })
     }
 
-    /// The nearest records of `p` from the kd-tree.
+    /// The nearest records of `p`: from the kd-tree, or for a cache of at most
+    /// [`LINEAR_SCAN`] records by a scan of their positions (faster than a tree walk there).
     pub fn nearest_uncached(&self, p: Vec3) -> Nearest {
+        if self.records.len() <= LINEAR_SCAN {
+            return self.nearest_by_scan(p);
+        }
         let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
         let Some(tree) = &self.tree else { return near };
         let found = tree.nearest_n::<SquaredEuclidean>(&p.to_array(), self.blend.neighbours.clamp(1, MAX_NEIGHBOURS));
@@ -400,6 +453,31 @@ impl Cache {
             near.index[near.len] = f.item as u32;
             near.dist2[near.len] = f.distance;
             near.len += 1;
+        }
+        near
+    }
+
+    /// The nearest records of `p` by computing the distance to every record.
+    fn nearest_by_scan(&self, p: Vec3) -> Nearest {
+        let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
+        let k = self.blend.neighbours.clamp(1, MAX_NEIGHBOURS);
+        let [xs, ys, zs] = &self.axes;
+        for c in 0..xs.len() {
+            let (dx, dy, dz) = (xs[c] - p.x, ys[c] - p.y, zs[c] - p.z);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            if near.len == k && d2 >= near.dist2[k - 1] {
+                continue;
+            }
+            // Insert in order, keeping the k nearest (ties: the lower index first).
+            let mut j = near.len.min(k - 1);
+            while j > 0 && near.dist2[j - 1] > d2 {
+                near.dist2[j] = near.dist2[j - 1];
+                near.index[j] = near.index[j - 1];
+                j -= 1;
+            }
+            near.dist2[j] = d2;
+            near.index[j] = c as u32;
+            near.len = (near.len + 1).min(k);
         }
         near
     }
@@ -437,42 +515,58 @@ impl Cache {
         nb
     }
 
-    /// The lookup of a camera vertex.
+    /// The lookup of a camera vertex choosing its connections.
     #[inline]
     pub fn lookup_vertex(&self, z: &Vertex) -> Neighbours {
-        self.lookup(z.p, facing(z.frame.n, z.wo), z.wo)
+        self.lookup_once(z.p, facing(z.frame.n, z.wo), z.wo)
+    }
+
+    /// The blended CMF at index `i` (Eq. 2) times `nb.norm`, from the records' CMF values
+    /// `row(c)` there: the search compares it with `u · norm` and divides nothing.
+    #[inline(always)]
+    fn mass_at(&self, nb: &Neighbours, i: usize, row: impl Fn(usize) -> f32) -> f64 {
+        if i + 1 >= self.v {
+            return nb.norm;
+        }
+        let mut sum = self.blend.uniform as f64 * (i + 1) as f64 * self.inv_v;
+        for k in 0..nb.len {
+            sum += nb.weight[k] * row(nb.index[k] as usize) as f64;
+        }
+        sum
+    }
+
+    #[inline(always)]
+    fn entry_mass(&self, nb: &Neighbours, i: usize) -> f64 {
+        self.mass_at(nb, i, |c| self.cmf[c * self.v + i])
     }
 
     /// The blended CMF at index `i` (Eq. 2), evaluated from the blended records only.
     #[inline]
     pub fn cmf_at(&self, nb: &Neighbours, i: usize) -> f64 {
-        if i + 1 >= self.v {
-            return 1.0;
-        }
-        let mut sum = self.blend.uniform as f64 * (i + 1) as f64 / self.v as f64;
-        for k in 0..nb.len {
-            sum += nb.weight[k] * self.cmf[nb.index[k] as usize * self.v + i] as f64;
-        }
-        sum / nb.norm
+        self.entry_mass(nb, i) / nb.norm
     }
 
     /// The blended PMF of index `i`: the mass between two CMF entries.
     #[inline]
     pub fn pmf(&self, nb: &Neighbours, i: usize) -> f64 {
-        let below = if i == 0 { 0.0 } else { self.cmf_at(nb, i - 1) };
-        self.cmf_at(nb, i) - below
+        let below = if i == 0 { 0.0 } else { self.entry_mass(nb, i - 1) };
+        (self.entry_mass(nb, i) - below) / nb.norm
     }
 
     /// Inverts the blended CMF for `u ∈ [0, 1)` by binary search (`O(neighbours log V)`):
-    /// the smallest index whose CMF exceeds `u`, and its probability.
+    /// the smallest index whose CMF exceeds `u`, and its probability. The search runs over
+    /// the block ends first (all blocks before the answer's end at or below `u`), then
+    /// inside the answer's block, so most CMF reads hit the compact block-end copy.
     pub fn sample(&self, nb: &Neighbours, u: f64) -> (usize, f64) {
         debug_assert!(self.v > 0);
-        let (mut lo, mut hi) = (0usize, self.v - 1);
-        while lo < hi {
-            let mid = (lo + hi) / 2;
-            if self.cmf_at(nb, mid) > u { hi = mid } else { lo = mid + 1 }
-        }
-        (lo, self.pmf(nb, lo))
+        let target = u * nb.norm;
+        let blocks = self.v.div_ceil(BLOCK);
+        let block = first_above(blocks, target, |j| {
+            self.mass_at(nb, block_end(j, self.v), |c| self.block_ends[c * blocks + j])
+        });
+        let start = block * BLOCK;
+        let i = start + first_above(block_end(block, self.v) + 1 - start, target, |k| self.entry_mass(nb, start + k));
+        (i, self.pmf(nb, i))
     }
 
     /// `P(y | z)` for MIS: the blended PMF of the light vertex `y = x_{s-1}` for the camera
@@ -668,6 +762,24 @@ mod tests {
         let blend = Blend { neighbours: 6, uniform: 0.5, distance_term: term };
         let (cache, _) = Cache::build(scene, &pool, records, blend, true);
         (cache, pool)
+    }
+
+    #[test]
+    fn the_linear_scan_finds_the_kd_trees_neighbours() {
+        let scene = scene();
+        let (cache, _) = cache(&scene, 50, DistanceTerm::Falloff);
+        assert!(cache.records.len() > LINEAR_SCAN, "the tree path is taken: {} records", cache.records.len());
+        let mut rng = crate::sampling::Sampler::new(&[7]);
+        let (c, r) = (scene.bounds.center, scene.bounds.radius);
+        for _ in 0..2000 {
+            let u = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d());
+            let p = c + (u * 2.0 - 1.0) * r;
+            let (tree, scan) = (cache.nearest_uncached(p), cache.nearest_by_scan(p));
+            assert_eq!(tree.len, scan.len);
+            for k in 0..tree.len {
+                assert!((tree.dist2[k] - scan.dist2[k]).abs() <= 1e-6 * tree.dist2[k].max(1e-6), "{p}");
+            }
+        }
     }
 
     /// The blended CMF built eagerly, entry by entry over whole rows.
