@@ -69,6 +69,10 @@ fn seeds_load_or_fail_cleanly() {
 fn fuzz_regressions_give_their_errors() {
     let mut count = 0;
     for target in ["scene_xml", "obj", "ply"] {
+        // A target that never crashed has no regression folder (git keeps no empty folders).
+        if !root().join("fuzz/regressions").join(target).is_dir() {
+            continue;
+        }
         for input in inputs(&format!("fuzz/regressions/{target}")) {
             let expect = std::fs::read_to_string(
                 input.with_extension(format!("{}.expect", input.extension().and_then(|e| e.to_str()).unwrap_or(""))),
