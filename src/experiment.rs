@@ -97,6 +97,7 @@ pub struct MethodEntry {
     pub pc_neighbours: Option<usize>,
     pub pc_distance_term: Option<String>,
     pub pc_mis: Option<String>,
+    pub pc_sampling: Option<String>,
 }
 
 fn default_backend() -> String {
@@ -235,6 +236,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = &m.pc_mis {
         pc.mis = value_enum(file, "pc_mis", x)?;
+    }
+    if let Some(x) = &m.pc_sampling {
+        pc.sampling = value_enum(file, "pc_sampling", x)?;
     }
     pc.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
     Ok(o)

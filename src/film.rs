@@ -228,7 +228,9 @@ impl ImageBlock {
 }
 
 /// The accumulated image: filtered camera samples (`Σ w L / Σ w`) plus light-tracing splats
-/// (`Σ h L / ∫h`, scaled by pixels per light path).
+/// (`Σ h L / ∫h`, scaled by pixels per light path). Camera samples lie inside the image, so a
+/// border pixel's weighted mean covers only the part of its filter inside the image; the
+/// splats' `∫h` is taken over the same part, so both estimate the same pixel value.
 #[derive(Clone)]
 pub struct Film {
     pub width: u32,
@@ -240,8 +242,9 @@ pub struct Film {
     layers: usize,
     layer_data: Vec<[f64; 3]>,
     layer_splats: Vec<[f64; 3]>,
-    /// `1 / ∫ filter`.
-    splat_norm: f32,
+    /// `1 / ∫ filter` over the image, per column and per row (the filters are separable).
+    col_norm: Vec<f32>,
+    row_norm: Vec<f32>,
     /// Light paths whose splats are in the film (the splat estimator's sample count).
     pub light_paths: u64,
     /// Samples dropped for non-finite values.
@@ -255,7 +258,6 @@ impl Film {
 
     pub fn with_layers(width: u32, height: u32, filter: Filter, layers: usize) -> Film {
         let n = width as usize * height as usize;
-        let integral = filter_integral(&filter);
         Film {
             width,
             height,
@@ -265,7 +267,8 @@ impl Film {
             layers,
             layer_data: vec![[0.0; 3]; layers * n],
             layer_splats: Vec::new(),
-            splat_norm: 1.0 / integral,
+            col_norm: inside_norms(&filter, width),
+            row_norm: inside_norms(&filter, height),
             light_paths: 0,
             invalid_samples: 0,
         }
@@ -311,7 +314,8 @@ impl Film {
             self.splats = vec![[0.0; 3]; n];
             self.layer_splats = vec![[0.0; 3]; self.layers * n];
         }
-        let (w, h, norm, filter) = (self.width as i32, self.height as i32, self.splat_norm, self.filter);
+        let (w, h, filter) = (self.width as i32, self.height as i32, self.filter);
+        let (cols, rows) = (&self.col_norm, &self.row_norm);
         for sp in splats {
             if !sp.value.is_finite() {
                 self.invalid_samples += 1;
@@ -320,7 +324,7 @@ impl Film {
             footprint(&filter, sp.pos, |x, y, wt| {
                 if x >= 0 && y >= 0 && x < w && y < h {
                     let i = y as usize * w as usize + x as usize;
-                    let v = sp.value * (wt * norm);
+                    let v = sp.value * (wt * cols[x as usize] * rows[y as usize]);
                     let d = &mut self.splats[i];
                     d[0] += v.x as f64;
                     d[1] += v.y as f64;
@@ -393,13 +397,27 @@ impl Film {
     }
 }
 
-/// `∫∫ filter(x) filter(y) dx dy` (the filters are separable), by the midpoint rule.
-fn filter_integral(filter: &Filter) -> f32 {
-    let r = filter.radius();
+/// `∫ filter(t) dt` over `[lo, hi]`, by the midpoint rule.
+fn filter_integral(filter: &Filter, lo: f32, hi: f32) -> f64 {
     let n = 4096;
-    let h = 2.0 * r / n as f32;
-    let one: f64 = (0..n).map(|i| filter.eval(-r + (i as f32 + 0.5) * h) as f64 * h as f64).sum();
-    (one * one) as f32
+    let h = (hi - lo) / n as f32;
+    (0..n).map(|i| filter.eval(lo + (i as f32 + 0.5) * h) as f64 * h as f64).sum()
+}
+
+/// For each pixel of a row (or column) of `n` pixels, `1 / ∫ filter` over the part of the
+/// filter centred on the pixel that lies inside the image (the whole filter away from the
+/// edges).
+fn inside_norms(filter: &Filter, n: u32) -> Vec<f32> {
+    let r = filter.radius();
+    let full = filter_integral(filter, -r, r);
+    (0..n)
+        .map(|i| {
+            let c = i as f32 + 0.5;
+            let (lo, hi) = ((-c).max(-r), (n as f32 - c).min(r));
+            let part = if lo <= -r && hi >= r { full } else { filter_integral(filter, lo, hi) };
+            if part > 0.0 { (1.0 / part) as f32 } else { 0.0 }
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -424,6 +442,30 @@ mod tests {
             }
             for v in film.develop() {
                 assert!((v - Rgb::new(0.25, 0.5, 2.0)).abs().max_element() < 1e-5, "{filter:?}: {v}");
+            }
+        }
+    }
+
+    /// Light arriving evenly over the image, splatted, develops to itself in every pixel,
+    /// border pixels included (their filter reaches outside the image, where no light lands).
+    #[test]
+    fn even_splats_develop_to_themselves_up_to_the_borders() {
+        let value = Rgb::new(0.25, 0.5, 2.0);
+        for filter in [Filter::Box { radius: 0.5 }, Filter::Tent { radius: 1.0 }, Filter::Gaussian { stddev: 0.5 }] {
+            let (w, h, k) = (9u32, 7u32, 32u32);
+            let mut film = Film::new(w, h, filter);
+            let splats: Vec<Splat> = (0..h * k)
+                .flat_map(|j| (0..w * k).map(move |i| (i, j)))
+                .map(|(i, j)| Splat {
+                    pos: Vec2::new((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32),
+                    value,
+                    layer: 0,
+                })
+                .collect();
+            film.add_splats(&splats);
+            film.light_paths = splats.len() as u64;
+            for (p, v) in film.develop().into_iter().enumerate() {
+                assert!((v / value - Rgb::ONE).abs().max_element() < 2e-3, "{filter:?}: pixel {p}: {v}");
             }
         }
     }

@@ -75,11 +75,19 @@ pub fn write(path: &Path, image: &Image) -> Result<()> {
     let result = match format {
         Format::Exr => {
             let w = image.width as usize;
-            exr::prelude::write_rgb_file(&tmp, w, image.height as usize, |x, y| {
-                let p = image.pixels[y * w + x];
-                (p.x, p.y, p.z)
-            })
-            .map_err(|e| out_err(format!("cannot write EXR: {e}")))
+            // Compressed on one thread so that the blocks are written in order: the same
+            // pixels always give the same bytes.
+            let channels =
+                exr::prelude::SpecificChannels::rgb(|exr::prelude::Vec2(x, y): exr::prelude::Vec2<usize>| {
+                    let p: Rgb = image.pixels[y * w + x];
+                    (p.x, p.y, p.z)
+                });
+            use exr::prelude::WritableImage;
+            exr::prelude::Image::from_channels((w, image.height as usize), channels)
+                .write()
+                .non_parallel()
+                .to_file(&tmp)
+                .map_err(|e| out_err(format!("cannot write EXR: {e}")))
         }
         Format::Png => {
             let bytes: Vec<u8> = image

@@ -6,7 +6,7 @@ use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
 use pcbpt::integrator::bidir::mis::Heuristic;
-use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions};
+use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
 use pcbpt::integrator::mlt::{MltBase, MltOptions};
 use pcbpt::integrator::{self, BidirOptions, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::{LoadOptions, Scene};
@@ -140,6 +140,9 @@ struct RenderArgs {
     /// PCBPT: MIS strategy counts of the probabilistic connections.
     #[arg(long, value_enum, default_value_t = PcOptions::default().mis)]
     pc_mis: PcMis,
+    /// PCBPT: how a draw inverts the blended PMF (the same distribution either way).
+    #[arg(long, value_enum, default_value_t = PcOptions::default().sampling)]
+    pc_sampling: PcSampling,
     /// PCBPT: memory limit of the cache (records × pool vertices floats), in MiB.
     #[arg(long, default_value_t = PcOptions::default().max_cache_mb)]
     pc_max_cache_mb: usize,
@@ -301,6 +304,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             neighbours: a.pc_neighbours,
             distance_term: a.pc_distance_term,
             mis: a.pc_mis,
+            sampling: a.pc_sampling,
             max_cache_mb: a.pc_max_cache_mb,
         },
     };

@@ -39,6 +39,15 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
                 .all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)),
             "{kind:?} differs between 1 and 2 threads"
         );
+        // And so do the files.
+        let dir = tempfile::tempdir().unwrap();
+        let bytes = |name: &str, out: &pcbpt::integrator::RenderOutput| {
+            let path = dir.path().join(name);
+            let image = pcbpt::image_io::Image::new(out.width, out.height, out.image.clone());
+            pcbpt::image_io::write(&path, &image).unwrap();
+            std::fs::read(path).unwrap()
+        };
+        assert!(bytes("one.exr", &one) == bytes("two.exr", &two), "{kind:?}: the EXR files differ");
         let other = render(&scene, kind, 4, 43, 2);
         assert_ne!(one.image, other.image, "{kind:?}: the seed must change the image");
     }

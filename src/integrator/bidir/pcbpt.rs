@@ -71,6 +71,19 @@ pub enum PcMis {
     Resampling,
 }
 
+/// How a draw inverts the blended PMF of a lookup. Both draw from exactly the same
+/// distribution (Eq. 2) and return its probability from the same lazy evaluation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PcSampling {
+    /// Binary search over the blended CMF, evaluated lazily at the probed indices
+    /// (`O(neighbours log V)` reads per draw).
+    Cmf,
+    /// The blend is a mixture: `u` picks a record (probability `w_i / Σ`) or the uniform
+    /// distribution, then that record's CMF alone is inverted (`O(log V + neighbours)`).
+    Mixture,
+}
+
 /// Options of PCBPT.
 #[derive(Clone, Debug, Serialize)]
 pub struct PcOptions {
@@ -90,6 +103,8 @@ pub struct PcOptions {
     pub neighbours: usize,
     pub distance_term: DistanceTerm,
     pub mis: PcMis,
+    /// How draws invert the blended PMF.
+    pub sampling: PcSampling,
     /// Memory limit of the cache (`records × V` floats), in MiB.
     pub max_cache_mb: usize,
 }
@@ -106,6 +121,7 @@ impl Default for PcOptions {
             neighbours: 6,
             distance_term: DistanceTerm::Falloff,
             mis: PcMis::Uniform,
+            sampling: PcSampling::Mixture,
             max_cache_mb: 1024,
         }
     }
@@ -457,28 +473,48 @@ impl Cache {
         near
     }
 
-    /// The nearest records of `p` by computing the distance to every record.
+    /// The nearest records of `p` by computing the distance to every record, then taking the
+    /// smallest `k` times (ties: the lower index first). Both loops are branch-free and
+    /// vectorised; `k` scans of a short array cost less than the mispredicted branches of
+    /// an insertion sort.
     fn nearest_by_scan(&self, p: Vec3) -> Nearest {
         let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
-        let k = self.blend.neighbours.clamp(1, MAX_NEIGHBOURS);
         let [xs, ys, zs] = &self.axes;
-        for c in 0..xs.len() {
-            let (dx, dy, dz) = (xs[c] - p.x, ys[c] - p.y, zs[c] - p.z);
-            let d2 = dx * dx + dy * dy + dz * dz;
-            if near.len == k && d2 >= near.dist2[k - 1] {
-                continue;
-            }
-            // Insert in order, keeping the k nearest (ties: the lower index first).
-            let mut j = near.len.min(k - 1);
-            while j > 0 && near.dist2[j - 1] > d2 {
-                near.dist2[j] = near.dist2[j - 1];
-                near.index[j] = near.index[j - 1];
-                j -= 1;
-            }
-            near.dist2[j] = d2;
-            near.index[j] = c as u32;
-            near.len = (near.len + 1).min(k);
+        let n = xs.len();
+        let k = self.blend.neighbours.clamp(1, MAX_NEIGHBOURS).min(n);
+        let (mut stack, mut heap) = ([0.0f32; LINEAR_SCAN], Vec::new());
+        let d2: &mut [f32] = if n <= LINEAR_SCAN {
+            &mut stack[..n]
+        } else {
+            heap.resize(n, 0.0);
+            &mut heap
+        };
+        for (((d, &x), &y), &z) in d2.iter_mut().zip(xs).zip(ys).zip(zs) {
+            let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+            // NaN (never from finite positions) would never be taken: it sorts last.
+            let e = dx * dx + dy * dy + dz * dz;
+            *d = if e.is_nan() { f32::INFINITY } else { e };
         }
+        for j in 0..k {
+            // Eight running minima: independent lanes the compiler keeps in vector registers.
+            let mut lanes = [f32::INFINITY; 8];
+            let chunks = d2.chunks_exact(8);
+            for &b in chunks.remainder() {
+                lanes[0] = if b < lanes[0] { b } else { lanes[0] };
+            }
+            for chunk in chunks {
+                for (l, &b) in lanes.iter_mut().zip(chunk) {
+                    *l = if b < *l { b } else { *l };
+                }
+            }
+            let min = lanes.iter().fold(f32::INFINITY, |a, &b| if b < a { b } else { a });
+            // The first entry equal to the minimum (an infinite one if all are taken).
+            let c = d2.iter().position(|&d| d == min).unwrap_or(0);
+            near.dist2[j] = min;
+            near.index[j] = c as u32;
+            d2[c] = f32::NAN;
+        }
+        near.len = k;
         near
     }
 
@@ -567,6 +603,46 @@ impl Cache {
         let start = block * BLOCK;
         let i = start + first_above(block_end(block, self.v) + 1 - start, target, |k| self.entry_mass(nb, start + k));
         (i, self.pmf(nb, i))
+    }
+
+    /// Draws from the same blended PMF as [`Cache::sample`] by sampling the mixture it is:
+    /// `u` picks record `i` with probability `w_i / Σ` or the uniform distribution with
+    /// `uniform / Σ`, and, rescaled into the picked interval, inverts that record's CMF alone
+    /// (block ends first, then one block). The probability returned is the blended PMF of
+    /// the drawn index, as [`Cache::sample`] returns it; stratified `u`s stay stratified.
+    pub fn sample_mixture(&self, nb: &Neighbours, u: f64) -> (usize, f64) {
+        debug_assert!(self.v > 0);
+        let mut t = u * nb.norm;
+        for k in 0..nb.len {
+            let w = nb.weight[k];
+            if t < w {
+                let i = self.invert_row(nb.index[k] as usize, (t / w).min(1.0 - f64::EPSILON));
+                return (i, self.pmf(nb, i));
+            }
+            t -= w;
+        }
+        let i = ((t / self.blend.uniform as f64 * self.v as f64).max(0.0) as usize).min(self.v - 1);
+        (i, self.pmf(nb, i))
+    }
+
+    /// The smallest index whose stored CMF of record `c` exceeds `u ∈ [0, 1)`.
+    #[inline]
+    fn invert_row(&self, c: usize, u: f64) -> usize {
+        let blocks = self.v.div_ceil(BLOCK);
+        let ends = &self.block_ends[c * blocks..(c + 1) * blocks];
+        let block = first_above(blocks, u, |j| ends[j] as f64);
+        let start = block * BLOCK;
+        let row = &self.cmf[c * self.v + start..c * self.v + block_end(block, self.v) + 1];
+        start + first_above(row.len(), u, |k| row[k] as f64)
+    }
+
+    /// A draw by the chosen inversion.
+    #[inline]
+    pub fn draw(&self, nb: &Neighbours, u: f64, sampling: PcSampling) -> (usize, f64) {
+        match sampling {
+            PcSampling::Cmf => self.sample(nb, u),
+            PcSampling::Mixture => self.sample_mixture(nb, u),
+        }
     }
 
     /// `P(y | z)` for MIS: the blended PMF of the light vertex `y = x_{s-1}` for the camera
@@ -712,7 +788,7 @@ impl Pcbpt {
         sink: &mut impl Sink,
         counters: &mut Counters,
     ) {
-        let select = CacheSelection { cache, paths: pool.paths.max(1) as f64 };
+        let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.opts.sampling };
         let pass = PoolPass { bdpt: &self.bdpt, connections: self.opts.connections, conn, pool };
         pass.sample(&select, pos, rng, scratch, sink, counters);
     }
@@ -723,6 +799,7 @@ impl Pcbpt {
 struct CacheSelection<'a> {
     cache: &'a Cache,
     paths: f64,
+    sampling: PcSampling,
 }
 
 impl PoolSelection for CacheSelection<'_> {
@@ -736,7 +813,7 @@ impl PoolSelection for CacheSelection<'_> {
     fn draw<R: Random>(&self, nb: &Neighbours, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)> {
         // Stratified draws with 48 random bits each.
         let xi = rng.next_1d() as f64 + rng.next_1d() as f64 * (1.0 / 16_777_216.0);
-        let (i, pmf) = self.cache.sample(nb, (k as f64 + xi) / n as f64);
+        let (i, pmf) = self.cache.draw(nb, (k as f64 + xi) / n as f64, self.sampling);
         (pmf > 0.0).then(|| (i, (1.0 / (n as f64 * self.paths * pmf)) as f32))
     }
 }
@@ -852,11 +929,11 @@ mod tests {
         assert_eq!(nbs.len(), 3);
         let n = 400_000u64;
         let mut rng = Sampler::new(&[5]);
-        for nb in &nbs {
+        for (nb, sampling) in nbs.iter().flat_map(|nb| [(nb, PcSampling::Cmf), (nb, PcSampling::Mixture)]) {
             let mut counts = vec![0u64; cache.v];
             for _ in 0..n {
                 let u = rng.next_1d() as f64 + rng.next_1d() as f64 / 16_777_216.0;
-                let (i, pmf) = cache.sample(nb, u);
+                let (i, pmf) = cache.draw(nb, u, sampling);
                 assert!((pmf - cache.pmf(nb, i)).abs() < 1e-12);
                 counts[i] += 1;
             }
@@ -874,7 +951,7 @@ mod tests {
                     sum / (nb.norm - cache.blend.uniform as f64) * n as f64
                 })
                 .collect();
-            assert!(!discrete_chi2(&counts, &unblended).passed(), "the unblended PMF was not rejected");
+            assert!(!discrete_chi2(&counts, &unblended).passed(), "{sampling:?}: the unblended PMF was not rejected");
         }
     }
 
@@ -902,5 +979,6 @@ mod tests {
         assert_eq!(nb.len, 0);
         assert!((0..10).all(|i| (empty.pmf(&nb, i) - 0.1).abs() < 1e-12));
         assert_eq!(empty.sample(&nb, 0.55).0, 5);
+        assert_eq!(empty.sample_mixture(&nb, 0.55).0, 5);
     }
 }
