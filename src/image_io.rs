@@ -5,6 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::math::Rgb;
+use exr::prelude::{Image as ExrImage, SpecificChannels, Vec2 as ExrVec2, WritableImage};
 use std::path::{Path, PathBuf};
 
 /// A linear RGB image, row-major from the top-left.
@@ -77,13 +78,11 @@ pub fn write(path: &Path, image: &Image) -> Result<()> {
             let w = image.width as usize;
             // Compressed on one thread so that the blocks are written in order: the same
             // pixels always give the same bytes.
-            let channels =
-                exr::prelude::SpecificChannels::rgb(|exr::prelude::Vec2(x, y): exr::prelude::Vec2<usize>| {
-                    let p: Rgb = image.pixels[y * w + x];
-                    (p.x, p.y, p.z)
-                });
-            use exr::prelude::WritableImage;
-            exr::prelude::Image::from_channels((w, image.height as usize), channels)
+            let channels = SpecificChannels::rgb(|ExrVec2(x, y): ExrVec2<usize>| {
+                let p: Rgb = image.pixels[y * w + x];
+                (p.x, p.y, p.z)
+            });
+            ExrImage::from_channels((w, image.height as usize), channels)
                 .write()
                 .non_parallel()
                 .to_file(&tmp)
