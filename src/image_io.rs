@@ -131,10 +131,8 @@ pub fn write_png_rgb8(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Res
 pub fn read_exr(path: &Path) -> Result<Image> {
     let img = exr::prelude::read_first_rgba_layer_from_file(
         path,
-        |res: exr::prelude::Vec2<usize>, _| (res.width(), res.height(), vec![Rgb::ZERO; res.width() * res.height()]),
-        |(w, _, px): &mut (usize, usize, Vec<Rgb>),
-         pos: exr::prelude::Vec2<usize>,
-         (r, g, b, _a): (f32, f32, f32, f32)| {
+        |res: ExrVec2<usize>, _| (res.width(), res.height(), vec![Rgb::ZERO; res.width() * res.height()]),
+        |(w, _, px): &mut (usize, usize, Vec<Rgb>), pos: ExrVec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)| {
             px[pos.y() * *w + pos.x()] = Rgb::new(r, g, b);
         },
     )
