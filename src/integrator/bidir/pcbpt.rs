@@ -255,6 +255,8 @@ pub struct Cache {
     tree: Option<KdTree<f32, 3>>,
     /// Record positions by axis, for the linear scan of small caches.
     axes: [Vec<f32>; 3],
+    /// Candidate lists of small caches: the linear scan runs over one cell's candidates.
+    grid: Option<CandidateGrid>,
     /// `records × v` normalised CMFs, record after record.
     cmf: Vec<f32>,
     /// `records × blocks`: each record's CMF at the last index of every [`BLOCK`].
@@ -322,6 +324,7 @@ impl Cache {
             records: Vec::new(),
             tree: None,
             axes: Default::default(),
+            grid: None,
             cmf: Vec::new(),
             block_ends: Vec::new(),
             inv_v: 1.0 / v.max(1) as f64,
@@ -398,8 +401,12 @@ impl Cache {
             cmf.chunks_exact(v).flat_map(|row| (0..v.div_ceil(BLOCK)).map(|j| row[block_end(j, v)])).collect()
         };
         let inv_v = 1.0 / v.max(1) as f64;
-        let axes = [0, 1, 2].map(|a| points.iter().map(|p| p[a]).collect());
-        (Cache { id: next_id(), records, tree, axes, cmf, block_ends, totals, v, inv_v, blend, clamp2 }, counters)
+        let axes: [Vec<f32>; 3] = [0, 1, 2].map(|a| points.iter().map(|p| p[a]).collect());
+        let k = blend.neighbours.clamp(1, MAX_NEIGHBOURS);
+        let grid = (records.len() <= LINEAR_SCAN && records.len() > k).then(|| CandidateGrid::new(&axes, k));
+        let cache =
+            Cache { id: next_id(), records, tree, axes, cmf, block_ends, totals, v, inv_v, blend, clamp2, grid };
+        (cache, counters)
     }
 
     /// Bytes the cache holds.
@@ -473,49 +480,24 @@ impl Cache {
         near
     }
 
-    /// The nearest records of `p` by computing the distance to every record, then taking the
-    /// smallest `k` times (ties: the lower index first). Both loops are branch-free and
-    /// vectorised; `k` scans of a short array cost less than the mispredicted branches of
-    /// an insertion sort.
+    /// The nearest records of `p` by a linear scan: over the candidates of `p`'s cell of the
+    /// [`CandidateGrid`] where there is one, else over every record.
     fn nearest_by_scan(&self, p: Vec3) -> Nearest {
-        let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
+        let k = self.blend.neighbours.clamp(1, MAX_NEIGHBOURS);
+        if let Some(grid) = &self.grid
+            && let Some(cell) = grid.cell(p)
+        {
+            let range = grid.start[cell] as usize..grid.start[cell + 1] as usize;
+            let [xs, ys, zs] = &grid.axes;
+            return scan_nearest(
+                [&xs[range.clone()], &ys[range.clone()], &zs[range.clone()]],
+                Some(&grid.ids[range]),
+                p,
+                k,
+            );
+        }
         let [xs, ys, zs] = &self.axes;
-        let n = xs.len();
-        let k = self.blend.neighbours.clamp(1, MAX_NEIGHBOURS).min(n);
-        let (mut stack, mut heap) = ([0.0f32; LINEAR_SCAN], Vec::new());
-        let d2: &mut [f32] = if n <= LINEAR_SCAN {
-            &mut stack[..n]
-        } else {
-            heap.resize(n, 0.0);
-            &mut heap
-        };
-        for (((d, &x), &y), &z) in d2.iter_mut().zip(xs).zip(ys).zip(zs) {
-            let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
-            // NaN (never from finite positions) would never be taken: it sorts last.
-            let e = dx * dx + dy * dy + dz * dz;
-            *d = if e.is_nan() { f32::INFINITY } else { e };
-        }
-        for j in 0..k {
-            // Eight running minima: independent lanes the compiler keeps in vector registers.
-            let mut lanes = [f32::INFINITY; 8];
-            let chunks = d2.chunks_exact(8);
-            for &b in chunks.remainder() {
-                lanes[0] = if b < lanes[0] { b } else { lanes[0] };
-            }
-            for chunk in chunks {
-                for (l, &b) in lanes.iter_mut().zip(chunk) {
-                    *l = if b < *l { b } else { *l };
-                }
-            }
-            let min = lanes.iter().fold(f32::INFINITY, |a, &b| if b < a { b } else { a });
-            // The first entry equal to the minimum (an infinite one if all are taken).
-            let c = d2.iter().position(|&d| d == min).unwrap_or(0);
-            near.dist2[j] = min;
-            near.index[j] = c as u32;
-            d2[c] = f32::NAN;
-        }
-        near.len = k;
-        near
+        scan_nearest([xs, ys, zs], None, p, k)
     }
 
     /// The weights of the nearest records for a vertex with normal `n` (turned towards
@@ -669,6 +651,148 @@ impl Cache {
             sum += nb.weight[k] * pmf;
         }
         (sum / nb.norm) as f32
+    }
+}
+
+/// The `k` nearest of the points `axes` (by coordinate arrays; `ids` their record indices,
+/// the positions themselves when `None`): the squared distances in one vectorised loop, then
+/// an insertion into the sorted `k` best, which most points leave at the first comparison.
+/// Ties go to the earlier point (with `ids` ascending, the lower record index).
+fn scan_nearest(axes: [&[f32]; 3], ids: Option<&[u32]>, p: Vec3, k: usize) -> Nearest {
+    let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
+    let [xs, ys, zs] = axes;
+    let n = xs.len();
+    let k = k.min(n);
+    let (mut stack, mut heap) = ([0.0f32; LINEAR_SCAN], Vec::new());
+    let d2: &mut [f32] = if n <= LINEAR_SCAN {
+        &mut stack[..n]
+    } else {
+        heap.resize(n, 0.0);
+        &mut heap
+    };
+    for (((d, &x), &y), &z) in d2.iter_mut().zip(xs).zip(ys).zip(zs) {
+        let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+        // NaN (never from finite positions) sorts last.
+        let e = dx * dx + dy * dy + dz * dz;
+        *d = if e.is_nan() { f32::INFINITY } else { e };
+    }
+    let mut len = 0;
+    for (i, &d) in d2.iter().enumerate() {
+        if len == k {
+            // Only a strictly nearer point displaces the last (no distance is NaN): ties keep
+            // the earlier one.
+            if d >= near.dist2[k - 1] {
+                continue;
+            }
+            len -= 1;
+        }
+        let mut j = len;
+        while j > 0 && d < near.dist2[j - 1] {
+            near.dist2[j] = near.dist2[j - 1];
+            near.index[j] = near.index[j - 1];
+            j -= 1;
+        }
+        near.dist2[j] = d;
+        near.index[j] = i as u32;
+        len += 1;
+    }
+    if let Some(ids) = ids {
+        for i in &mut near.index[..len] {
+            *i = ids[*i as usize];
+        }
+    }
+    near.len = len;
+    near
+}
+
+/// A uniform grid over the bounding box of a small cache's records that lists, for each cell,
+/// every record that can be among the `k` nearest of a point in the cell: those whose
+/// distance to the cell is at most the `k`-th smallest of the records' farthest distances
+/// to it. The scan over a cell's candidates finds exactly the neighbours (and the tie order)
+/// of a scan over all records; points outside the box scan all records.
+struct CandidateGrid {
+    lo: Vec3,
+    /// Cells per unit length.
+    scale: Vec3,
+    res: [usize; 3],
+    /// Cell `c`'s candidates are `start[c]..start[c + 1]` of `ids` and `axes`.
+    start: Vec<u32>,
+    ids: Vec<u32>,
+    axes: [Vec<f32>; 3],
+}
+
+/// Cells of a candidate grid, about.
+const GRID_CELLS: f32 = 4096.0;
+
+impl CandidateGrid {
+    fn new(points: &[Vec<f32>; 3], k: usize) -> CandidateGrid {
+        let n = points[0].len();
+        let at = |i: usize| Vec3::new(points[0][i], points[1][i], points[2][i]);
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for i in 0..n {
+            lo = lo.min(at(i));
+            hi = hi.max(at(i));
+        }
+        // A margin: camera vertices just outside the records still find their cell.
+        let margin = (hi - lo).max_element().max(1e-3) * 0.05;
+        let (lo, hi) = (lo - margin, hi + margin);
+        let extent = hi - lo;
+        let h = (extent.x * extent.y * extent.z / GRID_CELLS).cbrt().max(extent.max_element() / 64.0);
+        let res = [0, 1, 2].map(|a| ((extent[a] / h).ceil() as usize).clamp(1, 64));
+        let size = Vec3::new(extent.x / res[0] as f32, extent.y / res[1] as f32, extent.z / res[2] as f32);
+        let mut grid = CandidateGrid {
+            lo,
+            scale: Vec3::ONE / size,
+            res,
+            start: vec![0],
+            ids: Vec::new(),
+            axes: Default::default(),
+        };
+        let mut far = vec![0.0f32; n];
+        for z in 0..res[2] {
+            for y in 0..res[1] {
+                for x in 0..res[0] {
+                    // The cell, grown a little so that rounding in `cell` cannot put a point
+                    // outside the box its candidates were chosen for.
+                    let c0 = lo + Vec3::new(x as f32, y as f32, z as f32) * size - size * 1e-3;
+                    let c1 = lo + Vec3::new((x + 1) as f32, (y + 1) as f32, (z + 1) as f32) * size + size * 1e-3;
+                    for (i, f) in far.iter_mut().enumerate() {
+                        let q = at(i);
+                        *f = (q - c0).abs().max((q - c1).abs()).length_squared();
+                    }
+                    let mut sorted = far.clone();
+                    sorted.select_nth_unstable_by(k - 1, f32::total_cmp);
+                    let bound = sorted[k - 1];
+                    for i in 0..n {
+                        let q = at(i);
+                        let near = (q - q.clamp(c0, c1)).length_squared();
+                        if near <= bound {
+                            grid.ids.push(i as u32);
+                            for a in 0..3 {
+                                grid.axes[a].push(q[a]);
+                            }
+                        }
+                    }
+                    grid.start.push(grid.ids.len() as u32);
+                }
+            }
+        }
+        grid
+    }
+
+    /// The cell of `p`, `None` outside the grid.
+    #[inline]
+    fn cell(&self, p: Vec3) -> Option<usize> {
+        let f = (p - self.lo) * self.scale;
+        let mut idx = [0usize; 3];
+        for a in 0..3 {
+            // Also false for NaN.
+            if !(f[a] >= 0.0 && f[a] < self.res[a] as f32) {
+                return None;
+            }
+            idx[a] = (f[a] as usize).min(self.res[a] - 1);
+        }
+        Some((idx[2] * self.res[1] + idx[1]) * self.res[0] + idx[0])
     }
 }
 
@@ -857,6 +981,55 @@ mod tests {
                 assert!((tree.dist2[k] - scan.dist2[k]).abs() <= 1e-6 * tree.dist2[k].max(1e-6), "{p}");
             }
         }
+    }
+
+    #[test]
+    fn the_candidate_grid_finds_the_full_scans_neighbours() {
+        let scene = scene();
+        let limits = WalkLimits::new(8, 3);
+        let (pool, _, _) = LightPool::trace::<Counts>(&scene, &limits, 50, 3, 0, None);
+        let blend = Blend { neighbours: 6, uniform: 0.5, distance_term: DistanceTerm::Falloff };
+        let opts = PcOptions { stride: 16, ..PcOptions::default() };
+        let (mut records, _) = trace_records(&scene, &limits, &opts, 3, 0);
+        // Two records at one position: ties must go to the lower index, as in the full scan.
+        records.push(records[3]);
+        let (cache, _) = Cache::build(&scene, &pool, records, blend, false);
+        let n = cache.records.len();
+        assert!(n > 12 && n <= LINEAR_SCAN, "{n} records");
+        let grid = cache.grid.as_ref().expect("a small cache has a candidate grid");
+        let cells = grid.start.len() - 1;
+        assert!(grid.ids.len() < cells * n / 2, "{} candidates in {cells} cells of {n} records", grid.ids.len());
+        let mut rng = Sampler::new(&[11]);
+        // Points over the grid's box grown by a fifth of its size on each side.
+        let size = Vec3::new(grid.res[0] as f32, grid.res[1] as f32, grid.res[2] as f32) / grid.scale;
+        let (c, r) = (grid.lo + size * 0.5, size * 0.7);
+        let [xs, ys, zs] = &cache.axes;
+        let mut inside = 0;
+        for i in 0..20_000 {
+            let p = if i % 4 == 0 {
+                // Record positions themselves (zero distances, the duplicated pair).
+                cache.records[i / 4 % n].vertex.p
+            } else {
+                let u = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d());
+                c + (u * 2.0 - 1.0) * r * 1.2
+            };
+            inside += grid.cell(p).is_some() as usize;
+            let (fast, full) = (cache.nearest_by_scan(p), scan_nearest([xs, ys, zs], None, p, 6));
+            assert_eq!(fast.len, full.len);
+            assert_eq!(fast.index[..fast.len], full.index[..full.len], "{p}");
+            assert_eq!(fast.dist2[..fast.len], full.dist2[..full.len], "{p}");
+            // And the full scan is a sort by distance, ties by index.
+            let mut sorted: Vec<(f32, u32)> = (0..n)
+                .map(|i| {
+                    let d = cache.records[i].vertex.p - p;
+                    (d.x * d.x + d.y * d.y + d.z * d.z, i as u32)
+                })
+                .collect();
+            sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let expected: Vec<u32> = sorted[..6].iter().map(|e| e.1).collect();
+            assert_eq!(full.index[..full.len], expected[..], "{p}");
+        }
+        assert!((7_000..19_000).contains(&inside), "{inside} of 20 000 points fell in the grid");
     }
 
     /// The blended CMF built eagerly, entry by entry over whole rows.
