@@ -361,11 +361,12 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     } else if !a.quiet && s.bidir.is_some() {
         let c = &s.counters;
         eprintln!(
-            "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette){}; time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",
+            "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette, {} repeated draws merged){}; time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",
             c.light_paths,
             c.connections,
             c.connections_occluded,
             c.connections_skipped,
+            c.draws_merged,
             s.pool.map(|(m, v)| format!(", pool of {m} paths with {v} connectible vertices")).unwrap_or_default(),
             s.phases.light_pool,
             if s.cache.is_some() { format!("cache {:.2} s, ", s.phases.cache) } else { String::new() },

@@ -81,6 +81,9 @@ pub struct Counters {
     pub connections_occluded: u64,
     /// Connections left untraced by Russian roulette (EORR).
     pub connections_skipped: u64,
+    /// Pool draws of a camera vertex that repeated an earlier draw of it and were merged
+    /// into that connection (its weight counts both).
+    pub draws_merged: u64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -93,6 +96,7 @@ impl std::ops::AddAssign for Counters {
         self.connections += o.connections;
         self.connections_occluded += o.connections_occluded;
         self.connections_skipped += o.connections_skipped;
+        self.draws_merged += o.draws_merged;
     }
 }
 

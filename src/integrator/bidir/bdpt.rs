@@ -231,6 +231,8 @@ pub struct Bdpt {
 pub struct Scratch {
     pub camera: Vec<Vertex>,
     pub light: Vec<Vertex>,
+    /// The pool draws of one camera vertex: index and contribution factor.
+    pub draws: Vec<(usize, f32)>,
 }
 
 impl Bdpt {

@@ -217,11 +217,23 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
                 continue;
             }
             let lookup = select.lookup(&camera[t - 1]);
+            // Draws that repeat an earlier one (a peaked PMF and stratified draws) make the
+            // same connection: it is evaluated and traced once with the factors summed.
+            scratch.draws.clear();
             for k in 0..self.connections {
                 let Some((i, scale)) = select.draw(&lookup, k, self.connections, rng) else { continue };
+                match scratch.draws.iter_mut().find(|d| d.0 == i) {
+                    Some(d) => {
+                        d.1 += scale;
+                        counters.draws_merged += 1;
+                    }
+                    None => scratch.draws.push((i, scale)),
+                }
+            }
+            for &(i, scale) in &scratch.draws {
                 let light = self.pool.prefix(i);
                 if bdpt.allowed(light.len(), t) {
-                    conn.connect(light, &camera[..t], scale, pos, rng, sink, counters);
+                    conn.connect(light, &scratch.camera[..t], scale, pos, rng, sink, counters);
                 }
             }
         }
