@@ -748,32 +748,45 @@ impl CandidateGrid {
             ids: Vec::new(),
             axes: Default::default(),
         };
-        let mut far = vec![0.0f32; n];
-        for z in 0..res[2] {
-            for y in 0..res[1] {
-                for x in 0..res[0] {
-                    // The cell, grown a little so that rounding in `cell` cannot put a point
-                    // outside the box its candidates were chosen for.
-                    let c0 = lo + Vec3::new(x as f32, y as f32, z as f32) * size - size * 1e-3;
-                    let c1 = lo + Vec3::new((x + 1) as f32, (y + 1) as f32, (z + 1) as f32) * size + size * 1e-3;
-                    for (i, f) in far.iter_mut().enumerate() {
-                        let q = at(i);
-                        *f = (q - c0).abs().max((q - c1).abs()).length_squared();
-                    }
-                    let mut sorted = far.clone();
-                    sorted.select_nth_unstable_by(k - 1, f32::total_cmp);
-                    let bound = sorted[k - 1];
-                    for i in 0..n {
-                        let q = at(i);
-                        let near = (q - q.clamp(c0, c1)).length_squared();
-                        if near <= bound {
-                            grid.ids.push(i as u32);
-                            for a in 0..3 {
-                                grid.axes[a].push(q[a]);
-                            }
+        // Slabs of cells along z in parallel, each listing its cells in order.
+        let slabs: Vec<(Vec<u32>, Vec<u32>)> = (0..res[2])
+            .into_par_iter()
+            .map(|z| {
+                let (mut counts, mut ids) = (Vec::with_capacity(res[0] * res[1]), Vec::new());
+                let (mut far, mut sorted) = (vec![0.0f32; n], vec![0.0f32; n]);
+                for y in 0..res[1] {
+                    for x in 0..res[0] {
+                        // The cell, grown a little so that rounding in `cell` cannot put a
+                        // point outside the box its candidates were chosen for.
+                        let c0 = lo + Vec3::new(x as f32, y as f32, z as f32) * size - size * 1e-3;
+                        let c1 = lo + Vec3::new((x + 1) as f32, (y + 1) as f32, (z + 1) as f32) * size + size * 1e-3;
+                        for (i, f) in far.iter_mut().enumerate() {
+                            let q = at(i);
+                            *f = (q - c0).abs().max((q - c1).abs()).length_squared();
                         }
+                        sorted.copy_from_slice(&far);
+                        let bound = *sorted.select_nth_unstable_by(k - 1, f32::total_cmp).1;
+                        let before = ids.len();
+                        ids.extend((0..n as u32).filter(|&i| {
+                            let q = at(i as usize);
+                            (q - q.clamp(c0, c1)).length_squared() <= bound
+                        }));
+                        counts.push((ids.len() - before) as u32);
                     }
-                    grid.start.push(grid.ids.len() as u32);
+                }
+                (counts, ids)
+            })
+            .collect();
+        for (counts, ids) in slabs {
+            let mut at_start = *grid.start.last().unwrap_or(&0);
+            for c in counts {
+                at_start += c;
+                grid.start.push(at_start);
+            }
+            for &i in &ids {
+                grid.ids.push(i);
+                for (axis, coords) in grid.axes.iter_mut().zip(points) {
+                    axis.push(coords[i as usize]);
                 }
             }
         }

@@ -24,10 +24,15 @@ enum Variant {
     Mirror,
     PointLight,
     SphereLight,
+    /// `veach-ajar` itself: textures, rough conductors, glass, two-sided BSDFs, a light
+    /// seen through a gap (where PCBPT's resampling counts vary most).
+    VeachAjar,
 }
 
 fn scene(variant: Variant) -> Scene {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box/scene.xml");
+    let file =
+        if variant == Variant::VeachAjar { "scenes/veach-ajar/scene.xml" } else { "scenes/cornell-box/scene.xml" };
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
     let overrides = vec![("resx".into(), "48".into()), ("resy".into(), "40".into())];
     let mut scene = Scene::load(&path, &LoadOptions { overrides, ..Default::default() }).unwrap();
     let shape = |scene: &Scene, name: &str| scene.shapes.iter().position(|s| s.name == name).unwrap();
@@ -43,7 +48,7 @@ fn scene(variant: Variant) -> Scene {
         scene.shapes[s].bsdf = scene.bsdfs.len() - 1;
     };
     match variant {
-        Variant::Diffuse => {}
+        Variant::Diffuse | Variant::VeachAjar => {}
         Variant::Glossy => {
             set(&mut scene, "TallBox", rough(0.15, MicrofacetType::Ggx));
             set(&mut scene, "BackWall", rough(0.4, MicrofacetType::Beckmann));
@@ -329,6 +334,11 @@ fn weights_sum_to_one_with_a_point_light() {
 #[test]
 fn weights_sum_to_one_with_a_sphere_light_sampled_by_cone() {
     check_variant(Variant::SphereLight, 5);
+}
+
+#[test]
+fn weights_sum_to_one_on_veach_ajar_paths() {
+    check_variant(Variant::VeachAjar, 6);
 }
 
 #[test]
