@@ -113,12 +113,12 @@ impl Default for PcOptions {
     fn default() -> PcOptions {
         PcOptions {
             light_paths: 1000,
-            connections: 3,
+            connections: 4,
             stride: 64,
             cache_depth: 5,
             visibility: true,
             uniform_blend: 0.5,
-            neighbours: 6,
+            neighbours: 3,
             distance_term: DistanceTerm::Falloff,
             mis: PcMis::Uniform,
             sampling: PcSampling::Mixture,
