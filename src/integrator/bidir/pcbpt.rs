@@ -1024,7 +1024,7 @@ mod tests {
                 cache.records[i / 4 % n].vertex.p
             } else {
                 let u = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d());
-                c + (u * 2.0 - 1.0) * r * 1.2
+                c + (u * 2.0 - 1.0) * r
             };
             inside += grid.cell(p).is_some() as usize;
             let (fast, full) = (cache.nearest_by_scan(p), scan_nearest([xs, ys, zs], None, p, 6));

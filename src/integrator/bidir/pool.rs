@@ -233,7 +233,7 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
             for &(i, scale) in &scratch.draws {
                 let light = self.pool.prefix(i);
                 if bdpt.allowed(light.len(), t) {
-                    conn.connect(light, &scratch.camera[..t], scale, pos, rng, sink, counters);
+                    conn.connect(light, &camera[..t], scale, pos, rng, sink, counters);
                 }
             }
         }
