@@ -378,8 +378,13 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         );
         if let Some(k) = &s.cache {
             eprintln!(
-                "  PCBPT cache: {} records ({} empty, {} dropped for the memory limit) × {} pool vertices, {:.1} MiB",
-                k.records, k.empty_records, k.dropped_records, k.pool_vertices, k.megabytes
+                "  PCBPT cache: {} records ({} empty, {} dropped for the memory limit) × {} pool vertices, {:.1} MiB; unoccluded draws' harmonic mean V·PMF {:.2}",
+                k.records,
+                k.empty_records,
+                k.dropped_records,
+                k.pool_vertices,
+                k.megabytes,
+                c.pool_hits as f64 / c.pool_hits_inverse_concentration.max(f64::MIN_POSITIVE)
             );
         }
     }

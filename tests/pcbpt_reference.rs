@@ -4,6 +4,10 @@
 //! same verdict as the other bidirectional integrators (`tests/bidir_reference.rs`): two
 //! seeds averaged, image mean within 0.5%, relMSE within 1.3× of what noise explains.
 //!
+//! `--pc-mis harmonic` weighs every pool connection by how much the previous iteration's
+//! draws that reached a vertex were concentrated (the harmonic mean of `V · PMF` over them);
+//! its measurement is checked against uniform selection, where it is exactly one.
+//!
 //! The two `veach-ajar` cases of `--pc-mis resampling` are ignored: that estimator's heavy
 //! tail spreads the image means of single 128-spp renders (160×90) by about ±1%, so the mean
 //! of two cannot be held to 0.5% with a safe margin (with the current defaults and these
@@ -62,7 +66,35 @@ cases! {
     veach_ajar_resampling_falloff: VEACH_AJAR, 128, Resampling, Falloff, Mixture;
     #[ignore = "resampling MIS on veach-ajar: single 128-spp image means spread by ±1% (heavy tail), too much for a 0.5% check of two renders; unbiased on 180 same-seed pairs (BENCHMARKS.md); run with --ignored"]
     veach_ajar_resampling_printed: VEACH_AJAR, 128, Resampling, Printed, Mixture;
+    cornell_ply_harmonic_falloff: CORNELL_PLY, 24, Harmonic, Falloff, Mixture;
+    cornell_ply_harmonic_printed: CORNELL_PLY, 24, Harmonic, Printed, Mixture;
+    veach_mis_harmonic_falloff: VEACH_MIS, 32, Harmonic, Falloff, Mixture;
+    veach_mis_harmonic_printed: VEACH_MIS, 32, Harmonic, Printed, Mixture;
+    veach_ajar_harmonic_falloff: VEACH_AJAR, 128, Harmonic, Falloff, Mixture;
+    veach_ajar_harmonic_printed: VEACH_AJAR, 128, Harmonic, Printed, Mixture;
     cornell_ply_uniform_falloff_cmf: CORNELL_PLY, 24, Uniform, Falloff, Cmf;
     veach_mis_uniform_falloff_cmf: VEACH_MIS, 32, Uniform, Falloff, Cmf;
     veach_ajar_uniform_falloff_cmf: VEACH_AJAR, 128, Uniform, Falloff, Cmf;
+}
+
+/// The harmonic mean of `V · PMF` over the unoccluded pool connections, which
+/// `--pc-mis harmonic` takes from one iteration into the next.
+fn concentration(kind: IntegratorKind, spp: u32) -> f64 {
+    let scene = VEACH_AJAR.scene();
+    let mut o = RenderOptions::new(kind, Budget::Spp(spp));
+    o.seed = 5;
+    let c = integrator::render(&scene, &o).unwrap().stats.counters;
+    assert!(c.pool_hits > 1000, "{kind:?}: {} unoccluded pool connections", c.pool_hits);
+    c.pool_hits as f64 / c.pool_hits_inverse_concentration
+}
+
+#[test]
+fn harmonic_counts_measure_how_much_the_cache_concentrates_the_connections_that_reach() {
+    // Uniform selection (light-vertex-cache BDPT) draws every vertex with P = 1/V.
+    let lvc = concentration(IntegratorKind::Lvc, 4);
+    assert!((lvc - 1.0).abs() < 1e-5, "LVC: {lvc}");
+    // Behind veach-ajar's door most of the pool is hidden from the camera's room; the cache's
+    // PMFs send the draws that reach a vertex to the few it can see.
+    let pc = concentration(IntegratorKind::Pcbpt, 4);
+    assert!(pc > 2.0, "PCBPT: {pc}");
 }

@@ -23,7 +23,7 @@ use crate::sampling::Sampler;
 use crate::scene::Scene;
 use bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
 use bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
-use bidir::pcbpt::{Blend, Cache, PcCounts, PcMis, PcOptions, Pcbpt};
+use bidir::pcbpt::{Blend, Cache, PcCounts, PcOptions, Pcbpt};
 use bidir::pool::{LightPool, Lvc};
 use bidir::{Sink, WalkLimits};
 use glam::Vec2;
@@ -84,6 +84,11 @@ pub struct Counters {
     /// Pool draws of a camera vertex that repeated an earlier draw of it and were merged
     /// into that connection (its weight counts both).
     pub draws_merged: u64,
+    /// Pool draws whose connection was traced and found unoccluded.
+    pub pool_hits: u64,
+    /// Sum over those draws of `1 / (V · PMF)`, the inverse of their selection probability
+    /// relative to uniform selection (1 for uniform draws).
+    pub pool_hits_inverse_concentration: f64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -97,6 +102,8 @@ impl std::ops::AddAssign for Counters {
         self.connections_occluded += o.connections_occluded;
         self.connections_skipped += o.connections_skipped;
         self.draws_merged += o.draws_merged;
+        self.pool_hits += o.pool_hits;
+        self.pool_hits_inverse_concentration += o.pool_hits_inverse_concentration;
     }
 }
 
@@ -643,8 +650,11 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             }
             None => 0.0,
         };
-        // PCBPT's resampling weights use the previous iteration's cache.
+        // PCBPT's resampling weights use the previous iteration's cache, its harmonic
+        // weights the concentration of the previous camera pass's unoccluded draws (1,
+        // uniform, before the first).
         let mut previous: Option<Cache> = None;
+        let mut concentration = 1.0f64;
         while passes < total_passes {
             let count = match opts.budget {
                 Budget::Spp(spp) => pass_spp.min(spp - done),
@@ -658,13 +668,15 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             let mut pool_counters = Counters::default();
             if let Some((m, bdpt)) = est.pool_paths() {
                 pass_counts = match &est {
-                    Estimator::Pcbpt(pc) => PassCounts::Pc(PcCounts {
+                    Estimator::Pcbpt(pc) => PassCounts::Pc(PcCounts::for_iteration(
                         scene,
-                        light_trace: m as f32 / pixels,
-                        uniform: if vbar > 0.0 { pc.opts.connections as f32 / vbar } else { 0.0 },
-                        connections_times_paths: pc.opts.connections as f32 * m as f32,
-                        previous: previous.as_ref().filter(|_| pc.opts.mis == PcMis::Resampling),
-                    }),
+                        &pc.opts,
+                        m,
+                        pixels,
+                        vbar,
+                        concentration as f32,
+                        previous.as_ref(),
+                    )),
                     _ => PassCounts::Fixed(Counts::Pool {
                         light_trace: m as f32 / pixels,
                         connect: if vbar > 0.0 { opts.bidir.lvc_connections as f32 / vbar } else { 0.0 },
@@ -719,6 +731,12 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 break;
             };
             let t_merge = Instant::now();
+            let (hits, inverse) = results.iter().fold((0u64, 0.0f64), |(n, m), r| {
+                (n + r.counters.pool_hits, m + r.counters.pool_hits_inverse_concentration)
+            });
+            if hits > 0 && inverse > 0.0 {
+                concentration = hits as f64 / inverse;
+            }
             film.add_splats(&pool_splats);
             film.light_paths += pool_counters.light_paths;
             counters += pool_counters;

@@ -154,7 +154,8 @@ impl<C: StrategyCounts> Connector<'_, C> {
     }
 
     /// `s, t >= 2`: joins `y_{s-1}` and `z_{t-1}` with a shadow ray; `scale` multiplies the
-    /// contribution (the pool connections' `1 / (N M PMF)`).
+    /// contribution (the pool connections' `1 / (N M PMF)`). `true` when the shadow ray
+    /// was traced and found the two vertices visible to each other.
     #[allow(clippy::too_many_arguments)]
     pub fn connect<R: Random>(
         &self,
@@ -165,24 +166,24 @@ impl<C: StrategyCounts> Connector<'_, C> {
         rng: &mut R,
         sink: &mut impl Sink,
         counters: &mut Counters,
-    ) {
+    ) -> bool {
         let scene = self.scene;
         let (s, t) = (light.len(), camera.len());
         let (qs, pt) = (&light[s - 1], &camera[t - 1]);
         if !qs.is_connectible() || !pt.is_connectible() {
-            return;
+            return false;
         }
-        let Some(conn) = Connection::new(scene, qs, pt) else { return };
+        let Some(conn) = Connection::new(scene, qs, pt) else { return false };
         let f = conn.light_end.f * conn.camera_end.f;
         if f == Rgb::ZERO {
-            return;
+            return false;
         }
         let c = qs.beta * f * pt.beta * (scale / conn.dist2);
-        self.finish(light, camera, &conn, c, pos, rng, sink, counters, |sk, w| sk.add(s, t, w));
+        self.finish(light, camera, &conn, c, pos, rng, sink, counters, |sk, w| sk.add(s, t, w))
     }
 
     /// Weights an unweighted connection contribution, applies roulette, traces the shadow
-    /// ray and delivers the result.
+    /// ray and delivers the result; `true` when the shadow ray was traced and unoccluded.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn finish<R: Random, S: Sink>(
@@ -196,21 +197,26 @@ impl<C: StrategyCounts> Connector<'_, C> {
         sink: &mut S,
         counters: &mut Counters,
         deliver: impl FnOnce(&mut S, Rgb),
-    ) {
+    ) -> bool {
         let (a, b) = (&light[light.len() - 1], &camera[camera.len() - 1]);
         if self.roulette.is_some() {
             // The weight is part of what the roulette judges, so it comes first.
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
             if w == 0.0 {
-                return;
+                return false;
             }
-            let Some(k) = self.roulette(c * w, pos, rng, counters) else { return };
-            if self.trace(a, b, counters) {
+            let Some(k) = self.roulette(c * w, pos, rng, counters) else { return false };
+            let visible = self.trace(a, b, counters);
+            if visible {
                 deliver(sink, c * (w * k));
             }
+            visible
         } else if self.trace(a, b, counters) {
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
             deliver(sink, c * w);
+            true
+        } else {
+            false
         }
     }
 }
@@ -231,8 +237,9 @@ pub struct Bdpt {
 pub struct Scratch {
     pub camera: Vec<Vertex>,
     pub light: Vec<Vertex>,
-    /// The pool draws of one camera vertex: index and contribution factor.
-    pub draws: Vec<(usize, f32)>,
+    /// The pool draws of one camera vertex: index, contribution factor (summed over
+    /// repeats) and how many draws chose it.
+    pub draws: Vec<(usize, f32, u32)>,
 }
 
 impl Bdpt {
@@ -275,7 +282,9 @@ impl Bdpt {
                     (0, _) => conn.emission(&camera[..t], sink),
                     (_, 1) => conn.to_camera(&light[..s], rng, sink, counters),
                     (1, _) => conn.next_event(&camera[..t], pos, rng, sink, counters),
-                    _ => conn.connect(&light[..s], &camera[..t], 1.0, pos, rng, sink, counters),
+                    _ => {
+                        conn.connect(&light[..s], &camera[..t], 1.0, pos, rng, sink, counters);
+                    }
                 }
             }
         }

@@ -69,6 +69,10 @@ pub enum PcMis {
     Uniform,
     /// `n = N M P(y | z)`, `P` the blended PMF of the previous iteration's cache.
     Resampling,
+    /// `n = N M P̄`, `P̄` the harmonic mean of the blended PMF over the previous
+    /// iteration's unoccluded pool connections: one count for every connection, as if the
+    /// draws were uniform over the vertices they reach.
+    Harmonic,
 }
 
 /// How a draw inverts the blended PMF of a lookup. Both draw from exactly the same
@@ -844,13 +848,16 @@ pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
 }
 
 /// PCBPT's strategy counts, relative to one camera sample per pixel: `M/(W·H)` for light
-/// tracing from the pool, 1 for `s = 0` and NEE, and for pool connections `N / V̄` (uniform)
-/// or `N M P(y | z)` from the previous iteration's cache (resampling).
+/// tracing from the pool, 1 for `s = 0` and NEE, and for pool connections `N / V̄` (uniform),
+/// `N M P(y | z)` from the previous iteration's cache (resampling) or `N κ / V̄` with `κ` the
+/// harmonic mean of `V · PMF` over the previous iteration's unoccluded pool connections
+/// (harmonic).
 #[derive(Clone, Copy)]
 pub struct PcCounts<'a> {
     pub scene: &'a Scene,
     pub light_trace: f32,
-    /// `N / V̄`, V̄ from the previous iteration.
+    /// The count of every pool connection when not resampling: `N / V̄` (uniform) or
+    /// `N κ / V̄` (harmonic), from the previous iteration.
     pub uniform: f32,
     /// `N M`.
     pub connections_times_paths: f32,
@@ -858,7 +865,34 @@ pub struct PcCounts<'a> {
     pub previous: Option<&'a Cache>,
 }
 
-impl PcCounts<'_> {
+impl<'a> PcCounts<'a> {
+    /// The counts of one iteration with `m` light paths over `pixels` pixels, from what the
+    /// previous iteration measured: `vbar` (`V̄`), `concentration` (the harmonic mean of
+    /// `V · PMF` over its unoccluded pool connections) and its cache.
+    pub fn for_iteration(
+        scene: &'a Scene,
+        opts: &PcOptions,
+        m: usize,
+        pixels: f32,
+        vbar: f32,
+        concentration: f32,
+        previous: Option<&'a Cache>,
+    ) -> PcCounts<'a> {
+        let n = opts.connections as f32;
+        let uniform = match opts.mis {
+            _ if vbar <= 0.0 => 0.0,
+            PcMis::Harmonic => n * concentration / vbar,
+            PcMis::Uniform | PcMis::Resampling => n / vbar,
+        };
+        PcCounts {
+            scene,
+            light_trace: m as f32 / pixels,
+            uniform,
+            connections_times_paths: n * m as f32,
+            previous: previous.filter(|_| opts.mis == PcMis::Resampling),
+        }
+    }
+
     /// `n(s,t)`; `alpha` gives the light throughput at `y_{s-1}` (asked only for resampling).
     #[inline]
     fn count_with(&self, path: &FullPath, s: usize, t: usize, alpha: impl FnOnce() -> Rgb) -> f32 {

@@ -206,6 +206,9 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
         let (conn, bdpt) = (self.conn, self.bdpt);
         camera_subpath(conn.scene, pos, &bdpt.limits, rng, &mut scratch.camera, counters);
         let camera = &scratch.camera;
+        // A draw's factor is `1 / (N M P)`; `1 / (V P)` is its factor over this one's.
+        let uniform_scale =
+            self.pool.connectible.len() as f64 / (self.connections as f64 * self.pool.paths.max(1) as f64);
         for t in 2..=camera.len() {
             if bdpt.allowed(0, t) {
                 conn.emission(&camera[..t], sink);
@@ -225,15 +228,17 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
                 match scratch.draws.iter_mut().find(|d| d.0 == i) {
                     Some(d) => {
                         d.1 += scale;
+                        d.2 += 1;
                         counters.draws_merged += 1;
                     }
-                    None => scratch.draws.push((i, scale)),
+                    None => scratch.draws.push((i, scale, 1)),
                 }
             }
-            for &(i, scale) in &scratch.draws {
+            for &(i, scale, repeats) in &scratch.draws {
                 let light = self.pool.prefix(i);
-                if bdpt.allowed(light.len(), t) {
-                    conn.connect(light, &camera[..t], scale, pos, rng, sink, counters);
+                if bdpt.allowed(light.len(), t) && conn.connect(light, &camera[..t], scale, pos, rng, sink, counters) {
+                    counters.pool_hits += repeats as u64;
+                    counters.pool_hits_inverse_concentration += scale as f64 / uniform_scale;
                 }
             }
         }

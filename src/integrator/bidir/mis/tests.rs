@@ -7,7 +7,7 @@ use super::*;
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::integrator::Counters;
-use crate::integrator::bidir::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcOptions, trace_records};
+use crate::integrator::bidir::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, trace_records};
 use crate::integrator::bidir::pool::LightPool;
 use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
 use crate::light::{Light, LightSampler};
@@ -228,25 +228,27 @@ fn check_variant(variant: Variant, seed: u64) {
     let scene = scene(variant);
     let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
     let caches = [pc_cache(&scene, 120, DistanceTerm::Falloff), pc_cache(&scene, 40, DistanceTerm::Printed)];
-    let pc = |previous, n: f32, m: f32| PcCounts {
-        scene: &scene,
-        light_trace: m / (48.0 * 40.0),
-        uniform: n / 3.1,
-        connections_times_paths: n * m,
-        previous,
+    // Each `--pc-mis` option as the renderer sets it up, with V̄ = 3.1 and κ = 7.3 measured
+    // by a previous iteration.
+    let pc = |mis, previous, n: u32, m: usize| {
+        let opts = PcOptions { mis, connections: n, ..PcOptions::default() };
+        PcCounts::for_iteration(&scene, &opts, m, 48.0 * 40.0, 3.1, 7.3, previous)
     };
     let pc_options = [
-        ("pc uniform", pc(None, 3.0, 120.0)),
-        ("pc resampling", pc(Some(&caches[0]), 3.0, 120.0)),
-        ("pc resampling printed", pc(Some(&caches[1]), 5.0, 40.0)),
+        ("pc uniform", pc(PcMis::Uniform, Some(&caches[0]), 3, 120)),
+        ("pc harmonic", pc(PcMis::Harmonic, Some(&caches[0]), 3, 120)),
+        ("pc resampling", pc(PcMis::Resampling, Some(&caches[0]), 3, 120)),
+        ("pc resampling printed", pc(PcMis::Resampling, Some(&caches[1]), 5, 40)),
     ];
+    assert!(pc_options[0].1.previous.is_none() && pc_options[1].1.previous.is_none());
+    assert!((pc_options[1].1.uniform / pc_options[0].1.uniform - 7.3).abs() < 1e-5);
     let mut checked = 0;
     let mut with_delta = 0;
     let mut resampled = Vec::new();
     for x in paths(&scene, seed, 300) {
         if x.len() >= 4 && !x.iter().any(|v| is_delta_surface(&scene, v)) {
             let (l, c) = subpaths(&scene, &x, 2).unwrap();
-            resampled.push(pc_options[1].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
+            resampled.push(pc_options[2].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
         }
         let n = x.len();
         let has_delta = x.iter().any(|v| is_delta_surface(&scene, v));
