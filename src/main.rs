@@ -384,7 +384,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
                 k.dropped_records,
                 k.pool_vertices,
                 k.megabytes,
-                c.pool_hits as f64 / c.pool_hits_inverse_concentration.max(f64::MIN_POSITIVE)
+                c.concentration().map_or(1.0, |(all, _)| all)
             );
         }
     }

@@ -4,9 +4,17 @@
 //! same verdict as the other bidirectional integrators (`tests/bidir_reference.rs`): two
 //! seeds averaged, image mean within 0.5%, relMSE within 1.3× of what noise explains.
 //!
-//! `--pc-mis harmonic` weighs every pool connection by how much the previous iteration's
-//! draws that reached a vertex were concentrated (the harmonic mean of `V · PMF` over them);
-//! its measurement is checked against uniform selection, where it is exactly one.
+//! `--pc-mis harmonic` (the default) weighs the pool connections of each camera depth by how
+//! much the previous iteration's draws that reached a vertex were concentrated (the harmonic
+//! mean of `V · PMF` over them); its measurement is checked against uniform selection, where
+//! it is exactly one. Its two `veach-ajar` cases are ignored for the same reason as
+//! resampling's below, with a wider spread: giving the shared pool's connections more
+//! weight makes more of the error common to many pixels, so single 128-spp image means
+//! (160×90) spread by about ±1.8% (seeds 3–8: 1.0236, 1.0031, 1.0113, 1.0182, 0.9720, 0.9912;
+//! `uniform` on the same seeds ±1.1%). With these seeds both pass (0.9965, 0.9981), with too
+//! little margin for another CPU's intersection rounding. Its mean was measured instead on
+//! same-seed pairs against `uniform`: 1.0007 ± 0.0008 (60 pairs, 80×45) and 0.9988 ± 0.0019
+//! (60 pairs, 160×90); its `cornell-ply` and `veach-mis` cases run here.
 //!
 //! The two `veach-ajar` cases of `--pc-mis resampling` are ignored: that estimator's heavy
 //! tail spreads the image means of single 128-spp renders (160×90) by about ±1%, so the mean
@@ -70,31 +78,38 @@ cases! {
     cornell_ply_harmonic_printed: CORNELL_PLY, 24, Harmonic, Printed, Mixture;
     veach_mis_harmonic_falloff: VEACH_MIS, 32, Harmonic, Falloff, Mixture;
     veach_mis_harmonic_printed: VEACH_MIS, 32, Harmonic, Printed, Mixture;
+    #[ignore = "harmonic MIS on veach-ajar: pool-correlated error spreads single 128-spp image means by about ±1.8%, too much for a 0.5% check of two renders; unbiased on 120 same-seed pairs against uniform (BENCHMARKS.md); run with --ignored"]
     veach_ajar_harmonic_falloff: VEACH_AJAR, 128, Harmonic, Falloff, Mixture;
+    #[ignore = "harmonic MIS on veach-ajar: pool-correlated error spreads single 128-spp image means by about ±1.8%, too much for a 0.5% check of two renders; unbiased on 120 same-seed pairs against uniform (BENCHMARKS.md); run with --ignored"]
     veach_ajar_harmonic_printed: VEACH_AJAR, 128, Harmonic, Printed, Mixture;
     cornell_ply_uniform_falloff_cmf: CORNELL_PLY, 24, Uniform, Falloff, Cmf;
     veach_mis_uniform_falloff_cmf: VEACH_MIS, 32, Uniform, Falloff, Cmf;
     veach_ajar_uniform_falloff_cmf: VEACH_AJAR, 128, Uniform, Falloff, Cmf;
 }
 
-/// The harmonic mean of `V · PMF` over the unoccluded pool connections, which
-/// `--pc-mis harmonic` takes from one iteration into the next.
-fn concentration(kind: IntegratorKind, spp: u32) -> f64 {
+/// The harmonic mean of `V · PMF` over the unoccluded pool connections, overall and by
+/// camera depth, which `--pc-mis harmonic` takes from one iteration into the next.
+fn concentration(kind: IntegratorKind, spp: u32) -> (f64, [f64; integrator::CONCENTRATION_DEPTHS]) {
     let scene = VEACH_AJAR.scene();
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
     o.seed = 5;
     let c = integrator::render(&scene, &o).unwrap().stats.counters;
-    assert!(c.pool_hits > 1000, "{kind:?}: {} unoccluded pool connections", c.pool_hits);
-    c.pool_hits as f64 / c.pool_hits_inverse_concentration
+    let hits: u64 = c.pool_hits.iter().sum();
+    assert!(hits > 1000 && c.pool_hits[0] > 100, "{kind:?}: {:?} unoccluded pool connections", c.pool_hits);
+    c.concentration().unwrap()
 }
 
 #[test]
 fn harmonic_counts_measure_how_much_the_cache_concentrates_the_connections_that_reach() {
-    // Uniform selection (light-vertex-cache BDPT) draws every vertex with P = 1/V.
-    let lvc = concentration(IntegratorKind::Lvc, 4);
+    // Uniform selection (light-vertex-cache BDPT) draws every vertex with P = 1/V, at every
+    // depth.
+    let (lvc, by_depth) = concentration(IntegratorKind::Lvc, 4);
     assert!((lvc - 1.0).abs() < 1e-5, "LVC: {lvc}");
+    assert!(by_depth.iter().all(|c| (c - 1.0).abs() < 1e-5), "LVC: {by_depth:?}");
     // Behind veach-ajar's door most of the pool is hidden from the camera's room; the cache's
-    // PMFs send the draws that reach a vertex to the few it can see.
-    let pc = concentration(IntegratorKind::Pcbpt, 4);
+    // PMFs send the draws that reach a vertex to the few it can see, most sharply from the
+    // first hit, whose records are the densest and nearest.
+    let (pc, by_depth) = concentration(IntegratorKind::Pcbpt, 4);
     assert!(pc > 2.0, "PCBPT: {pc}");
+    assert!(by_depth[0] > pc && by_depth[0] > by_depth[2], "PCBPT: {by_depth:?}");
 }

@@ -24,6 +24,7 @@ use crate::scene::Scene;
 use bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
 use bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
 use bidir::pcbpt::{Blend, Cache, PcCounts, PcOptions, Pcbpt};
+pub use bidir::pool::CONCENTRATION_DEPTHS;
 use bidir::pool::{LightPool, Lvc};
 use bidir::{Sink, WalkLimits};
 use glam::Vec2;
@@ -84,11 +85,33 @@ pub struct Counters {
     /// Pool draws of a camera vertex that repeated an earlier draw of it and were merged
     /// into that connection (its weight counts both).
     pub draws_merged: u64,
-    /// Pool draws whose connection was traced and found unoccluded.
-    pub pool_hits: u64,
+    /// Pool draws whose connection was traced and found unoccluded, by the depth of the
+    /// camera vertex (`[t - 2]` for `z_{t-1}`, deeper ones in the last entry).
+    pub pool_hits: [u64; CONCENTRATION_DEPTHS],
     /// Sum over those draws of `1 / (V · PMF)`, the inverse of their selection probability
-    /// relative to uniform selection (1 for uniform draws).
-    pub pool_hits_inverse_concentration: f64,
+    /// relative to uniform selection (1 for uniform draws), by the same depths.
+    pub pool_hits_inverse_concentration: [f64; CONCENTRATION_DEPTHS],
+}
+
+impl Counters {
+    /// The harmonic mean of `V · PMF` over the unoccluded pool connections, over all depths
+    /// and per camera depth (a depth without such connections gets the overall one); `None`
+    /// without any.
+    pub fn concentration(&self) -> Option<(f64, [f64; CONCENTRATION_DEPTHS])> {
+        let hits: u64 = self.pool_hits.iter().sum();
+        let inverse: f64 = self.pool_hits_inverse_concentration.iter().sum();
+        if hits == 0 || inverse <= 0.0 {
+            return None;
+        }
+        let all = hits as f64 / inverse;
+        let mut by_depth = [all; CONCENTRATION_DEPTHS];
+        for (k, c) in by_depth.iter_mut().enumerate() {
+            if self.pool_hits[k] > 0 && self.pool_hits_inverse_concentration[k] > 0.0 {
+                *c = self.pool_hits[k] as f64 / self.pool_hits_inverse_concentration[k];
+            }
+        }
+        Some((all, by_depth))
+    }
 }
 
 impl std::ops::AddAssign for Counters {
@@ -102,8 +125,10 @@ impl std::ops::AddAssign for Counters {
         self.connections_occluded += o.connections_occluded;
         self.connections_skipped += o.connections_skipped;
         self.draws_merged += o.draws_merged;
-        self.pool_hits += o.pool_hits;
-        self.pool_hits_inverse_concentration += o.pool_hits_inverse_concentration;
+        for k in 0..CONCENTRATION_DEPTHS {
+            self.pool_hits[k] += o.pool_hits[k];
+            self.pool_hits_inverse_concentration[k] += o.pool_hits_inverse_concentration[k];
+        }
     }
 }
 
@@ -651,10 +676,10 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             None => 0.0,
         };
         // PCBPT's resampling weights use the previous iteration's cache, its harmonic
-        // weights the concentration of the previous camera pass's unoccluded draws (1,
-        // uniform, before the first).
+        // weights the concentration of the previous camera pass's unoccluded draws by camera
+        // depth (1, uniform, before the first).
         let mut previous: Option<Cache> = None;
-        let mut concentration = 1.0f64;
+        let mut concentration = [1.0f32; CONCENTRATION_DEPTHS];
         while passes < total_passes {
             let count = match opts.budget {
                 Budget::Spp(spp) => pass_spp.min(spp - done),
@@ -674,7 +699,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                         m,
                         pixels,
                         vbar,
-                        concentration as f32,
+                        &concentration,
                         previous.as_ref(),
                     )),
                     _ => PassCounts::Fixed(Counts::Pool {
@@ -731,11 +756,14 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 break;
             };
             let t_merge = Instant::now();
-            let (hits, inverse) = results.iter().fold((0u64, 0.0f64), |(n, m), r| {
-                (n + r.counters.pool_hits, m + r.counters.pool_hits_inverse_concentration)
-            });
-            if hits > 0 && inverse > 0.0 {
-                concentration = hits as f64 / inverse;
+            // This pass's concentration of pool draws, in tile order (the same sums whatever
+            // the thread count).
+            let mut pass_counters = Counters::default();
+            for r in &results {
+                pass_counters += r.counters;
+            }
+            if let Some((_, by_depth)) = pass_counters.concentration() {
+                concentration = by_depth.map(|c| c as f32);
             }
             film.add_splats(&pool_splats);
             film.light_paths += pool_counters.light_paths;

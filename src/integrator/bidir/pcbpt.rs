@@ -17,13 +17,22 @@
 //! 4. **Connections.** `F(z) = (1/N) Σ_k w C(v_k, z) / (M PMF(z, v_k))`, on the shared
 //!    [`Connector`]; `s = 0`, NEE and light tracing from the pool are BDPT's.
 //!
-//! MIS strategy counts ([`PcCounts`]): `N/V̄` (uniform) or `N M P(y | z)` with `P` the blended
-//! PMF of the *previous* iteration's cache evaluated on the path (resampling); both are
-//! functions of the path alone, so the weights of a path's strategies sum to one.
+//! MIS strategy counts ([`PcCounts`]): `N/V̄` (uniform); `N κ_t / V̄` with `κ_t` the harmonic
+//! mean of `V · PMF` over the *previous* iteration's unoccluded pool connections from camera
+//! vertices `z_{t-1}` (harmonic, the default: the draws count as if they were uniform over
+//! the vertices they reach); or
+//! `N M P(y | z)` with `P` the blended PMF of the previous iteration's cache evaluated on the
+//! path (resampling). All are functions of the path alone, so the weights of a path's
+//! strategies sum to one.
+//!
+//! Why `κ` is the harmonic mean: a draw follows the blended PMF, so the mean of
+//! `Vis / (V · PMF)` over draws is `Σ_v Vis(v) / V`, the share of the pool a camera vertex can
+//! reach, and the share of draws that reach one is `P(Vis)`; their ratio, `κ`, is how many
+//! times more often the cache's draws reach a vertex than uniform ones would.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::mis::{FullPath, StrategyCounts};
-use super::pool::{LightPool, PoolPass, PoolSelection};
+use super::pool::{CONCENTRATION_DEPTHS, LightPool, PoolPass, PoolSelection};
 use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, visible};
 use crate::bsdf::TransportMode;
 use crate::film::tiles;
@@ -69,9 +78,9 @@ pub enum PcMis {
     Uniform,
     /// `n = N M P(y | z)`, `P` the blended PMF of the previous iteration's cache.
     Resampling,
-    /// `n = N M P̄`, `P̄` the harmonic mean of the blended PMF over the previous
-    /// iteration's unoccluded pool connections: one count for every connection, as if the
-    /// draws were uniform over the vertices they reach.
+    /// `n = N M P̄_t`, `P̄_t` the harmonic mean of the blended PMF over the previous
+    /// iteration's unoccluded pool connections from camera depth `t`: as if the draws were
+    /// uniform over the vertices they reach.
     Harmonic,
 }
 
@@ -124,7 +133,7 @@ impl Default for PcOptions {
             uniform_blend: 0.5,
             neighbours: 3,
             distance_term: DistanceTerm::Falloff,
-            mis: PcMis::Uniform,
+            mis: PcMis::Harmonic,
             sampling: PcSampling::Mixture,
             max_cache_mb: 1024,
         }
@@ -849,16 +858,17 @@ pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
 
 /// PCBPT's strategy counts, relative to one camera sample per pixel: `M/(W·H)` for light
 /// tracing from the pool, 1 for `s = 0` and NEE, and for pool connections `N / V̄` (uniform),
-/// `N M P(y | z)` from the previous iteration's cache (resampling) or `N κ / V̄` with `κ` the
-/// harmonic mean of `V · PMF` over the previous iteration's unoccluded pool connections
-/// (harmonic).
+/// `N M P(y | z)` from the previous iteration's cache (resampling) or `N κ_t / V̄` with `κ_t`
+/// the harmonic mean of `V · PMF` over the previous iteration's unoccluded pool connections
+/// from camera vertices `z_{t-1}` (harmonic).
 #[derive(Clone, Copy)]
 pub struct PcCounts<'a> {
     pub scene: &'a Scene,
     pub light_trace: f32,
-    /// The count of every pool connection when not resampling: `N / V̄` (uniform) or
-    /// `N κ / V̄` (harmonic), from the previous iteration.
-    pub uniform: f32,
+    /// The count of the pool connections to `z_{t-1}`, at `[t - 2]` (deeper ones at the
+    /// last entry), when not resampling: `N / V̄` (uniform) or `N κ_t / V̄` (harmonic), from
+    /// the previous iteration.
+    pub uniform: [f32; CONCENTRATION_DEPTHS],
     /// `N M`.
     pub connections_times_paths: f32,
     /// The previous iteration's cache (resampling weights), `None` for uniform.
@@ -868,22 +878,23 @@ pub struct PcCounts<'a> {
 impl<'a> PcCounts<'a> {
     /// The counts of one iteration with `m` light paths over `pixels` pixels, from what the
     /// previous iteration measured: `vbar` (`V̄`), `concentration` (the harmonic mean of
-    /// `V · PMF` over its unoccluded pool connections) and its cache.
+    /// `V · PMF` over its unoccluded pool connections, by camera depth as in
+    /// [`Counters::pool_hits`]) and its cache.
     pub fn for_iteration(
         scene: &'a Scene,
         opts: &PcOptions,
         m: usize,
         pixels: f32,
         vbar: f32,
-        concentration: f32,
+        concentration: &[f32; CONCENTRATION_DEPTHS],
         previous: Option<&'a Cache>,
     ) -> PcCounts<'a> {
         let n = opts.connections as f32;
-        let uniform = match opts.mis {
+        let uniform = std::array::from_fn(|k| match opts.mis {
             _ if vbar <= 0.0 => 0.0,
-            PcMis::Harmonic => n * concentration / vbar,
+            PcMis::Harmonic => n * concentration[k] / vbar,
             PcMis::Uniform | PcMis::Resampling => n / vbar,
-        };
+        });
         PcCounts {
             scene,
             light_trace: m as f32 / pixels,
@@ -900,7 +911,7 @@ impl<'a> PcCounts<'a> {
             (_, 1) => self.light_trace,
             (0 | 1, _) => 1.0,
             _ => match self.previous {
-                None => self.uniform,
+                None => self.uniform[(t - 2).min(CONCENTRATION_DEPTHS - 1)],
                 Some(cache) => self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha()),
             },
         }

@@ -13,6 +13,10 @@ use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
 
+/// Camera depths the concentration of pool draws is measured for: `z_1 .. z_15` each, deeper
+/// vertices together.
+pub const CONCENTRATION_DEPTHS: usize = 16;
+
 /// Key word that separates pool random streams from camera-sample streams.
 const POOL_STREAM: u64 = 0x706f_6f6c;
 
@@ -237,8 +241,9 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
             for &(i, scale, repeats) in &scratch.draws {
                 let light = self.pool.prefix(i);
                 if bdpt.allowed(light.len(), t) && conn.connect(light, &camera[..t], scale, pos, rng, sink, counters) {
-                    counters.pool_hits += repeats as u64;
-                    counters.pool_hits_inverse_concentration += scale as f64 / uniform_scale;
+                    let k = (t - 2).min(CONCENTRATION_DEPTHS - 1);
+                    counters.pool_hits[k] += repeats as u64;
+                    counters.pool_hits_inverse_concentration[k] += scale as f64 / uniform_scale;
                 }
             }
         }

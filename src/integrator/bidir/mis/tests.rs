@@ -232,7 +232,9 @@ fn check_variant(variant: Variant, seed: u64) {
     // by a previous iteration.
     let pc = |mis, previous, n: u32, m: usize| {
         let opts = PcOptions { mis, connections: n, ..PcOptions::default() };
-        PcCounts::for_iteration(&scene, &opts, m, 48.0 * 40.0, 3.1, 7.3, previous)
+        // κ differs by camera depth.
+        let kappa = std::array::from_fn(|k| 7.3 / (1.0 + k as f32));
+        PcCounts::for_iteration(&scene, &opts, m, 48.0 * 40.0, 3.1, &kappa, previous)
     };
     let pc_options = [
         ("pc uniform", pc(PcMis::Uniform, Some(&caches[0]), 3, 120)),
@@ -241,7 +243,8 @@ fn check_variant(variant: Variant, seed: u64) {
         ("pc resampling printed", pc(PcMis::Resampling, Some(&caches[1]), 5, 40)),
     ];
     assert!(pc_options[0].1.previous.is_none() && pc_options[1].1.previous.is_none());
-    assert!((pc_options[1].1.uniform / pc_options[0].1.uniform - 7.3).abs() < 1e-5);
+    assert!((pc_options[1].1.uniform[0] / pc_options[0].1.uniform[0] - 7.3).abs() < 1e-5);
+    assert!((pc_options[1].1.uniform[3] / pc_options[0].1.uniform[3] - 7.3 / 4.0).abs() < 1e-5);
     let mut checked = 0;
     let mut with_delta = 0;
     let mut resampled = Vec::new();
