@@ -452,5 +452,5 @@ fn pcbpt_reports_its_phases_cache_and_shadow_rays() {
         assert!(r["shadow_rays"][phase].as_u64().unwrap() > 0, "no shadow rays in {phase}: {r}");
         assert!(r["phases"][phase].as_f64().unwrap() > 0.0, "no time in {phase}: {r}");
     }
-    assert_eq!(r["bidir"]["pc"]["light_paths"].as_u64(), Some(1000));
+    assert_eq!(r["bidir"]["pc"]["light_paths"].as_u64(), Some(500));
 }

@@ -10,17 +10,17 @@
 //! it is exactly one. Its two `veach-ajar` cases are ignored for the same reason as
 //! resampling's below, with a wider spread: giving the shared pool's connections more
 //! weight makes more of the error common to many pixels, so single 128-spp image means
-//! (160×90) spread by about ±1.8% (seeds 3–8: 1.0236, 1.0031, 1.0113, 1.0182, 0.9720, 0.9912;
-//! `uniform` on the same seeds ±1.1%). With these seeds both pass (0.9965, 0.9981), with too
-//! little margin for another CPU's intersection rounding. Its mean was measured instead on
+//! (160×90) spread by about ±1.8% (seeds 3–8 with M = 1000: 1.0236, 1.0031, 1.0113, 1.0182, 0.9720, 0.9912;
+//! `uniform` on the same seeds ±1.1%). With M = 1000 and these seeds both passed (0.9965,
+//! 0.9981), with too little margin for another CPU's intersection rounding. Its mean was measured instead on
 //! same-seed pairs against `uniform`: 1.0007 ± 0.0008 (60 pairs, 80×45) and 0.9988 ± 0.0019
 //! (60 pairs, 160×90); its `cornell-ply` and `veach-mis` cases run here.
 //!
 //! The two `veach-ajar` cases of `--pc-mis resampling` are ignored: that estimator's heavy
 //! tail spreads the image means of single 128-spp renders (160×90) by about ±1%, so the mean
-//! of two cannot be held to 0.5% with a safe margin (with the current defaults and these
-//! seeds both pass, at 1.0041 and 1.0045; with the previous defaults one missed at 1.0052; a
-//! different CPU's intersection rounding can move one firefly). Its mean was measured instead on 180 same-seed pairs against `uniform`
+//! of two cannot be held to 0.5% with a safe margin (with the defaults of 3 neighbours,
+//! N = 4, M = 1000 and these seeds both passed, at 1.0041 and 1.0045; with 6 neighbours and
+//! N = 3 one missed at 1.0052; a different CPU's intersection rounding can move one firefly). Its mean was measured instead on 180 same-seed pairs against `uniform`
 //! (whose own veach-ajar cases run here): resampling/uniform 1.0006 ± 0.0009
 //! (BENCHMARKS.md, `scripts/paired_means.py`). The check stays runnable with `-- --ignored`.
 

@@ -125,7 +125,7 @@ pub struct PcOptions {
 impl Default for PcOptions {
     fn default() -> PcOptions {
         PcOptions {
-            light_paths: 1000,
+            light_paths: 500,
             connections: 4,
             stride: 64,
             cache_depth: 5,
