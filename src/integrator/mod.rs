@@ -756,24 +756,23 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 break;
             };
             let t_merge = Instant::now();
-            // This pass's concentration of pool draws, in tile order (the same sums whatever
-            // the thread count).
-            let mut pass_counters = Counters::default();
-            for r in &results {
-                pass_counters += r.counters;
-            }
-            if let Some((_, by_depth)) = pass_counters.concentration() {
-                concentration = by_depth.map(|c| c as f32);
-            }
             film.add_splats(&pool_splats);
             film.light_paths += pool_counters.light_paths;
             counters += pool_counters;
+            // The camera pass's counters, summed in tile order (the same sums whatever the
+            // thread count).
+            let mut pass_counters = Counters::default();
             for r in &results {
                 film.merge(&r.block);
                 film.add_splats(&r.splats);
                 film.light_paths += r.counters.light_paths;
-                counters += r.counters;
-                shadow.camera_pass += r.counters.shadow_rays;
+                pass_counters += r.counters;
+            }
+            counters += pass_counters;
+            shadow.camera_pass += pass_counters.shadow_rays;
+            // The concentration of this pass's pool draws weights the next pass.
+            if let Some((_, by_depth)) = pass_counters.concentration() {
+                concentration = by_depth.map(|c| c as f32);
             }
             phases.merge += t_merge.elapsed().as_secs_f64();
             done += count;

@@ -20,9 +20,8 @@
 //! MIS strategy counts ([`PcCounts`]): `N/V̄` (uniform); `N κ_t / V̄` with `κ_t` the harmonic
 //! mean of `V · PMF` over the *previous* iteration's unoccluded pool connections from camera
 //! vertices `z_{t-1}` (harmonic, the default: the draws count as if they were uniform over
-//! the vertices they reach); or
-//! `N M P(y | z)` with `P` the blended PMF of the previous iteration's cache evaluated on the
-//! path (resampling). All are functions of the path alone, so the weights of a path's
+//! the vertices they reach); or `N M P(y | z)` with `P` the blended PMF of the previous
+//! iteration's cache evaluated on the path (resampling). All are functions of the path alone, so the weights of a path's
 //! strategies sum to one.
 //!
 //! Why `κ` is the harmonic mean: a draw follows the blended PMF, so the mean of
@@ -868,7 +867,7 @@ pub struct PcCounts<'a> {
     /// The count of the pool connections to `z_{t-1}`, at `[t - 2]` (deeper ones at the
     /// last entry), when not resampling: `N / V̄` (uniform) or `N κ_t / V̄` (harmonic), from
     /// the previous iteration.
-    pub uniform: [f32; CONCENTRATION_DEPTHS],
+    pub connect: [f32; CONCENTRATION_DEPTHS],
     /// `N M`.
     pub connections_times_paths: f32,
     /// The previous iteration's cache (resampling weights), `None` for uniform.
@@ -890,7 +889,7 @@ impl<'a> PcCounts<'a> {
         previous: Option<&'a Cache>,
     ) -> PcCounts<'a> {
         let n = opts.connections as f32;
-        let uniform = std::array::from_fn(|k| match opts.mis {
+        let connect = std::array::from_fn(|k| match opts.mis {
             _ if vbar <= 0.0 => 0.0,
             PcMis::Harmonic => n * concentration[k] / vbar,
             PcMis::Uniform | PcMis::Resampling => n / vbar,
@@ -898,7 +897,7 @@ impl<'a> PcCounts<'a> {
         PcCounts {
             scene,
             light_trace: m as f32 / pixels,
-            uniform,
+            connect,
             connections_times_paths: n * m as f32,
             previous: previous.filter(|_| opts.mis == PcMis::Resampling),
         }
@@ -911,7 +910,7 @@ impl<'a> PcCounts<'a> {
             (_, 1) => self.light_trace,
             (0 | 1, _) => 1.0,
             _ => match self.previous {
-                None => self.uniform[(t - 2).min(CONCENTRATION_DEPTHS - 1)],
+                None => self.connect[(t - 2).min(CONCENTRATION_DEPTHS - 1)],
                 Some(cache) => self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha()),
             },
         }

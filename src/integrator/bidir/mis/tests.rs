@@ -243,8 +243,8 @@ fn check_variant(variant: Variant, seed: u64) {
         ("pc resampling printed", pc(PcMis::Resampling, Some(&caches[1]), 5, 40)),
     ];
     assert!(pc_options[0].1.previous.is_none() && pc_options[1].1.previous.is_none());
-    assert!((pc_options[1].1.uniform[0] / pc_options[0].1.uniform[0] - 7.3).abs() < 1e-5);
-    assert!((pc_options[1].1.uniform[3] / pc_options[0].1.uniform[3] - 7.3 / 4.0).abs() < 1e-5);
+    assert!((pc_options[1].1.connect[0] / pc_options[0].1.connect[0] - 7.3).abs() < 1e-5);
+    assert!((pc_options[1].1.connect[3] / pc_options[0].1.connect[3] - 7.3 / 4.0).abs() < 1e-5);
     let mut checked = 0;
     let mut with_delta = 0;
     let mut resampled = Vec::new();
