@@ -297,6 +297,22 @@ fn first_above(n: usize, target: f64, f: impl Fn(usize) -> f64) -> usize {
     base
 }
 
+/// The largest `f32` at or below `u`: for any `f32` `x`, `x <= u` exactly when
+/// `x <= f32_at_or_below(u)`, so CMF entries compare with `u` in single precision.
+#[inline]
+fn f32_at_or_below(u: f64) -> f32 {
+    let x = u as f32;
+    if x as f64 <= u { x } else { x.next_down() }
+}
+
+/// How many entries of `xs` are at or below `u`; for non-decreasing `xs`, the index of the
+/// first entry above it. Branch-free, so the compiler vectorises it: the entries are
+/// compared all at once instead of by a chain of dependent probes.
+#[inline(always)]
+fn count_at_or_below(xs: &[f32], u: f32) -> usize {
+    xs.iter().map(|&x| (x <= u) as u32).sum::<u32>() as usize
+}
+
 /// The last CMF index of block `j` over `v` entries.
 #[inline]
 fn block_end(j: usize, v: usize) -> usize {
@@ -619,15 +635,18 @@ impl Cache {
         (i, self.pmf(nb, i))
     }
 
-    /// The smallest index whose stored CMF of record `c` exceeds `u ∈ [0, 1)`.
+    /// The smallest index whose stored CMF of record `c` exceeds `u ∈ [0, 1)` (the last
+    /// when none does): the block ends first, then one block, each by counting the entries
+    /// at or below `u`.
     #[inline]
     fn invert_row(&self, c: usize, u: f64) -> usize {
         let blocks = self.v.div_ceil(BLOCK);
         let ends = &self.block_ends[c * blocks..(c + 1) * blocks];
-        let block = first_above(blocks, u, |j| ends[j] as f64);
+        let u = f32_at_or_below(u);
+        let block = count_at_or_below(ends, u).min(blocks - 1);
         let start = block * BLOCK;
         let row = &self.cmf[c * self.v + start..c * self.v + block_end(block, self.v) + 1];
-        start + first_above(row.len(), u, |k| row[k] as f64)
+        start + count_at_or_below(row, u).min(row.len() - 1)
     }
 
     /// A draw by the chosen inversion.
@@ -1182,6 +1201,30 @@ mod tests {
                 })
                 .collect();
             assert!(!discrete_chi2(&counts, &unblended).passed(), "{sampling:?}: the unblended PMF was not rejected");
+        }
+    }
+
+    #[test]
+    fn counting_inversion_equals_the_binary_search() {
+        let scene = scene();
+        let (cache, _) = cache(&scene, 200, DistanceTerm::Falloff);
+        assert!(cache.v > 3 * BLOCK, "{} vertices: one block would not test the block search", cache.v);
+        let mut rng = Sampler::new(&[17]);
+        for c in 0..cache.records.len() {
+            let row = cache.row(c);
+            let search = |u: f64| first_above(cache.v, u, |i| row[i] as f64);
+            // Random points, the stored values themselves and their f64 neighbours (where the
+            // comparison in single precision could go wrong), and the ends.
+            let mut us: Vec<f64> =
+                (0..200).map(|_| rng.next_1d() as f64 + rng.next_1d() as f64 / 16_777_216.0).collect();
+            for &x in row.iter().step_by(7) {
+                let x = x as f64;
+                us.extend([x, x.next_down(), x.next_up()].into_iter().filter(|u| (0.0..1.0).contains(u)));
+            }
+            us.extend([0.0, 1.0 - f64::EPSILON]);
+            for u in us {
+                assert_eq!(cache.invert_row(c, u), search(u), "record {c}, u = {u:e}");
+            }
         }
     }
 
