@@ -129,7 +129,7 @@ impl Default for PcOptions {
             stride: 64,
             cache_depth: 5,
             visibility: true,
-            uniform_blend: 0.5,
+            uniform_blend: 0.75,
             neighbours: 3,
             distance_term: DistanceTerm::Falloff,
             mis: PcMis::Harmonic,
