@@ -33,20 +33,20 @@ use common::*;
 use pcbpt::image_io::Image;
 use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use pcbpt::scene::Scene;
 
-fn render(case: &Case, spp: u32, opts: &PcOptions, seed: u64) -> Image {
-    let scene = case.scene();
+fn render(scene: &Scene, spp: u32, opts: &PcOptions, seed: u64) -> Image {
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(spp));
     o.seed = seed;
     o.bidir.pc = opts.clone();
-    let out = integrator::render(&scene, &o).unwrap();
-    Image::new(out.width, out.height, out.image)
+    image(integrator::render(scene, &o).unwrap())
 }
 
 fn check(case: &Case, spp: u32, mis: PcMis, distance_term: DistanceTerm, sampling: PcSampling) {
     let opts = PcOptions { mis, distance_term, sampling, ..PcOptions::default() };
-    let a = render(case, spp, &opts, 1);
-    let b = render(case, spp, &opts, 2);
+    let scene = case.scene();
+    let a = render(&scene, spp, &opts, 1);
+    let b = render(&scene, spp, &opts, 2);
     case.check(&a, &b, &format!("PCBPT {mis:?} {distance_term:?} {sampling:?}, 2 × {spp} spp"));
 }
 
@@ -100,12 +100,7 @@ fn paired_mean_ratio(a: &PcOptions, b: &PcOptions, spp: u32, seeds: std::ops::Ra
         &[("resx", "80"), ("resy", "45"), ("max_depth", "-1")],
         pcbpt::accel::Backend::Embree,
     );
-    let mean = |opts: &PcOptions, seed: u64| {
-        let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(spp));
-        o.seed = seed;
-        o.bidir.pc = opts.clone();
-        image(integrator::render(&scene, &o).unwrap()).mean()
-    };
+    let mean = |opts: &PcOptions, seed: u64| render(&scene, spp, opts, seed).mean();
     let ratios: Vec<f64> = seeds.map(|seed| mean(b, seed) / mean(a, seed)).collect();
     let n = ratios.len() as f64;
     let avg = ratios.iter().sum::<f64>() / n;
