@@ -21,8 +21,8 @@
 //! mean of `V · PMF` over the *previous* iteration's unoccluded pool connections from camera
 //! vertices `z_{t-1}` (harmonic, the default: the draws count as if they were uniform over
 //! the vertices they reach); or `N M P(y | z)` with `P` the blended PMF of the previous
-//! iteration's cache evaluated on the path (resampling). All are functions of the path alone, so the weights of a path's
-//! strategies sum to one.
+//! iteration's cache evaluated on the path (resampling). All are functions of the path
+//! alone, so the weights of a path's strategies sum to one.
 //!
 //! Why `κ` is the harmonic mean: a draw follows the blended PMF, so the mean of
 //! `Vis / (V · PMF)` over draws is `Σ_v Vis(v) / V`, the share of the pool a camera vertex can
@@ -31,7 +31,7 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::mis::{FullPath, StrategyCounts};
-use super::pool::{CONCENTRATION_DEPTHS, LightPool, PoolPass, PoolSelection};
+use super::pool::{CONCENTRATION_DEPTHS, LightPool, PoolPass, PoolSelection, concentration_depth};
 use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, visible};
 use crate::bsdf::TransportMode;
 use crate::film::tiles;
@@ -929,7 +929,7 @@ impl<'a> PcCounts<'a> {
             (_, 1) => self.light_trace,
             (0 | 1, _) => 1.0,
             _ => match self.previous {
-                None => self.connect[(t - 2).min(CONCENTRATION_DEPTHS - 1)],
+                None => self.connect[concentration_depth(t)],
                 Some(cache) => self.connections_times_paths * cache.selection_pmf(self.scene, path, s, alpha()),
             },
         }

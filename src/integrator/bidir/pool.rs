@@ -17,6 +17,12 @@ use rayon::prelude::*;
 /// vertices together.
 pub const CONCENTRATION_DEPTHS: usize = 16;
 
+/// The entry of a concentration measured, or a count looked up, for camera vertex `z_{t-1}`.
+#[inline]
+pub fn concentration_depth(t: usize) -> usize {
+    (t - 2).min(CONCENTRATION_DEPTHS - 1)
+}
+
 /// Key word that separates pool random streams from camera-sample streams.
 const POOL_STREAM: u64 = 0x706f_6f6c;
 
@@ -241,7 +247,7 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
             for &(i, scale, repeats) in &scratch.draws {
                 let light = self.pool.prefix(i);
                 if bdpt.allowed(light.len(), t) && conn.connect(light, &camera[..t], scale, pos, rng, sink, counters) {
-                    let k = (t - 2).min(CONCENTRATION_DEPTHS - 1);
+                    let k = concentration_depth(t);
                     counters.pool_hits[k] += repeats as u64;
                     counters.pool_hits_inverse_concentration[k] += scale as f64 / uniform_scale;
                 }
