@@ -230,6 +230,29 @@ impl Vertex {
         solid * next.cos_area(-w) / dist2
     }
 
+    /// The densities of this vertex scattering between its predecessor `prev` and `next`
+    /// (unit direction `w`, distance `dist`), in area measure: of generating `next`, and of
+    /// generating `prev` given `next` (zero for endpoints, which have no predecessor). One
+    /// BSDF lookup for both; the same values as two calls of [`Vertex::pdf`].
+    #[inline]
+    pub fn densities(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex, w: Vec3, dist: f32) -> (f32, f32) {
+        let to_next = next.cos_area(-w) / (dist * dist);
+        match self.kind {
+            VertexKind::Camera => (scene.camera.pdf_direction(w) * to_next, 0.0),
+            VertexKind::Light(l) => (scene.lights[l as usize].pdf_emission_direction(self.ng, w) * to_next, 0.0),
+            VertexKind::Surface => {
+                let Some(prev) = prev else { return (0.0, 0.0) };
+                let (fwd, rev) = self.bsdf(scene).pdf_pair(
+                    self.frame.to_local(self.wo),
+                    self.frame.to_local(w),
+                    self.uv,
+                    TransportMode::Radiance,
+                );
+                (fwd * to_next, prev.area_density(rev, self.p))
+            }
+        }
+    }
+
     /// Area density at `next` of this vertex, taken as a light, emitting towards it.
     pub fn pdf_light(&self, scene: &Scene, next: &Vertex) -> f32 {
         let Some(l) = self.light_index(scene) else { return 0.0 };
@@ -349,12 +372,18 @@ impl WalkLimits {
 
 /// Extends `path` (which holds the vertex the ray leaves from) by sampling BSDFs, writing
 /// each vertex's forward density and the previous vertex's reverse density as it goes.
+///
+/// The densities and each vertex's direction back (`wo`) are taken from the vertex
+/// positions, not from the ray that found the vertex: a ray leaves an offset origin, and
+/// where a segment is not much longer than that offset (in corners) the sampled direction
+/// and the direction between the two points differ. Every strategy of a path must see the
+/// same densities of the same points for the MIS weights to sum to one; the connections and
+/// the other strategies evaluate them from positions.
 #[allow(clippy::too_many_arguments)]
 fn random_walk<R: Random>(
     scene: &Scene,
     mut ray: Ray,
     mut beta: Rgb,
-    mut pdf_dir: f32,
     mode: TransportMode,
     max_vertices: usize,
     rr_depth: u32,
@@ -367,11 +396,25 @@ fn random_walk<R: Random>(
     let mut bounces = 0u32;
     while path.len() < max_vertices {
         counters.extension_rays += 1;
-        let Some(si) = scene.intersect(&ray) else { break };
-        let prev_p = path[path.len() - 1].p;
+        let Some(mut si) = scene.intersect(&ray) else { break };
+        let n = path.len();
+        let prev = &path[n - 1];
+        let back = prev.p - si.p;
+        let dist = back.length();
+        if dist == 0.0 || !dist.is_finite() {
+            break;
+        }
+        si.wo = back / dist;
         let bsdf = scene.bsdf(&si);
         let mut v = Vertex::surface(&si, beta, !bsdf.is_delta());
-        v.pdf_fwd = v.area_density(pdf_dir, prev_p);
+        // A vertex left through a delta lobe has no density (zero marks the delta).
+        if !prev.delta {
+            let (fwd, rev) = prev.densities(scene, n.checked_sub(2).map(|i| &path[i]), &v, -si.wo, dist);
+            v.pdf_fwd = fwd;
+            if n >= 2 {
+                path[n - 2].pdf_rev = rev;
+            }
+        }
         path.push(v);
         if path.len() >= max_vertices {
             break;
@@ -385,16 +428,10 @@ fn random_walk<R: Random>(
         if mode == TransportMode::Importance {
             weight *= shading_correction(si.ng, si.shading.n, si.wo, wi);
         }
-        let (pdf_fwd, pdf_rev) = if bs.delta {
+        if bs.delta {
             let n = path.len();
             path[n - 1].delta = true;
-            (0.0, 0.0)
-        } else {
-            (bs.pdf, bsdf.pdf(bs.wi, wo, si.uv, mode))
-        };
-        let n = path.len();
-        let here = path[n - 1].p;
-        path[n - 2].pdf_rev = path[n - 2].area_density(pdf_rev, here);
+        }
         beta *= weight;
         rr_beta *= weight;
         if beta == Rgb::ZERO || !beta.is_finite() {
@@ -409,7 +446,6 @@ fn random_walk<R: Random>(
             beta /= q;
             rr_beta /= q;
         }
-        pdf_dir = pdf_fwd;
         ray = si.spawn_ray(wi);
     }
 }
@@ -429,13 +465,11 @@ pub fn camera_subpath<R: Random>(
     if limits.camera_vertices <= 1 {
         return;
     }
-    let pdf_dir = scene.camera.pdf_direction(ray.d);
     let before = counters.extension_rays;
     random_walk(
         scene,
         ray,
         Rgb::ONE,
-        pdf_dir,
         TransportMode::Radiance,
         limits.camera_vertices,
         limits.rr_depth,
@@ -486,7 +520,6 @@ pub fn light_subpath<R: Random>(
         scene,
         Ray::new(o, es.d),
         beta,
-        es.pdf_dir,
         TransportMode::Importance,
         limits.light_vertices,
         limits.rr_depth,
