@@ -11,16 +11,16 @@
 //!
 //! `--pc-mis harmonic` (the default) weighs the pool connections of each camera depth by how
 //! much the previous iteration's draws that reached a vertex were concentrated (the harmonic
-//! mean of `V · PMF` over them); its measurement is checked against uniform selection, where
-//! it is exactly one. Its two `veach-ajar` cases are ignored for the same reason as
-//! resampling's below, with a wider spread: giving the shared pool's connections more
-//! weight makes more of the error common to many pixels, so single 128-spp image means
-//! (160×90) spread by about ±1.8% (seeds 3–8 with M = 1000: 1.0236, 1.0031, 1.0113,
-//! 1.0182, 0.9720, 0.9912; `uniform` on the same seeds ±1.1%). With these seeds they gave 0.9965 and 0.9981 with
-//! M = 1000, 1.0039 and 1.0047 with M = 500 and a uniform blend of 0.5, and 1.0050 and 1.0056
-//! with the present defaults (M = 500, blend 0.75; the printed case just outside 0.5%;
-//! measured before the walks took their densities between vertex positions, which raised
-//! BDPT's mean there by 0.2%): the same spread moving with every option. Its mean is checked instead, for each distance term,
+//! mean of `V · PMF` over them); its measurement is checked against uniform selection, where it
+//! is exactly one. Its two `veach-ajar` cases are ignored for the same reason as resampling's
+//! below, with a wider spread: giving the shared pool's connections more weight makes more of
+//! the error common to many pixels, so single 128-spp image means (160×90) spread by about
+//! ±1.8% (seeds 3–8 with M = 1000: 1.0236, 1.0031, 1.0113, 1.0182, 0.9720, 0.9912; `uniform` on
+//! the same seeds ±1.1%). With these seeds they gave 0.9965 and 0.9981 with M = 1000, 1.0039
+//! and 1.0047 with M = 500 and a uniform blend of 0.5, and 1.0050 and 1.0056 with the present
+//! defaults (M = 500, blend 0.75; the printed case just outside 0.5%; measured before the walks
+//! took their densities between vertex positions, which raised BDPT's mean there by 0.2%): the
+//! same spread moving with every option. Its mean is checked instead, for each distance term,
 //! on 40 same-seed pairs against `uniform` (`harmonic_*keeps_the_veach_ajar_mean_*`; earlier
 //! studies: 1.0007 ± 0.0008 on 60 pairs at 80×45 and 0.9988 ± 0.0019 on 60 pairs at 160×90);
 //! its `cornell-ply` and `veach-mis` cases run here.
