@@ -16,6 +16,12 @@ pub fn pdf(wo: Vec3, wi: Vec3) -> f32 {
     if wo.z <= 0.0 { 0.0 } else { square_to_cosine_hemisphere_pdf(wi) }
 }
 
+/// `(pdf(wo, wi), pdf(wi, wo))`: both are zero unless both directions lie on the front side.
+#[inline]
+pub fn pdf_pair(wo: Vec3, wi: Vec3) -> (f32, f32) {
+    if wo.z <= 0.0 || wi.z <= 0.0 { (0.0, 0.0) } else { (wi.z * FRAC_1_PI, wo.z * FRAC_1_PI) }
+}
+
 pub fn sample(reflectance: Rgb, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
     if wo.z <= 0.0 {
         return None;

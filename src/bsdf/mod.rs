@@ -155,7 +155,31 @@ impl Bsdf {
     /// Forward and reverse densities of a pair: of `wi` given `wo`, and of `wo` given `wi`
     /// (what a path generated from the other end would have used).
     pub fn pdf_pair(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (f32, f32) {
-        (self.pdf(wo, wi, uv, mode), self.pdf(wi, wo, uv, mode))
+        match &self.model {
+            // One side test for both directions (the same values as two `pdf` calls).
+            BsdfModel::Diffuse { .. } => {
+                let (wo, wi) = self.orient(wo, wi);
+                diffuse::pdf_pair(wo, wi)
+            }
+            _ => (self.pdf(wo, wi, uv, mode), self.pdf(wi, wo, uv, mode)),
+        }
+    }
+
+    /// [`Bsdf::eval`] and [`Bsdf::pdf_pair`] together, with one dispatch: what a
+    /// connection needs from each of its ends.
+    #[inline]
+    pub fn eval_pdfs(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (Rgb, f32, f32) {
+        match &self.model {
+            BsdfModel::Diffuse { reflectance } => {
+                let (wo, wi) = self.orient(wo, wi);
+                let (fwd, rev) = diffuse::pdf_pair(wo, wi);
+                (diffuse::eval(reflectance.eval(uv), wo, wi), fwd, rev)
+            }
+            _ => {
+                let (fwd, rev) = self.pdf_pair(wo, wi, uv, mode);
+                (self.eval(wo, wi, uv, mode), fwd, rev)
+            }
+        }
     }
 
     /// Samples `wi` given `wo` with the random numbers `u1` (lobe choice) and `u2`.

@@ -395,6 +395,10 @@ impl StrategyCounts for PassCounts<'_> {
         }
     }
 
+    fn all_ones(&self) -> bool {
+        matches!(self, PassCounts::Fixed(c) if c.all_ones())
+    }
+
     fn path_dependent(&self) -> bool {
         match self {
             PassCounts::Fixed(_) => false,

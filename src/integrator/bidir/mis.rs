@@ -26,16 +26,6 @@ pub enum Heuristic {
     Power,
 }
 
-impl Heuristic {
-    #[inline]
-    fn apply(self, x: f32) -> f32 {
-        match self {
-            Heuristic::Balance => x,
-            Heuristic::Power => x * x,
-        }
-    }
-}
-
 /// The densities of one full path as seen by one strategy, copied out of its vertices and
 /// patched where the connection changes them.
 /// `N` bounds the path length: short paths use a small array.
@@ -67,7 +57,7 @@ impl<const N: usize> PathPdfs<N> {
         if s >= self.n {
             return false;
         }
-        if s == 0 { !self.delta_light } else { !self.delta[s - 1] && !self.delta[s] }
+        if s == 0 { !self.delta_light } else { !(self.delta[s - 1] | self.delta[s]) }
     }
 }
 
@@ -84,33 +74,46 @@ pub fn weight_from_pdfs<const N: usize>(
     heuristic: Heuristic,
     count: &impl Fn(usize) -> f32,
 ) -> f32 {
+    match heuristic {
+        Heuristic::Balance => walk::<N, false>(p, s, count),
+        Heuristic::Power => walk::<N, true>(p, s, count),
+    }
+}
+
+/// The ratio walk of [`weight_from_pdfs`], one copy per heuristic (`POWER`: β = 2).
+#[inline(always)]
+fn walk<const N: usize, const POWER: bool>(p: &PathPdfs<N>, s: usize, count: &impl Fn(usize) -> f32) -> f32 {
     let n_s = count(s);
     if n_s <= 0.0 {
         return 0.0;
     }
     // p_1 uses next-event estimation's density for x_0; the others the light subpath's.
     let nee = |i: usize| if i == 1 { p.nee_ratio } else { 1.0 };
-    let norm = nee(s) * n_s;
-    let mut sum = 1.0f32;
-    let mut add = |i: usize, r: f32| {
-        if p.valid(i) {
-            let c = count(i);
-            if c > 0.0 {
-                sum += heuristic.apply(r * nee(i) * c / norm);
-            }
+    let inv_norm = 1.0 / (nee(s) * n_s);
+    let term = |i: usize, r: f32| -> f32 {
+        if !p.valid(i) {
+            return 0.0;
+        }
+        let c = count(i);
+        if c > 0.0 {
+            let x = r * nee(i) * c * inv_norm;
+            if POWER { x * x } else { x }
+        } else {
+            0.0
         }
     };
+    let mut sum = 1.0f32;
     // Towards the light: p_i / p_s.
     let mut r = 1.0f32;
     for i in (0..s).rev() {
         r *= remap0(p.pe[i]) / remap0(p.pl[i]);
-        add(i, r);
+        sum += term(i, r);
     }
     // Towards the camera: p_{i+1} / p_s.
     let mut r = 1.0f32;
     for i in s..p.n.saturating_sub(1) {
         r *= remap0(p.pl[i]) / remap0(p.pe[i]);
-        add(i + 1, r);
+        sum += term(i + 1, r);
     }
     let w = 1.0 / sum;
     if w.is_finite() { w } else { 0.0 }
@@ -144,6 +147,11 @@ impl FullPath<'_> {
 pub trait StrategyCounts {
     fn count(&self, path: &FullPath, s: usize, t: usize) -> f32;
 
+    /// Whether every count is one (BDPT): the weights need not look them up.
+    fn all_ones(&self) -> bool {
+        false
+    }
+
     /// Whether the counts are costly functions of the path, better evaluated together by
     /// [`StrategyCounts::fill`] once per weight.
     fn path_dependent(&self) -> bool {
@@ -175,6 +183,10 @@ pub enum Counts {
 }
 
 impl StrategyCounts for Counts {
+    fn all_ones(&self) -> bool {
+        *self == Counts::Bdpt
+    }
+
     #[inline]
     fn count(&self, _path: &FullPath, s: usize, t: usize) -> f32 {
         match *self {
@@ -279,10 +291,11 @@ pub fn mis_weight_with(
     }
     let count = |sp| counts.count(&full, sp, n - sp);
     // Most paths are short: a small array is cheaper to set up.
-    if n <= SHORT {
-        weight_from_pdfs(&path_pdfs::<SHORT>(scene, light, camera, conn), light.len(), heuristic, &count)
-    } else {
-        weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), light.len(), heuristic, &count)
+    match (n <= SHORT, counts.all_ones()) {
+        (true, true) => weight_from_pdfs(&path_pdfs::<SHORT>(scene, light, camera, conn), s, heuristic, &|_| 1.0),
+        (true, false) => weight_from_pdfs(&path_pdfs::<SHORT>(scene, light, camera, conn), s, heuristic, &count),
+        (false, true) => weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), s, heuristic, &|_| 1.0),
+        (false, false) => weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), s, heuristic, &count),
     }
 }
 

@@ -162,10 +162,12 @@ impl Vertex {
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
         match self.kind {
             VertexKind::Surface => {
-                let bsdf = self.bsdf(scene);
                 let (lo, li) = (self.frame.to_local(self.wo), self.frame.to_local(w));
-                let f = self.scatter_local(bsdf, self.wo, w, lo, li, mode);
-                let (pdf_fwd, pdf_rev) = bsdf.pdf_pair(lo, li, self.uv, mode);
+                let (f, pdf_fwd, pdf_rev) = self.bsdf(scene).eval_pdfs(lo, li, self.uv, mode);
+                let mut f = f * li.z.abs();
+                if mode == TransportMode::Importance && f != Rgb::ZERO {
+                    f *= shading_correction(self.ng, self.frame.n, self.wo, w);
+                }
                 End { f, pdf_fwd, pdf_rev }
             }
             VertexKind::Light(l) => {
