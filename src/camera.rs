@@ -53,6 +53,8 @@ pub struct CameraConnection {
     /// `We · cos θ_camera`: the emitted importance times the camera-side cosine (the pinhole
     /// has no surface, so the cosine stays with the importance).
     pub we_cos: f32,
+    /// [`Camera::pdf_direction`] of the direction from the camera to the point.
+    pub pdf_dir: f32,
 }
 
 impl Camera {
@@ -124,6 +126,7 @@ impl Camera {
     /// position, produces direction `d` (unit): `1 / (A cos³θ)`; zero off the image.
     #[inline]
     pub fn pdf_direction(&self, d: Vec3) -> f32 {
+        // `connect` computes the same expression for its `pdf_dir`.
         match self.raster_of(d) {
             Some((_, cos)) => 1.0 / (self.image_plane_area() * cos * cos * cos),
             None => 0.0,
@@ -159,7 +162,8 @@ impl Camera {
         if depth < self.near_clip || depth > self.far_clip {
             return None;
         }
-        Some(CameraConnection { raster, wi: -dir, dist2, we_cos: self.we(cos) * cos })
+        let pdf_dir = 1.0 / (self.image_plane_area() * cos * cos * cos);
+        Some(CameraConnection { raster, wi: -dir, dist2, we_cos: self.we(cos) * cos, pdf_dir })
     }
 
     /// The primary ray through a film position in pixel units (`(0,0)` is the top-left

@@ -53,6 +53,10 @@ impl Distribution1D {
     /// within the chosen entry (so one number can be reused).
     pub fn sample(&self, u: f32) -> (usize, f32) {
         let n = self.cmf.len();
+        if n == 1 {
+            // One entry (of probability one): what the search below returns.
+            return (0, u.clamp(0.0, 1.0 - f32::EPSILON));
+        }
         let i = self.cmf.partition_point(|&c| c <= u).min(n - 1);
         // Skip zero-probability entries that a CMF plateau could land on.
         let mut i = i;

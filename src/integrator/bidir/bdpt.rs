@@ -148,7 +148,8 @@ impl<C: StrategyCounts> Connector<'_, C> {
             w: k.wi,
             dist2: k.dist2,
             light_end,
-            camera_end: z0.end(scene, -k.wi, TransportMode::Radiance),
+            // What `z0.end(scene, -k.wi, ..)` gives, without projecting the direction again.
+            camera_end: End { f: Rgb::ZERO, pdf_fwd: k.pdf_dir, pdf_rev: 0.0 },
         };
         self.finish(light, from_ref(&z0), &conn, c, k.raster, rng, sink, counters, |sk, w| sk.splat(s, 1, k.raster, w));
     }
