@@ -284,10 +284,11 @@ pub fn mis_weight_with(
     let n = full.len();
     let s = light.len();
     if counts.path_dependent() {
-        let p = path_pdfs::<CAP>(scene, light, camera, conn);
-        let mut table = [0.0f32; CAP];
-        counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
-        return weight_from_pdfs(&p, s, heuristic, &|i| table[i]);
+        return if n <= SHORT {
+            weight_with_table::<SHORT>(scene, light, camera, conn, heuristic, counts)
+        } else {
+            weight_with_table::<CAP>(scene, light, camera, conn, heuristic, counts)
+        };
     }
     let count = |sp| counts.count(&full, sp, n - sp);
     // Most paths are short: a small array is cheaper to set up.
@@ -297,6 +298,23 @@ pub fn mis_weight_with(
         (false, true) => weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), s, heuristic, &|_| 1.0),
         (false, false) => weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), s, heuristic, &count),
     }
+}
+
+/// [`mis_weight_with`] for counts that depend on the path: all the counts the walk needs
+/// are evaluated together first.
+fn weight_with_table<const N: usize>(
+    scene: &Scene,
+    light: &[Vertex],
+    camera: &[Vertex],
+    conn: Option<&Connection>,
+    heuristic: Heuristic,
+    counts: &impl StrategyCounts,
+) -> f32 {
+    let s = light.len();
+    let p = path_pdfs::<N>(scene, light, camera, conn);
+    let mut table = [0.0f32; N];
+    counts.fill(&FullPath { light, camera }, &|i| i == s || p.valid(i), &mut table);
+    weight_from_pdfs(&p, s, heuristic, &|i| table[i])
 }
 
 /// The MIS weight of the strategy that joins `light` and `camera`, evaluating the

@@ -940,9 +940,10 @@ impl StrategyCounts for PcCounts<'_> {
     #[inline]
     fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
         self.count_with(path, s, t, || {
-            let mut alpha = [Rgb::ZERO; super::mis::CAP];
-            light_throughputs(self.scene, path, &mut alpha[..s]);
-            alpha[s - 1]
+            with_throughput_buffer(s, |alpha| {
+                light_throughputs(self.scene, path, alpha);
+                alpha[s - 1]
+            })
         })
     }
 
@@ -953,7 +954,14 @@ impl StrategyCounts for PcCounts<'_> {
     /// Counts of a whole path with one pass for the light throughputs.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
         let n = path.len();
-        let mut alpha = [Rgb::ZERO; super::mis::CAP];
+        with_throughput_buffer(n, |alpha| self.fill_with(path, needed, out, alpha))
+    }
+}
+
+impl PcCounts<'_> {
+    /// [`StrategyCounts::fill`] with room for the path's light throughputs.
+    fn fill_with(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32], alpha: &mut [Rgb]) {
+        let n = path.len();
         if self.previous.is_some()
             && let Some(last) = (2..n.saturating_sub(1)).rev().find(|&s| needed(s))
         {
@@ -966,6 +974,17 @@ impl StrategyCounts for PcCounts<'_> {
         }
     }
 }
+
+/// Calls `f` with room for the light throughputs of the first `n` vertices of a path: a
+/// small array for the usual short paths (zeroing the full one for every weight costs more
+/// than using it).
+#[inline]
+fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
+    if n <= SHORT_PATH { f(&mut [Rgb::ZERO; SHORT_PATH][..n]) } else { f(&mut [Rgb::ZERO; super::mis::CAP][..n]) }
+}
+
+/// Paths up to this many vertices keep their light throughputs in a small array.
+const SHORT_PATH: usize = 16;
 
 /// The PCBPT camera pass: BDPT's `s = 0` and NEE per camera vertex, and `N` connections to
 /// pool vertices drawn from the cache.
