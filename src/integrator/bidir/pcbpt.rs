@@ -686,29 +686,20 @@ impl Cache {
 }
 
 /// The `k` nearest of the points `axes` (by coordinate arrays; `ids` their record indices,
-/// the positions themselves when `None`): the squared distances in one vectorised loop, then
-/// an insertion into the sorted `k` best, which most points leave at the first comparison.
+/// the positions themselves when `None`): each point's squared distance, then an insertion
+/// into the sorted `k` best, which most points leave at the first comparison (one pass, no
+/// buffer of distances to clear).
 /// Ties go to the earlier point (with `ids` ascending, the lower record index).
 fn scan_nearest(axes: [&[f32]; 3], ids: Option<&[u32]>, p: Vec3, k: usize) -> Nearest {
     let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
     let [xs, ys, zs] = axes;
-    let n = xs.len();
-    let k = k.min(n);
-    let (mut stack, mut heap) = ([0.0f32; LINEAR_SCAN], Vec::new());
-    let d2: &mut [f32] = if n <= LINEAR_SCAN {
-        &mut stack[..n]
-    } else {
-        heap.resize(n, 0.0);
-        &mut heap
-    };
-    for (((d, &x), &y), &z) in d2.iter_mut().zip(xs).zip(ys).zip(zs) {
-        let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
-        // NaN (never from finite positions) sorts last.
-        let e = dx * dx + dy * dy + dz * dz;
-        *d = if e.is_nan() { f32::INFINITY } else { e };
-    }
+    let k = k.min(xs.len());
     let mut len = 0;
-    for (i, &d) in d2.iter().enumerate() {
+    for (i, ((&x, &y), &z)) in xs.iter().zip(ys).zip(zs).enumerate() {
+        let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
+        let e = dx * dx + dy * dy + dz * dz;
+        // NaN (never from finite positions) sorts last.
+        let d = if e.is_nan() { f32::INFINITY } else { e };
         if len == k {
             // Only a strictly nearer point displaces the last (no distance is NaN): ties keep
             // the earlier one.
