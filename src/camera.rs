@@ -216,6 +216,7 @@ mod tests {
             let k = c.connect(r.at(5.0)).unwrap();
             assert!((k.raster - pos).abs().max_element() < 1e-3, "{pos} -> {}", k.raster);
             assert!((k.wi + r.d).length() < 1e-5);
+            assert_eq!(k.pdf_dir, c.pdf_direction(-k.wi));
         }
     }
 

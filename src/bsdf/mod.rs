@@ -292,6 +292,32 @@ mod tests {
         v
     }
 
+    #[test]
+    fn eval_pdfs_is_eval_and_both_densities() {
+        // Every model, one- and two-sided, directions on both sides: the one-dispatch
+        // evaluation (and pdf_pair's diffuse shortcut) give exactly the separate calls.
+        let mut rng = Sampler::new(&[5]);
+        for (name, b) in models() {
+            for two_sided in [false, true] {
+                let b = Bsdf { two_sided, ..b.clone() };
+                for _ in 0..500 {
+                    let wo = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+                    let wi = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+                    for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                        let (f, fwd, rev) = b.eval_pdfs(wo, wi, Vec2::ZERO, mode);
+                        let expected = (
+                            b.eval(wo, wi, Vec2::ZERO, mode),
+                            b.pdf(wo, wi, Vec2::ZERO, mode),
+                            b.pdf(wi, wo, Vec2::ZERO, mode),
+                        );
+                        assert_eq!((f, fwd, rev), expected, "{name}, two-sided {two_sided}, {wo} {wi}");
+                        assert_eq!(b.pdf_pair(wo, wi, Vec2::ZERO, mode), (expected.1, expected.2), "{name}");
+                    }
+                }
+            }
+        }
+    }
+
     fn check_bsdf(name: &str, b: &Bsdf, wo: Vec3, mode: TransportMode, tests: usize) {
         let mut t = Chi2Test::new(SphereDomain::default());
         t.tests = tests;

@@ -14,7 +14,7 @@ use crate::scene::Scene;
 /// Room for two subpaths of [`super::MAX_VERTICES`].
 pub const CAP: usize = 2 * super::MAX_VERTICES;
 /// Paths up to this many vertices use a small array.
-const SHORT: usize = 16;
+pub const SHORT: usize = 16;
 
 /// The MIS heuristic.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]

@@ -971,11 +971,9 @@ impl PcCounts<'_> {
 /// than using it).
 #[inline]
 fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
-    if n <= SHORT_PATH { f(&mut [Rgb::ZERO; SHORT_PATH][..n]) } else { f(&mut [Rgb::ZERO; super::mis::CAP][..n]) }
+    use super::mis::{CAP, SHORT};
+    if n <= SHORT { f(&mut [Rgb::ZERO; SHORT][..n]) } else { f(&mut [Rgb::ZERO; CAP][..n]) }
 }
-
-/// Paths up to this many vertices keep their light throughputs in a small array.
-const SHORT_PATH: usize = 16;
 
 /// The PCBPT camera pass: BDPT's `s = 0` and NEE per camera vertex, and `N` connections to
 /// pool vertices drawn from the cache.
