@@ -280,29 +280,17 @@ pub fn mis_weight_with(
     heuristic: Heuristic,
     counts: &impl StrategyCounts,
 ) -> f32 {
-    let full = FullPath { light, camera };
-    let n = full.len();
-    let s = light.len();
-    if counts.path_dependent() {
-        return if n <= SHORT {
-            weight_with_table::<SHORT>(scene, light, camera, conn, heuristic, counts)
-        } else {
-            weight_with_table::<CAP>(scene, light, camera, conn, heuristic, counts)
-        };
-    }
-    let count = |sp| counts.count(&full, sp, n - sp);
     // Most paths are short: a small array is cheaper to set up.
-    match (n <= SHORT, counts.all_ones()) {
-        (true, true) => weight_from_pdfs(&path_pdfs::<SHORT>(scene, light, camera, conn), s, heuristic, &|_| 1.0),
-        (true, false) => weight_from_pdfs(&path_pdfs::<SHORT>(scene, light, camera, conn), s, heuristic, &count),
-        (false, true) => weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), s, heuristic, &|_| 1.0),
-        (false, false) => weight_from_pdfs(&path_pdfs::<CAP>(scene, light, camera, conn), s, heuristic, &count),
+    if light.len() + camera.len() <= SHORT {
+        weight_in::<SHORT>(scene, light, camera, conn, heuristic, counts)
+    } else {
+        weight_in::<CAP>(scene, light, camera, conn, heuristic, counts)
     }
 }
 
-/// [`mis_weight_with`] for counts that depend on the path: all the counts the walk needs
-/// are evaluated together first.
-fn weight_with_table<const N: usize>(
+/// [`mis_weight_with`] with the path's densities in arrays of `N`.
+#[inline(always)]
+fn weight_in<const N: usize>(
     scene: &Scene,
     light: &[Vertex],
     camera: &[Vertex],
@@ -310,11 +298,19 @@ fn weight_with_table<const N: usize>(
     heuristic: Heuristic,
     counts: &impl StrategyCounts,
 ) -> f32 {
-    let s = light.len();
+    let full = FullPath { light, camera };
+    let (n, s) = (full.len(), light.len());
     let p = path_pdfs::<N>(scene, light, camera, conn);
-    let mut table = [0.0f32; N];
-    counts.fill(&FullPath { light, camera }, &|i| i == s || p.valid(i), &mut table);
-    weight_from_pdfs(&p, s, heuristic, &|i| table[i])
+    if counts.path_dependent() {
+        // Costly counts: all those the walk needs, evaluated together first.
+        let mut table = [0.0f32; N];
+        counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
+        weight_from_pdfs(&p, s, heuristic, &|i| table[i])
+    } else if counts.all_ones() {
+        weight_from_pdfs(&p, s, heuristic, &|_| 1.0)
+    } else {
+        weight_from_pdfs(&p, s, heuristic, &|sp| counts.count(&full, sp, n - sp))
+    }
 }
 
 /// The MIS weight of the strategy that joins `light` and `camera`, evaluating the
