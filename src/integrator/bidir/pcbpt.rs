@@ -51,6 +51,7 @@ pub const MAX_NEIGHBOURS: usize = 16;
 
 /// Caches of at most this many records find neighbours by a linear scan.
 const LINEAR_SCAN: usize = 128;
+const _: () = assert!(LINEAR_SCAN <= 256, "candidate lists store record indices in bytes");
 
 /// CMF entries per block of the two-level search: the blended CMF is first searched over
 /// the block ends (a compact copy of every record's CMF at them), then inside one block.
@@ -265,8 +266,8 @@ pub struct Cache {
     id: u64,
     pub records: Vec<Record>,
     tree: Option<KdTree<f32, 3>>,
-    /// Record positions by axis, for the linear scan of small caches.
-    axes: [Vec<f32>; 3],
+    /// Record positions, for the linear scan of small caches.
+    sites: Vec<Site>,
     /// Candidate lists of small caches: the linear scan runs over one cell's candidates.
     grid: Option<CandidateGrid>,
     /// `records × v` normalised CMFs, record after record.
@@ -351,7 +352,7 @@ impl Cache {
             id: next_id(),
             records: Vec::new(),
             tree: None,
-            axes: Default::default(),
+            sites: Vec::new(),
             grid: None,
             cmf: Vec::new(),
             block_ends: Vec::new(),
@@ -429,11 +430,11 @@ impl Cache {
             cmf.chunks_exact(v).flat_map(|row| (0..v.div_ceil(BLOCK)).map(|j| row[block_end(j, v)])).collect()
         };
         let inv_v = 1.0 / v.max(1) as f64;
-        let axes: [Vec<f32>; 3] = [0, 1, 2].map(|a| points.iter().map(|p| p[a]).collect());
+        let sites: Vec<Site> = points.iter().enumerate().map(|(i, &p)| Site { p, id: i as u32 }).collect();
         let k = blend.neighbours.clamp(1, MAX_NEIGHBOURS);
-        let grid = (records.len() <= LINEAR_SCAN && records.len() > k).then(|| CandidateGrid::new(&axes, k));
+        let grid = (records.len() <= LINEAR_SCAN && records.len() > k).then(|| CandidateGrid::new(&sites, k));
         let cache =
-            Cache { id: next_id(), records, tree, axes, cmf, block_ends, totals, v, inv_v, blend, clamp2, grid };
+            Cache { id: next_id(), records, tree, sites, cmf, block_ends, totals, v, inv_v, blend, clamp2, grid };
         (cache, counters)
     }
 
@@ -516,16 +517,9 @@ impl Cache {
             && let Some(cell) = grid.cell(p)
         {
             let range = grid.start[cell] as usize..grid.start[cell + 1] as usize;
-            let [xs, ys, zs] = &grid.axes;
-            return scan_nearest(
-                [&xs[range.clone()], &ys[range.clone()], &zs[range.clone()]],
-                Some(&grid.ids[range]),
-                p,
-                k,
-            );
+            return scan_nearest(grid.ids[range].iter().map(|&i| &self.sites[i as usize]), p, k);
         }
-        let [xs, ys, zs] = &self.axes;
-        scan_nearest([xs, ys, zs], None, p, k)
+        scan_nearest(self.sites.iter(), p, k)
     }
 
     /// The weights of the nearest records for a vertex with normal `n` (turned towards
@@ -685,45 +679,40 @@ impl Cache {
     }
 }
 
-/// The `k` nearest of the points `axes` (by coordinate arrays; `ids` their record indices,
-/// the positions themselves when `None`): each point's squared distance, then an insertion
-/// into the sorted `k` best, which most points leave at the first comparison (one pass, no
-/// buffer of distances to clear).
-/// Ties go to the earlier point (with `ids` ascending, the lower record index).
-fn scan_nearest(axes: [&[f32]; 3], ids: Option<&[u32]>, p: Vec3, k: usize) -> Nearest {
-    let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: 0 };
-    let [xs, ys, zs] = axes;
-    let k = k.min(xs.len());
-    let mut len = 0;
-    for (i, ((&x, &y), &z)) in xs.iter().zip(ys).zip(zs).enumerate() {
+/// A record's position and index, 16 bytes.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Site {
+    p: [f32; 3],
+    id: u32,
+}
+
+/// The `k` nearest of `sites`, ties to the lower record index. Each site becomes a key, its
+/// squared distance's bits above its index (a non-negative `f32` orders as its bits), and
+/// passes through the sorted `k` best by a min/max exchange at every place: no branch
+/// depends on the distances.
+#[inline]
+fn scan_nearest<'a>(sites: impl ExactSizeIterator<Item = &'a Site>, p: Vec3, k: usize) -> Nearest {
+    let k = k.min(sites.len()).min(MAX_NEIGHBOURS);
+    let mut best = [u64::MAX; MAX_NEIGHBOURS];
+    for site in sites {
+        let [x, y, z] = site.p;
         let (dx, dy, dz) = (x - p.x, y - p.y, z - p.z);
         let e = dx * dx + dy * dy + dz * dz;
-        // NaN (never from finite positions) sorts last.
+        // NaN (never from finite positions) sorts last; a sum of squares is never -0.
         let d = if e.is_nan() { f32::INFINITY } else { e };
-        if len == k {
-            // Only a strictly nearer point displaces the last (no distance is NaN): ties keep
-            // the earlier one.
-            if d >= near.dist2[k - 1] {
-                continue;
-            }
-            len -= 1;
-        }
-        let mut j = len;
-        while j > 0 && d < near.dist2[j - 1] {
-            near.dist2[j] = near.dist2[j - 1];
-            near.index[j] = near.index[j - 1];
-            j -= 1;
-        }
-        near.dist2[j] = d;
-        near.index[j] = i as u32;
-        len += 1;
-    }
-    if let Some(ids) = ids {
-        for i in &mut near.index[..len] {
-            *i = ids[*i as usize];
+        let mut key = (d.to_bits() as u64) << 32 | site.id as u64;
+        for b in &mut best[..k] {
+            let lo = key.min(*b);
+            key = key.max(*b);
+            *b = lo;
         }
     }
-    near.len = len;
+    let mut near = Nearest { index: [0; MAX_NEIGHBOURS], dist2: [0.0; MAX_NEIGHBOURS], len: k };
+    for (j, &key) in best[..k].iter().enumerate() {
+        near.index[j] = key as u32;
+        near.dist2[j] = f32::from_bits((key >> 32) as u32);
+    }
     near
 }
 
@@ -737,19 +726,19 @@ struct CandidateGrid {
     /// Cells per unit length.
     scale: Vec3,
     res: [usize; 3],
-    /// Cell `c`'s candidates are `start[c]..start[c + 1]` of `ids` and `axes`.
+    /// Cell `c`'s candidates are the records `ids[start[c]..start[c + 1]]`, ascending: one
+    /// byte each (at most [`LINEAR_SCAN`] records), so the lists stay in the nearer caches.
     start: Vec<u32>,
-    ids: Vec<u32>,
-    axes: [Vec<f32>; 3],
+    ids: Vec<u8>,
 }
 
 /// Cells of a candidate grid, about.
 const GRID_CELLS: f32 = 4096.0;
 
 impl CandidateGrid {
-    fn new(points: &[Vec<f32>; 3], k: usize) -> CandidateGrid {
-        let n = points[0].len();
-        let at = |i: usize| Vec3::new(points[0][i], points[1][i], points[2][i]);
+    fn new(points: &[Site], k: usize) -> CandidateGrid {
+        let n = points.len();
+        let at = |i: usize| Vec3::from_array(points[i].p);
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         for i in 0..n {
             lo = lo.min(at(i));
@@ -762,14 +751,7 @@ impl CandidateGrid {
         let h = (extent.x * extent.y * extent.z / GRID_CELLS).cbrt().max(extent.max_element() / 64.0);
         let res = [0, 1, 2].map(|a| ((extent[a] / h).ceil() as usize).clamp(1, 64));
         let size = Vec3::new(extent.x / res[0] as f32, extent.y / res[1] as f32, extent.z / res[2] as f32);
-        let mut grid = CandidateGrid {
-            lo,
-            scale: Vec3::ONE / size,
-            res,
-            start: vec![0],
-            ids: Vec::new(),
-            axes: Default::default(),
-        };
+        let mut grid = CandidateGrid { lo, scale: Vec3::ONE / size, res, start: vec![0], ids: Vec::new() };
         // Slabs of cells along z in parallel, each listing its cells in order.
         let slabs: Vec<(Vec<u32>, Vec<u32>)> = (0..res[2])
             .into_par_iter()
@@ -805,12 +787,7 @@ impl CandidateGrid {
                 at_start += c;
                 grid.start.push(at_start);
             }
-            for &i in &ids {
-                grid.ids.push(i);
-                for (axis, coords) in grid.axes.iter_mut().zip(points) {
-                    axis.push(coords[i as usize]);
-                }
-            }
+            grid.ids.extend(ids.iter().map(|&i| i as u8));
         }
         grid
     }
@@ -1087,7 +1064,6 @@ mod tests {
         // Points over the grid's box grown by a fifth of its size on each side.
         let size = Vec3::new(grid.res[0] as f32, grid.res[1] as f32, grid.res[2] as f32) / grid.scale;
         let (c, r) = (grid.lo + size * 0.5, size * 0.7);
-        let [xs, ys, zs] = &cache.axes;
         let mut inside = 0;
         for i in 0..20_000 {
             let p = if i % 4 == 0 {
@@ -1098,7 +1074,7 @@ mod tests {
                 c + (u * 2.0 - 1.0) * r
             };
             inside += grid.cell(p).is_some() as usize;
-            let (fast, full) = (cache.nearest_by_scan(p), scan_nearest([xs, ys, zs], None, p, 6));
+            let (fast, full) = (cache.nearest_by_scan(p), scan_nearest(cache.sites.iter(), p, 6));
             assert_eq!(fast.len, full.len);
             assert_eq!(fast.index[..fast.len], full.index[..full.len], "{p}");
             assert_eq!(fast.dist2[..fast.len], full.dist2[..full.len], "{p}");
