@@ -615,18 +615,36 @@ impl Cache {
     /// (block ends first, then one block). The probability returned is the blended PMF of
     /// the drawn index, as [`Cache::sample`] returns it; stratified `u`s stay stratified.
     pub fn sample_mixture(&self, nb: &Neighbours, u: f64) -> (usize, f64) {
+        let i = self.mixture_index(nb, u);
+        (i, self.pmf(nb, i))
+    }
+
+    /// [`Cache::sample_mixture`] of every `us[k]` into `out[k]`, in two passes: all the
+    /// inversions, then all the PMFs. The draws are independent, so each pass's reads of
+    /// CMF rows far apart overlap instead of waiting one after another.
+    pub fn sample_mixture_all(&self, nb: &Neighbours, us: &[f64], out: &mut [(usize, f64)]) {
+        debug_assert_eq!(us.len(), out.len());
+        for (o, &u) in out.iter_mut().zip(us) {
+            o.0 = self.mixture_index(nb, u);
+        }
+        for o in out.iter_mut() {
+            o.1 = self.pmf(nb, o.0);
+        }
+    }
+
+    /// The index [`Cache::sample_mixture`] draws for `u`.
+    #[inline]
+    fn mixture_index(&self, nb: &Neighbours, u: f64) -> usize {
         debug_assert!(self.v > 0);
         let mut t = u * nb.norm;
         for k in 0..nb.len {
             let w = nb.weight[k];
             if t < w {
-                let i = self.invert_row(nb.index[k] as usize, (t / w).min(1.0 - f64::EPSILON));
-                return (i, self.pmf(nb, i));
+                return self.invert_row(nb.index[k] as usize, (t / w).min(1.0 - f64::EPSILON));
             }
             t -= w;
         }
-        let i = ((t / self.blend.uniform as f64 * self.v as f64).max(0.0) as usize).min(self.v - 1);
-        (i, self.pmf(nb, i))
+        ((t / self.blend.uniform as f64 * self.v as f64).max(0.0) as usize).min(self.v - 1)
     }
 
     /// The smallest index whose stored CMF of record `c` exceeds `u ∈ [0, 1)` (the last
@@ -996,10 +1014,53 @@ impl PoolSelection for CacheSelection<'_> {
 
     #[inline]
     fn draw<R: Random>(&self, nb: &Neighbours, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)> {
-        // Stratified draws with 48 random bits each.
-        let xi = rng.next_1d() as f64 + rng.next_1d() as f64 * (1.0 / 16_777_216.0);
-        let (i, pmf) = self.cache.draw(nb, (k as f64 + xi) / n as f64, self.sampling);
-        (pmf > 0.0).then(|| (i, (1.0 / (n as f64 * self.paths * pmf)) as f32))
+        let (i, pmf) = self.cache.draw(nb, stratum(k, n, rng), self.sampling);
+        self.factor(pmf, n).map(|f| (i, f))
+    }
+
+    /// With mixture sampling, up to [`DRAW_BATCH`] draws at a time through
+    /// [`Cache::sample_mixture_all`]: the same draws, in the same order, as one by one.
+    fn draw_all<R: Random>(&self, nb: &Neighbours, n: u32, rng: &mut R, mut out: impl FnMut(usize, f32)) {
+        if self.sampling != PcSampling::Mixture {
+            for k in 0..n {
+                if let Some((i, f)) = self.draw(nb, k, n, rng) {
+                    out(i, f);
+                }
+            }
+            return;
+        }
+        let mut us = [0.0f64; DRAW_BATCH];
+        let mut drawn = [(0usize, 0.0f64); DRAW_BATCH];
+        for first in (0..n).step_by(DRAW_BATCH) {
+            let m = (n - first).min(DRAW_BATCH as u32) as usize;
+            for (j, u) in us[..m].iter_mut().enumerate() {
+                *u = stratum(first + j as u32, n, rng);
+            }
+            self.cache.sample_mixture_all(nb, &us[..m], &mut drawn[..m]);
+            for &(i, pmf) in &drawn[..m] {
+                if let Some(f) = self.factor(pmf, n) {
+                    out(i, f);
+                }
+            }
+        }
+    }
+}
+
+/// Draws [`CacheSelection::draw_all`] makes together.
+const DRAW_BATCH: usize = 8;
+
+/// Stratum `k` of `n` of `[0, 1)`, jittered with 48 random bits.
+#[inline]
+fn stratum<R: Random>(k: u32, n: u32, rng: &mut R) -> f64 {
+    let xi = rng.next_1d() as f64 + rng.next_1d() as f64 * (1.0 / 16_777_216.0);
+    (k as f64 + xi) / n as f64
+}
+
+impl CacheSelection<'_> {
+    /// A draw's contribution factor `1 / (N M PMF)`, `None` for a draw of probability zero.
+    #[inline]
+    fn factor(&self, pmf: f64, n: u32) -> Option<f32> {
+        (pmf > 0.0).then(|| (1.0 / (n as f64 * self.paths * pmf)) as f32)
     }
 }
 
@@ -1152,6 +1213,26 @@ mod tests {
             }
             assert!(blended > 20, "only {blended} lookups found records");
         }
+    }
+
+    #[test]
+    fn batched_mixture_draws_equal_single_draws() {
+        let scene = scene();
+        let (cache, _) = cache(&scene, 200, DistanceTerm::Falloff);
+        let mut rng = Sampler::new(&[17]);
+        let mut blended = 0;
+        for nb in lookups(&scene, &cache, 40) {
+            blended += (nb.len > 0) as usize;
+            for m in [1, 3, DRAW_BATCH] {
+                let us: Vec<f64> = (0..m).map(|_| rng.next_1d() as f64).collect();
+                let mut out = vec![(usize::MAX, -1.0); m];
+                cache.sample_mixture_all(&nb, &us, &mut out);
+                for (&u, &o) in us.iter().zip(&out) {
+                    assert_eq!(o, cache.sample_mixture(&nb, u), "u = {u}");
+                }
+            }
+        }
+        assert!(blended > 20, "only {blended} lookups found records");
     }
 
     #[test]

@@ -174,6 +174,14 @@ pub trait PoolSelection {
     /// Draw `k` of `n` for a camera vertex: a connectible pool index and the factor
     /// `1 / (N M P)` of its contribution, or `None` when the draw is wasted.
     fn draw<R: Random>(&self, lookup: &Self::Lookup, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)>;
+    /// All `n` draws of a camera vertex, in order, each passed to `out` unless wasted.
+    fn draw_all<R: Random>(&self, lookup: &Self::Lookup, n: u32, rng: &mut R, mut out: impl FnMut(usize, f32)) {
+        for k in 0..n {
+            if let Some((i, scale)) = self.draw(lookup, k, n, rng) {
+                out(i, scale);
+            }
+        }
+    }
 }
 
 /// Uniform selection over the pool's `v` vertices (LVC): each draw weighs `V / (N M)`.
@@ -233,17 +241,23 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
             // Draws that repeat an earlier one (a peaked PMF and stratified draws) make the
             // same connection: it is evaluated and traced once with the factors summed.
             scratch.draws.clear();
-            for k in 0..self.connections {
-                let Some((i, scale)) = select.draw(&lookup, k, self.connections, rng) else { continue };
-                match scratch.draws.iter_mut().find(|d| d.0 == i) {
-                    Some(d) => {
-                        d.1 += scale;
-                        d.2 += 1;
-                        counters.draws_merged += 1;
-                    }
-                    None => scratch.draws.push((i, scale, 1)),
+            let draws = &mut scratch.draws;
+            select.draw_all(&lookup, self.connections, rng, |i, scale| match draws.iter_mut().find(|d| d.0 == i) {
+                Some(d) => {
+                    d.1 += scale;
+                    d.2 += 1;
+                    counters.draws_merged += 1;
                 }
+                None => draws.push((i, scale, 1)),
+            });
+            // The drawn pool vertices lie anywhere in the pool: their reads are started
+            // together here rather than one connection after another.
+            let mut touched = 0.0f32;
+            for &(i, _, _) in &scratch.draws {
+                let y = &self.pool.vertices[self.pool.connectible[i] as usize];
+                touched += y.p.x + y.pdf_rev + y.beta.x;
             }
+            std::hint::black_box(touched);
             for &(i, scale, repeats) in &scratch.draws {
                 let light = self.pool.prefix(i);
                 if bdpt.allowed(light.len(), t) && conn.connect(light, &camera[..t], scale, pos, rng, sink, counters) {
