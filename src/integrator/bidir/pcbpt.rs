@@ -31,7 +31,7 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::mis::{FullPath, StrategyCounts};
-use super::pool::{CONCENTRATION_DEPTHS, LightPool, PoolPass, PoolSelection, concentration_depth};
+use super::pool::{CONCENTRATION_DEPTHS, LightPool, PoolPass, PoolSelection, concentration_depth, draw_one_by_one};
 use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, visible};
 use crate::bsdf::TransportMode;
 use crate::film::tiles;
@@ -1022,12 +1022,7 @@ impl PoolSelection for CacheSelection<'_> {
     /// [`Cache::sample_mixture_all`]: the same draws, in the same order, as one by one.
     fn draw_all<R: Random>(&self, nb: &Neighbours, n: u32, rng: &mut R, mut out: impl FnMut(usize, f32)) {
         if self.sampling != PcSampling::Mixture {
-            for k in 0..n {
-                if let Some((i, f)) = self.draw(nb, k, n, rng) {
-                    out(i, f);
-                }
-            }
-            return;
+            return draw_one_by_one(self, nb, n, rng, out);
         }
         let mut us = [0.0f64; DRAW_BATCH];
         let mut drawn = [(0usize, 0.0f64); DRAW_BATCH];

@@ -175,11 +175,22 @@ pub trait PoolSelection {
     /// `1 / (N M P)` of its contribution, or `None` when the draw is wasted.
     fn draw<R: Random>(&self, lookup: &Self::Lookup, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)>;
     /// All `n` draws of a camera vertex, in order, each passed to `out` unless wasted.
-    fn draw_all<R: Random>(&self, lookup: &Self::Lookup, n: u32, rng: &mut R, mut out: impl FnMut(usize, f32)) {
-        for k in 0..n {
-            if let Some((i, scale)) = self.draw(lookup, k, n, rng) {
-                out(i, scale);
-            }
+    fn draw_all<R: Random>(&self, lookup: &Self::Lookup, n: u32, rng: &mut R, out: impl FnMut(usize, f32)) {
+        draw_one_by_one(self, lookup, n, rng, out)
+    }
+}
+
+/// [`PoolSelection::draw_all`] by `n` calls of [`PoolSelection::draw`].
+pub fn draw_one_by_one<P: PoolSelection + ?Sized, R: Random>(
+    select: &P,
+    lookup: &P::Lookup,
+    n: u32,
+    rng: &mut R,
+    mut out: impl FnMut(usize, f32),
+) {
+    for k in 0..n {
+        if let Some((i, scale)) = select.draw(lookup, k, n, rng) {
+            out(i, scale);
         }
     }
 }
