@@ -15,7 +15,7 @@ pub mod fresnel;
 pub mod microfacet;
 pub mod plastic;
 
-use crate::math::Rgb;
+use crate::math::{Frame, Rgb};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 use microfacet::Roughness;
@@ -112,6 +112,17 @@ impl Bsdf {
             (Vec3::new(wo.x, wo.y, -wo.z), Vec3::new(wi.x, wi.y, -wi.z))
         } else {
             (wo, wi)
+        }
+    }
+
+    /// The world directions `wo` and `wi` in `frame`, as far as this BSDF looks at them: a
+    /// diffuse BSDF depends on their cosines with the normal alone, so only those (the `z`
+    /// components) are computed and `x`, `y` are left zero.
+    #[inline]
+    pub fn to_local(&self, frame: &Frame, wo: Vec3, wi: Vec3) -> (Vec3, Vec3) {
+        match self.model {
+            BsdfModel::Diffuse { .. } => (Vec3::new(0.0, 0.0, wo.dot(frame.n)), Vec3::new(0.0, 0.0, wi.dot(frame.n))),
+            _ => (frame.to_local(wo), frame.to_local(wi)),
         }
     }
 

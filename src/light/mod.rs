@@ -7,7 +7,7 @@
 
 use crate::math::{Frame, Rgb, luminance};
 use crate::sampling::{Distribution1D, Distribution2D, UNIFORM_SPHERE_PDF, square_to_uniform_sphere};
-use crate::scene::shape::{Shape, SurfaceInteraction};
+use crate::scene::shape::{Shape, ShapeGeometry, SurfaceInteraction};
 use crate::texture::{Bitmap, Texture};
 use glam::{Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
@@ -384,15 +384,34 @@ pub fn spot_falloff(cos_theta: f32, cutoff: f32, beam_width: f32) -> f32 {
 #[derive(Clone, Debug)]
 pub struct LightSampler {
     distribution: Option<Distribution1D>,
+    sphere_lights: bool,
+    delta_position_lights: bool,
 }
 
 impl LightSampler {
     pub fn new(lights: &[Light], shapes: &[Shape], bounds: &Bounds) -> LightSampler {
-        if lights.is_empty() {
-            return LightSampler { distribution: None };
-        }
-        let powers: Vec<f32> = lights.iter().map(|l| l.power(shapes, bounds)).collect();
-        LightSampler { distribution: Some(Distribution1D::new(&powers)) }
+        let sphere_lights = lights.iter().any(|l| {
+            matches!(l, Light::Area { shape, .. } if matches!(shapes[*shape].geometry, ShapeGeometry::Sphere { .. }))
+        });
+        let delta_position_lights = lights.iter().any(Light::is_delta_position);
+        let distribution = (!lights.is_empty()).then(|| {
+            let powers: Vec<f32> = lights.iter().map(|l| l.power(shapes, bounds)).collect();
+            Distribution1D::new(&powers)
+        });
+        LightSampler { distribution, sphere_lights, delta_position_lights }
+    }
+
+    /// Whether some area light is a sphere (whose points next-event estimation samples by
+    /// the cone they subtend, not by area).
+    #[inline]
+    pub fn any_sphere_light(&self) -> bool {
+        self.sphere_lights
+    }
+
+    /// Whether some light has a delta position (point and spot lights).
+    #[inline]
+    pub fn any_delta_position(&self) -> bool {
+        self.delta_position_lights
     }
 
     /// Picks a light: its index, its probability, and `u` rescaled for reuse.

@@ -167,7 +167,7 @@ impl Shape {
                     .area_distribution
                     .as_ref()
                     .map(|d| d.sample(u1))
-                    .unwrap_or(((u1 * m.indices.len() as f32) as usize % m.indices.len().max(1), 0.0));
+                    .unwrap_or_else(|| ((u1 * m.indices.len() as f32) as usize % m.indices.len().max(1), 0.0));
                 let tri = m.indices[i];
                 let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
                 let b = square_to_uniform_triangle(u);

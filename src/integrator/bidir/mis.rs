@@ -212,6 +212,7 @@ impl StrategyCounts for Counts {
 /// connecting vertices and of their predecessors. For `s = 1` and `t = 1` the slices hold
 /// the sampled light point and the camera. `conn` is the connection's evaluation (absent
 /// for `s = 0`, where the camera subpath ends on an emitter).
+#[inline(always)]
 pub fn path_pdfs<const N: usize>(
     scene: &Scene,
     light: &[Vertex],
@@ -261,10 +262,11 @@ pub fn path_pdfs<const N: usize>(
     }
     p.delta[s] = false;
     let x0 = if s > 0 { &light[0] } else { pt };
-    p.delta_light = match x0.kind {
-        VertexKind::Light(l) => scene.lights[l as usize].is_delta_position(),
-        _ => false,
-    };
+    p.delta_light = scene.light_sampler.any_delta_position()
+        && match x0.kind {
+            VertexKind::Light(l) => scene.lights[l as usize].is_delta_position(),
+            _ => false,
+        };
     let x1 = FullPath { light, camera }.get(1).p;
     p.nee_ratio = nee_ratio(scene, x0, x1);
     p

@@ -56,6 +56,8 @@ pub struct Vertex {
     pub delta: bool,
     /// A deterministic connection can end here (not a purely specular surface).
     pub connectible: bool,
+    /// The shading normal is the geometric normal (no shading-normal correction).
+    pub flat: bool,
 }
 
 impl Vertex {
@@ -73,6 +75,7 @@ impl Vertex {
             pdf_rev: 0.0,
             delta: false,
             connectible: true,
+            flat: true,
         }
     }
 
@@ -90,6 +93,7 @@ impl Vertex {
             pdf_rev: 0.0,
             delta: false,
             connectible: true,
+            flat: true,
         }
     }
 
@@ -108,6 +112,7 @@ impl Vertex {
             pdf_rev: 0.0,
             delta: false,
             connectible,
+            flat: si.shading.n == si.ng,
         }
     }
 
@@ -162,11 +167,15 @@ impl Vertex {
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
         match self.kind {
             VertexKind::Surface => {
-                let (lo, li) = (self.frame.to_local(self.wo), self.frame.to_local(w));
-                let (f, pdf_fwd, pdf_rev) = self.bsdf(scene).eval_pdfs(lo, li, self.uv, mode);
+                let bsdf = self.bsdf(scene);
+                let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
+                let (f, pdf_fwd, pdf_rev) = bsdf.eval_pdfs(lo, li, self.uv, mode);
                 let mut f = f * li.z.abs();
-                if mode == TransportMode::Importance && f != Rgb::ZERO {
-                    f *= shading_correction(self.ng, self.frame.n, self.wo, w);
+                if mode == TransportMode::Importance && !self.flat && f != Rgb::ZERO {
+                    // `lo.z` and `li.z` are the cosines with the shading normal.
+                    let num = lo.z.abs() * w.dot(self.ng).abs();
+                    let den = self.wo.dot(self.ng).abs() * li.z.abs();
+                    f *= if den == 0.0 { 0.0 } else { num / den };
                 }
                 End { f, pdf_fwd, pdf_rev }
             }
@@ -322,6 +331,9 @@ pub fn light_origin_pdf(scene: &Scene, light: usize) -> f32 {
 /// light point `x0` to the density of a light subpath starting there. Both choose the light
 /// by power; they differ where NEE samples the cone a sphere subtends instead of its area.
 pub fn nee_ratio(scene: &Scene, x0: &Vertex, from: Vec3) -> f32 {
+    if !scene.light_sampler.any_sphere_light() {
+        return 1.0;
+    }
     let Some(l) = x0.light_index(scene) else { return 1.0 };
     match &scene.lights[l] {
         crate::light::Light::Area { shape, .. } => {
