@@ -488,6 +488,29 @@ struct TileResult {
     counters: Counters,
 }
 
+/// A finished camera pass not yet in the film: the light pool's splats and the tiles'
+/// results.
+struct PendingPass {
+    pool_splats: Vec<Splat>,
+    pool_light_paths: u64,
+    results: Vec<TileResult>,
+}
+
+/// Adds a finished pass to the film, in a fixed order (pool splats, then tile by tile), so
+/// the sums are the same whatever the thread count; returns the seconds it took.
+fn add_pass(film: &mut Film, pass: Option<PendingPass>) -> f64 {
+    let Some(pass) = pass else { return 0.0 };
+    let t = Instant::now();
+    film.add_splats(&pass.pool_splats);
+    film.light_paths += pass.pool_light_paths;
+    for r in &pass.results {
+        film.merge(&r.block);
+        film.add_splats(&r.splats);
+        film.light_paths += r.counters.light_paths;
+    }
+    t.elapsed().as_secs_f64()
+}
+
 fn render_tile(
     scene: &Scene,
     est: &Estimator,
@@ -684,6 +707,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
         // depth (1, uniform, before the first).
         let mut previous: Option<Cache> = None;
         let mut concentration = [1.0f32; CONCENTRATION_DEPTHS];
+        let mut pending: Option<PendingPass> = None;
         while passes < total_passes {
             let count = match opts.budget {
                 Budget::Spp(spp) => pass_spp.min(spp - done),
@@ -737,6 +761,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             phases.cache += t_cache.elapsed().as_secs_f64();
             // EORR: thresholds from the image of the passes so far (none before the first).
             let tau: Option<Vec<f32>> = (opts.integrator == IntegratorKind::Eorr && passes > 0).then(|| {
+                phases.merge += add_pass(&mut film, pending.take());
                 film.develop().iter().map(|c| crate::math::luminance(*c).max(0.0) * opts.bidir.eorr_fraction).collect()
             });
             let pass = PassData {
@@ -748,28 +773,29 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 layers,
             };
             let t_cam = Instant::now();
-            // A pass interrupted part-way is discarded whole, so every pixel keeps the same
-            // number of samples.
-            let results: Option<Vec<TileResult>> = tile_list
-                .par_iter()
-                .map(|&t| (!stopped()).then(|| render_tile(scene, &est, &pass, t, opts.seed, done, count)))
-                .collect();
+            // The previous pass goes into the film while this one renders (one thread merges,
+            // then joins the tiles). A pass interrupted part-way is discarded whole, so every
+            // pixel keeps the same number of samples.
+            let (merge_seconds, results) = rayon::join(
+                || add_pass(&mut film, pending.take()),
+                || -> Option<Vec<TileResult>> {
+                    tile_list
+                        .par_iter()
+                        .map(|&t| (!stopped()).then(|| render_tile(scene, &est, &pass, t, opts.seed, done, count)))
+                        .collect()
+                },
+            );
+            phases.merge += merge_seconds;
             phases.camera_pass += t_cam.elapsed().as_secs_f64();
             let Some(results) = results else {
                 interrupted = true;
                 break;
             };
-            let t_merge = Instant::now();
-            film.add_splats(&pool_splats);
-            film.light_paths += pool_counters.light_paths;
             counters += pool_counters;
             // The camera pass's counters, summed in tile order (the same sums whatever the
             // thread count).
             let mut pass_counters = Counters::default();
             for r in &results {
-                film.merge(&r.block);
-                film.add_splats(&r.splats);
-                film.light_paths += r.counters.light_paths;
                 pass_counters += r.counters;
             }
             counters += pass_counters;
@@ -778,10 +804,13 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             if let Some((_, by_depth)) = pass_counters.concentration() {
                 concentration = by_depth.map(|c| c as f32);
             }
-            phases.merge += t_merge.elapsed().as_secs_f64();
+            pending = Some(PendingPass { pool_splats, pool_light_paths: pool_counters.light_paths, results });
             done += count;
             passes += 1;
-            take_snapshots(&opts.checkpoints, &mut snapshots, start.elapsed().as_secs_f64(), done, || film.develop());
+            take_snapshots(&opts.checkpoints, &mut snapshots, start.elapsed().as_secs_f64(), done, || {
+                phases.merge += add_pass(&mut film, pending.take());
+                film.develop()
+            });
             if let Some(bar) = &bar {
                 match opts.budget {
                     Budget::Spp(_) => bar.set_position(done as u64),
@@ -805,6 +834,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 break;
             }
         }
+        phases.merge += add_pass(&mut film, pending.take());
     });
     if let Some(bar) = bar {
         bar.finish_and_clear();
