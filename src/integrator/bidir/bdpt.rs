@@ -115,9 +115,11 @@ impl<C: StrategyCounts> Connector<'_, C> {
         }
         let c = pt.beta * camera_end.f * ls.li / (pmf * ls.pdf);
         let y0 = Vertex::light(l, ls.p, ls.n, Vec2::ZERO, Rgb::ONE, light_origin_pdf(scene, l));
+        let dist2 = (ls.p - pt.p).length_squared();
         let conn = Connection {
             w: -ls.wi,
-            dist2: (ls.p - pt.p).length_squared(),
+            dist2,
+            inv_dist2: 1.0 / dist2,
             // Only the emission density matters at a sampled light point.
             light_end: End {
                 f: Rgb::ZERO,
@@ -142,11 +144,13 @@ impl<C: StrategyCounts> Connector<'_, C> {
         if light_end.f == Rgb::ZERO {
             return;
         }
-        let c = qs.beta * light_end.f * (k.we_cos / k.dist2);
+        let inv_dist2 = 1.0 / k.dist2;
+        let c = qs.beta * light_end.f * (k.we_cos * inv_dist2);
         let z0 = Vertex::camera(scene.camera.position);
         let conn = Connection {
             w: k.wi,
             dist2: k.dist2,
+            inv_dist2,
             light_end,
             // What `z0.end(scene, -k.wi, ..)` gives, without projecting the direction again.
             camera_end: End { f: Rgb::ZERO, pdf_fwd: k.pdf_dir, pdf_rev: 0.0 },
@@ -179,7 +183,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         if f == Rgb::ZERO {
             return false;
         }
-        let c = qs.beta * f * pt.beta * (scale / conn.dist2);
+        let c = qs.beta * f * pt.beta * (scale * conn.inv_dist2);
         self.finish(light, camera, &conn, c, pos, rng, sink, counters, |sk, w| sk.add(s, t, w))
     }
 

@@ -235,20 +235,18 @@ pub fn path_pdfs<const N: usize>(
         p.delta[i] = v.delta;
     }
     let pt = &camera[t - 1];
-    // The density, at `to`, of `from`'s solid-angle density `pdf` towards it.
-    let area = |pdf: f32, from: &Vertex, to: &Vertex| to.area_density(pdf, from.p);
     match conn {
         Some(c) => {
             let qs = &light[s - 1];
             // pt and qs as reached across the connection.
-            p.pl[s] = c.light_end.pdf_fwd * pt.cos_area(c.w) / c.dist2;
-            p.pe[s - 1] = c.camera_end.pdf_fwd * qs.cos_area(c.w) / c.dist2;
+            p.pl[s] = c.light_end.pdf_fwd * pt.cos_area(c.w) * c.inv_dist2;
+            p.pe[s - 1] = c.camera_end.pdf_fwd * qs.cos_area(c.w) * c.inv_dist2;
             // Their predecessors, generated from them given the other end.
             if t >= 2 {
-                p.pl[s + 1] = area(c.camera_end.pdf_rev, pt, &camera[t - 2]);
+                p.pl[s + 1] = c.camera_end.pdf_rev * pt.to_prev;
             }
             if s >= 2 {
-                p.pe[s - 2] = area(c.light_end.pdf_rev, qs, &light[s - 2]);
+                p.pe[s - 2] = c.light_end.pdf_rev * qs.to_prev;
             }
             p.delta[s - 1] = false;
         }

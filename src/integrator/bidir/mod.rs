@@ -52,6 +52,10 @@ pub struct Vertex {
     pub beta: Rgb,
     pub pdf_fwd: f32,
     pub pdf_rev: f32,
+    /// Converts this vertex's solid-angle density towards its predecessor (in its own walk)
+    /// into an area density there: the predecessor's `|cos|` towards this vertex over their
+    /// squared distance (zero for endpoints, which have none).
+    pub to_prev: f32,
     /// The walk left this vertex through a Dirac delta lobe.
     pub delta: bool,
     /// A deterministic connection can end here (not a purely specular surface).
@@ -73,6 +77,7 @@ impl Vertex {
             beta: Rgb::ONE,
             pdf_fwd: 1.0,
             pdf_rev: 0.0,
+            to_prev: 0.0,
             delta: false,
             connectible: true,
             flat: true,
@@ -91,6 +96,7 @@ impl Vertex {
             beta,
             pdf_fwd,
             pdf_rev: 0.0,
+            to_prev: 0.0,
             delta: false,
             connectible: true,
             flat: true,
@@ -110,6 +116,7 @@ impl Vertex {
             beta,
             pdf_fwd: 0.0,
             pdf_rev: 0.0,
+            to_prev: 0.0,
             delta: false,
             connectible,
             flat: si.shading.n == si.ng,
@@ -241,25 +248,21 @@ impl Vertex {
         solid * next.cos_area(-w) / dist2
     }
 
-    /// The densities of this vertex scattering between its predecessor `prev` and `next`
-    /// (unit direction `w`, distance `dist`), in area measure: of generating `next`, and of
-    /// generating `prev` given `next` (zero for endpoints, which have no predecessor). One
-    /// BSDF lookup for both; the same values as two calls of [`Vertex::pdf`].
+    /// The densities of this vertex scattering between its predecessor and `next` (unit
+    /// direction `w`, distance `dist`), in area measure: of generating `next`, and of
+    /// generating the predecessor given `next` (zero for endpoints, which have no
+    /// predecessor). One BSDF lookup for both; the values of two calls of [`Vertex::pdf`].
     #[inline]
-    pub fn densities(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex, w: Vec3, dist: f32) -> (f32, f32) {
+    pub fn densities(&self, scene: &Scene, next: &Vertex, w: Vec3, dist: f32) -> (f32, f32) {
         let to_next = next.cos_area(-w) / (dist * dist);
         match self.kind {
             VertexKind::Camera => (scene.camera.pdf_direction(w) * to_next, 0.0),
             VertexKind::Light(l) => (scene.lights[l as usize].pdf_emission_direction(self.ng, w) * to_next, 0.0),
             VertexKind::Surface => {
-                let Some(prev) = prev else { return (0.0, 0.0) };
-                let (fwd, rev) = self.bsdf(scene).pdf_pair(
-                    self.frame.to_local(self.wo),
-                    self.frame.to_local(w),
-                    self.uv,
-                    TransportMode::Radiance,
-                );
-                (fwd * to_next, prev.area_density(rev, self.p))
+                let bsdf = self.bsdf(scene);
+                let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
+                let (fwd, rev) = bsdf.pdf_pair(lo, li, self.uv, TransportMode::Radiance);
+                (fwd * to_next, rev * self.to_prev)
             }
         }
     }
@@ -292,11 +295,12 @@ pub struct End {
 }
 
 /// A connection between `y_{s-1}` and `z_{t-1}`: the unit direction from the light end to
-/// the camera end, the squared distance, and both ends' terms.
+/// the camera end, the squared distance and its reciprocal, and both ends' terms.
 #[derive(Clone, Copy, Debug)]
 pub struct Connection {
     pub w: Vec3,
     pub dist2: f32,
+    pub inv_dist2: f32,
     pub light_end: End,
     pub camera_end: End,
 }
@@ -313,7 +317,7 @@ impl Connection {
         let w = d / dist2.sqrt();
         let light_end = qs.end(scene, w, TransportMode::Importance);
         let camera_end = pt.end(scene, -w, TransportMode::Radiance);
-        Some(Connection { w, dist2, light_end, camera_end })
+        Some(Connection { w, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
     }
 }
 
@@ -421,9 +425,10 @@ fn random_walk<R: Random>(
         si.wo = back / dist;
         let bsdf = scene.bsdf(&si);
         let mut v = Vertex::surface(&si, beta, !bsdf.is_delta());
+        v.to_prev = prev.cos_area(si.wo) / (dist * dist);
         // A vertex left through a delta lobe has no density (zero marks the delta).
         if !prev.delta {
-            let (fwd, rev) = prev.densities(scene, n.checked_sub(2).map(|i| &path[i]), &v, -si.wo, dist);
+            let (fwd, rev) = prev.densities(scene, &v, -si.wo, dist);
             v.pdf_fwd = fwd;
             if n >= 2 {
                 path[n - 2].pdf_rev = rev;

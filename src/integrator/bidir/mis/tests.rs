@@ -131,6 +131,7 @@ fn subpaths(scene: &Scene, x: &[Vertex], s: usize) -> Option<(Vec<Vertex>, Vec<V
         v.pdf_rev = if i + 3 <= s { x[i + 1].pdf(scene, Some(&x[i + 2]), &x[i]) } else { f32::NAN };
         if i > 0 {
             v.wo = (x[i - 1].p - x[i].p).normalize();
+            v.to_prev = x[i - 1].cos_area(v.wo) / x[i - 1].p.distance_squared(x[i].p);
         }
         v.delta = is_delta_surface(scene, &v);
         light.push(v);
@@ -147,6 +148,7 @@ fn subpaths(scene: &Scene, x: &[Vertex], s: usize) -> Option<(Vec<Vertex>, Vec<V
         v.pdf_rev = if j + 3 <= t { x[i - 1].pdf(scene, Some(&x[i - 2]), &x[i]) } else { f32::NAN };
         if j > 0 {
             v.wo = (x[i + 1].p - x[i].p).normalize();
+            v.to_prev = x[i + 1].cos_area(v.wo) / x[i + 1].p.distance_squared(x[i].p);
         }
         v.delta = is_delta_surface(scene, &v);
         camera.push(v);
