@@ -6,7 +6,7 @@
 //! border for the filter's reach) and blocks are merged in tile order, so a fixed seed
 //! gives the same image whatever the number of threads.
 
-use crate::math::Rgb;
+use crate::math::{Rgb, floor_i32};
 use glam::Vec2;
 
 /// Mitsuba's reconstruction filters (`rfilter`).
@@ -77,14 +77,14 @@ fn footprint(filter: &Filter, pos: Vec2, mut f: impl FnMut(i32, i32, f32)) {
     if let Filter::Box { radius } = *filter
         && radius <= 0.5
     {
-        f(pos.x.floor() as i32, pos.y.floor() as i32, 1.0);
+        f(floor_i32(pos.x), floor_i32(pos.y), 1.0);
         return;
     }
     let r = filter.radius();
     let x_lo = (pos.x - 0.5 - r).ceil() as i32;
-    let x_hi = (pos.x - 0.5 + r).floor() as i32;
+    let x_hi = floor_i32(pos.x - 0.5 + r);
     let y_lo = (pos.y - 0.5 - r).ceil() as i32;
-    let y_hi = (pos.y - 0.5 + r).floor() as i32;
+    let y_hi = floor_i32(pos.y - 0.5 + r);
     let mut wx = [0.0f32; 16];
     let nx = ((x_hi - x_lo + 1).max(0) as usize).min(16);
     for (k, w) in wx.iter_mut().enumerate().take(nx) {
