@@ -183,6 +183,10 @@ impl Bsdf {
         match &self.model {
             BsdfModel::Diffuse { reflectance } => {
                 let (wo, wi) = self.orient(wo, wi);
+                // Both directions on the front side, or nothing (no texture lookup).
+                if wo.z <= 0.0 || wi.z <= 0.0 {
+                    return (Rgb::ZERO, 0.0, 0.0);
+                }
                 let (fwd, rev) = diffuse::pdf_pair(wo, wi);
                 (diffuse::eval(reflectance.eval(uv), wo, wi), fwd, rev)
             }

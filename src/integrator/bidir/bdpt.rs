@@ -178,7 +178,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         if !qs.is_connectible() || !pt.is_connectible() {
             return false;
         }
-        let Some(conn) = Connection::new(scene, qs, pt) else { return false };
+        let Some(conn) = Connection::carrying(scene, qs, pt) else { return false };
         let f = conn.light_end.f * conn.camera_end.f;
         if f == Rgb::ZERO {
             return false;

@@ -309,6 +309,19 @@ impl Connection {
     /// Evaluates the connection of two vertices (`None` when they coincide).
     #[inline]
     pub fn new(scene: &Scene, qs: &Vertex, pt: &Vertex) -> Option<Connection> {
+        Connection::evaluate(scene, qs, pt, false)
+    }
+
+    /// [`Connection::new`] for a connection that is only wanted if it carries light: `None`
+    /// also when an end's BSDF (or emission) value is zero, found before the other end is
+    /// evaluated.
+    #[inline]
+    pub fn carrying(scene: &Scene, qs: &Vertex, pt: &Vertex) -> Option<Connection> {
+        Connection::evaluate(scene, qs, pt, true)
+    }
+
+    #[inline(always)]
+    fn evaluate(scene: &Scene, qs: &Vertex, pt: &Vertex, nonzero: bool) -> Option<Connection> {
         let d = pt.p - qs.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 || !dist2.is_finite() {
@@ -316,6 +329,9 @@ impl Connection {
         }
         let w = d / dist2.sqrt();
         let light_end = qs.end(scene, w, TransportMode::Importance);
+        if nonzero && light_end.f == Rgb::ZERO {
+            return None;
+        }
         let camera_end = pt.end(scene, -w, TransportMode::Radiance);
         Some(Connection { w, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
     }
