@@ -32,6 +32,9 @@ pub struct Shape {
     area: f32,
     /// Triangle selection by area (meshes that emit).
     area_distribution: Option<Distribution1D>,
+    /// Unit normals of a sampled mesh's triangles (before `flip_normals`), filled with the
+    /// area distribution: sampling a point then needs no cross product.
+    sample_normals: Vec<Vec3>,
 }
 
 /// A point on a surface hit by a ray.
@@ -79,7 +82,16 @@ impl Shape {
             ShapeGeometry::Mesh(m) => (0..m.indices.len()).map(|i| m.triangle_area(i) as f64).sum::<f64>() as f32,
             ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
         };
-        Shape { geometry, bsdf, light: None, flip_normals, name, area, area_distribution: None }
+        Shape {
+            geometry,
+            bsdf,
+            light: None,
+            flip_normals,
+            name,
+            area,
+            area_distribution: None,
+            sample_normals: Vec::new(),
+        }
     }
 
     /// Prepares area sampling (called for emitting shapes).
@@ -87,6 +99,14 @@ impl Shape {
         if let ShapeGeometry::Mesh(m) = &self.geometry {
             let areas: Vec<f32> = (0..m.indices.len()).map(|i| m.triangle_area(i)).collect();
             self.area_distribution = Some(Distribution1D::new(&areas));
+            self.sample_normals = m
+                .indices
+                .iter()
+                .map(|tri| {
+                    let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
+                    (p1 - p0).cross(p2 - p0).normalize_or_zero()
+                })
+                .collect();
         }
     }
 
@@ -172,7 +192,10 @@ impl Shape {
                 let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
                 let b = square_to_uniform_triangle(u);
                 let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
-                let n = (p1 - p0).cross(p2 - p0).normalize_or_zero() * sign;
+                let n = match self.sample_normals.get(i) {
+                    Some(n) => *n,
+                    None => (p1 - p0).cross(p2 - p0).normalize_or_zero(),
+                } * sign;
                 let uv = match &m.uvs {
                     Some(t) => {
                         let [t0, t1, t2] = tri.map(|k| t[k as usize]);
