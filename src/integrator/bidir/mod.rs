@@ -153,17 +153,6 @@ impl Vertex {
         if self.ng == Vec3::ZERO { 1.0 } else { self.ng.dot(w).abs() }
     }
 
-    /// Converts a solid-angle density at `from` to an area density at this vertex.
-    #[inline]
-    pub fn area_density(&self, pdf_solid: f32, from: Vec3) -> f32 {
-        let d = self.p - from;
-        let dist2 = d.length_squared();
-        if dist2 == 0.0 {
-            return 0.0;
-        }
-        pdf_solid * self.cos_area(d / dist2.sqrt()) / dist2
-    }
-
     /// What a connection needs from this vertex as one of its ends, towards the unit
     /// direction `w` of the other end: the BSDF (or emission) times the cosine at this vertex
     /// for light travelling between it and `w`, with the adjoint shading-normal correction in
@@ -180,9 +169,7 @@ impl Vertex {
                 let mut f = f * li.z.abs();
                 if mode == TransportMode::Importance && !self.flat && f != Rgb::ZERO {
                     // `lo.z` and `li.z` are the cosines with the shading normal.
-                    let num = lo.z.abs() * w.dot(self.ng).abs();
-                    let den = self.wo.dot(self.ng).abs() * li.z.abs();
-                    f *= if den == 0.0 { 0.0 } else { num / den };
+                    f *= shading_correction_cos(lo.z, w.dot(self.ng), self.wo.dot(self.ng), li.z);
                 }
                 End { f, pdf_fwd, pdf_rev }
             }
@@ -379,8 +366,14 @@ pub fn nee_ratio(scene: &Scene, x0: &Vertex, from: Vec3) -> f32 {
 /// (Veach 1997, §5.3): `|wo·ns| |wi·ng| / (|wo·ng| |wi·ns|)`.
 #[inline]
 pub fn shading_correction(ng: Vec3, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
-    let num = wo.dot(ns).abs() * wi.dot(ng).abs();
-    let den = wo.dot(ng).abs() * wi.dot(ns).abs();
+    shading_correction_cos(wo.dot(ns), wi.dot(ng), wo.dot(ng), wi.dot(ns))
+}
+
+/// [`shading_correction`] from the four cosines `wo·ns`, `wi·ng`, `wo·ng`, `wi·ns`.
+#[inline]
+pub fn shading_correction_cos(wo_ns: f32, wi_ng: f32, wo_ng: f32, wi_ns: f32) -> f32 {
+    let num = wo_ns.abs() * wi_ng.abs();
+    let den = wo_ng.abs() * wi_ns.abs();
     if den == 0.0 { 0.0 } else { num / den }
 }
 
