@@ -22,6 +22,12 @@ impl TriangleMesh {
         self.indices[i].map(|k| self.positions[k as usize])
     }
 
+    /// Unit geometric normal of triangle `i` (`(p1 - p0) × (p2 - p0)`; zero when degenerate).
+    pub fn triangle_normal(&self, i: usize) -> Vec3 {
+        let [a, b, c] = self.triangle(i);
+        (b - a).cross(c - a).normalize_or_zero()
+    }
+
     pub fn triangle_area(&self, i: usize) -> f32 {
         let [a, b, c] = self.triangle(i);
         0.5 * (b - a).cross(c - a).length()

@@ -99,14 +99,7 @@ impl Shape {
         if let ShapeGeometry::Mesh(m) = &self.geometry {
             let areas: Vec<f32> = (0..m.indices.len()).map(|i| m.triangle_area(i)).collect();
             self.area_distribution = Some(Distribution1D::new(&areas));
-            self.sample_normals = m
-                .indices
-                .iter()
-                .map(|tri| {
-                    let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
-                    (p1 - p0).cross(p2 - p0).normalize_or_zero()
-                })
-                .collect();
+            self.sample_normals = (0..m.indices.len()).map(|i| m.triangle_normal(i)).collect();
         }
     }
 
@@ -194,7 +187,7 @@ impl Shape {
                 let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
                 let n = match self.sample_normals.get(i) {
                     Some(n) => *n,
-                    None => (p1 - p0).cross(p2 - p0).normalize_or_zero(),
+                    None => m.triangle_normal(i),
                 } * sign;
                 let uv = match &m.uvs {
                     Some(t) => {
