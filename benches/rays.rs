@@ -6,7 +6,7 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
-use pcbpt::accel::{Accel, Backend, BuildOptions, Geometry, Ray};
+use pcbpt::accel::{Accel, Backend, BuildOptions, BvhLayout, Geometry, Ray};
 use pcbpt::sampling::{Sampler, square_to_uniform_sphere};
 use rayon::prelude::*;
 use std::f32::consts::PI;
@@ -63,10 +63,12 @@ fn terrain(n: u32) -> Mesh {
     Mesh { positions, indices }
 }
 
-fn backends() -> Vec<Backend> {
-    let mut b = vec![Backend::Embree];
+/// The accelerators compared: Embree in both BVH layouts, and obvhs when compiled in.
+fn backends() -> Vec<(&'static str, Backend, BuildOptions)> {
+    let flat = BuildOptions { layout: BvhLayout::Flat, ..BuildOptions::default() };
+    let mut b = vec![("embree", Backend::Embree, BuildOptions::default()), ("embree-flat", Backend::Embree, flat)];
     if cfg!(feature = "obvhs") {
-        b.push(Backend::Obvhs);
+        b.push(("obvhs", Backend::Obvhs, BuildOptions::default()));
     }
     b
 }
@@ -129,10 +131,8 @@ fn bench(c: &mut Criterion) {
 
     let mut g = c.benchmark_group("build_1M_triangles");
     g.sample_size(10).measurement_time(Duration::from_secs(8));
-    for b in backends() {
-        g.bench_function(b.to_string(), |bench| {
-            bench.iter(|| black_box(Accel::build(b, &sphere_geo, BuildOptions::default()).unwrap()))
-        });
+    for (name, b, o) in backends() {
+        g.bench_function(name, |bench| bench.iter(|| black_box(Accel::build(b, &sphere_geo, o).unwrap())));
     }
     g.finish();
 
@@ -141,17 +141,17 @@ fn bench(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(3))
         .warm_up_time(Duration::from_secs(1))
         .throughput(Throughput::Elements(N_RAYS as u64));
-    for b in backends() {
-        let s = Accel::build(b, &sphere_geo, BuildOptions::default()).unwrap();
-        let t = Accel::build(b, &terrain_geo, BuildOptions::default()).unwrap();
-        g.bench_function(format!("{b}/camera"), |bench| bench.iter(|| black_box(trace_closest(&s, &cam))));
-        if b == Backend::Embree {
-            g.bench_function(format!("{b}/camera_stream"), |bench| {
+    for (name, b, o) in backends() {
+        let s = Accel::build(b, &sphere_geo, o).unwrap();
+        let t = Accel::build(b, &terrain_geo, o).unwrap();
+        g.bench_function(format!("{name}/camera"), |bench| bench.iter(|| black_box(trace_closest(&s, &cam))));
+        if name == "embree" {
+            g.bench_function(format!("{name}/camera_stream"), |bench| {
                 bench.iter(|| black_box(trace_closest_batch(&s, &cam, true)))
             });
         }
-        g.bench_function(format!("{b}/incoherent"), |bench| bench.iter(|| black_box(trace_closest(&s, &inc))));
-        g.bench_function(format!("{b}/shadow"), |bench| bench.iter(|| black_box(trace_occluded(&t, &sh))));
+        g.bench_function(format!("{name}/incoherent"), |bench| bench.iter(|| black_box(trace_closest(&s, &inc))));
+        g.bench_function(format!("{name}/shadow"), |bench| bench.iter(|| black_box(trace_occluded(&t, &sh))));
     }
     g.finish();
 }

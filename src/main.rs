@@ -1,7 +1,7 @@
 //! The `pcbpt` command line: `render` a Mitsuba scene, `compare` two images.
 
 use clap::{Args, Parser, Subcommand};
-use pcbpt::accel::{Backend, BuildOptions, BuildQuality};
+use pcbpt::accel::{Backend, BuildOptions, BuildQuality, BvhLayout};
 use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
@@ -83,9 +83,13 @@ struct RenderArgs {
     /// Ray-tracing backend.
     #[arg(long, value_enum, default_value_t = Backend::Embree)]
     backend: Backend,
-    /// Acceleration structure build quality.
+    /// Acceleration structure build quality (with the two-level layout: of each shape's BVH).
     #[arg(long, value_enum, default_value_t = BuildQuality::Medium)]
     bvh_quality: BuildQuality,
+    /// Embree's BVH layout: one BVH over all triangles, or one per shape under a BVH over
+    /// the shapes (ignored by obvhs).
+    #[arg(long, value_enum, default_value_t = BvhLayout::TwoLevel)]
+    bvh_layout: BvhLayout,
     /// Embree's robust traversal mode (slower, fewer arithmetic shortcuts).
     #[arg(long)]
     robust: bool,
@@ -238,7 +242,7 @@ fn install_signal_handlers() -> Result<Arc<AtomicBool>> {
 fn render(a: RenderArgs) -> Result<ExitCode> {
     let stop = install_signal_handlers()?;
     let t0 = Instant::now();
-    let build = BuildOptions { quality: a.bvh_quality, robust: a.robust, compact: false };
+    let build = BuildOptions { quality: a.bvh_quality, layout: a.bvh_layout, robust: a.robust, compact: false };
     let mut scene = Scene::load(&a.scene, &LoadOptions { overrides: a.define.clone(), backend: a.backend, build })?;
     if let Some(d) = a.max_depth {
         if d < -1 {

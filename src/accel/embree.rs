@@ -7,7 +7,7 @@
 //! [`AccelError::Embree`]; nothing aborts.
 #![allow(unsafe_code)]
 
-use super::{AccelError, BuildOptions, BuildQuality, Geometry, Hit, Ray};
+use super::{AccelError, BuildOptions, BuildQuality, BvhLayout, Geometry, Hit, Ray};
 use std::ffi::{CStr, c_char, c_void};
 use std::ptr;
 use std::sync::{Arc, Mutex};
@@ -185,10 +185,22 @@ impl EmbreeScene {
         if options.compact {
             flags |= ffi::RTCSceneFlags::RTC_SCENE_FLAG_COMPACT;
         }
+        // Embree builds a scene of low build quality as two levels (a BVH per geometry, at
+        // the geometry's own build quality, under a BVH over the geometries); medium and high
+        // give one BVH over all primitives, so a flat layout has no low-quality build.
+        let scene_quality = match (options.layout, options.quality) {
+            (BvhLayout::TwoLevel, _) => ffi::RTCBuildQuality::RTC_BUILD_QUALITY_LOW,
+            (BvhLayout::Flat, BuildQuality::Low) => {
+                return Err(AccelError::Unsupported(
+                    "Embree has no low-quality build of a flat BVH (its low-quality scene build is the two-level layout): use --bvh-layout two-level or a higher --bvh-quality",
+                ));
+            }
+            (BvhLayout::Flat, q) => quality(q),
+        };
         // SAFETY: `scene.raw` is a live, not yet committed scene.
         unsafe {
             ffi::rtcSetSceneFlags(scene.raw, flags);
-            ffi::rtcSetSceneBuildQuality(scene.raw, quality(options.quality));
+            ffi::rtcSetSceneBuildQuality(scene.raw, scene_quality);
         }
         for (id, g) in geometry.iter().enumerate() {
             let handle = scene.new_geometry(g, options.quality)?;

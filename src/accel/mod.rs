@@ -66,10 +66,25 @@ pub enum BuildQuality {
     High,
 }
 
+/// How Embree arranges its BVH over the scene's shapes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum BvhLayout {
+    /// One BVH over all triangles of all shapes, built at the scene's build quality.
+    Flat,
+    /// One BVH per shape (built at the build quality) under a BVH over the shapes: Embree's
+    /// two-level structure (`RTC_BUILD_QUALITY_LOW` for the scene). Faster to trace in scenes
+    /// made of a few separate shapes (BENCHMARKS.md, "Embree's BVH layout").
+    #[default]
+    TwoLevel,
+}
+
 /// Options for building an accelerator.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BuildOptions {
+    /// Build quality of the BVH (with the two-level layout: of each shape's BVH).
     pub quality: BuildQuality,
+    /// Embree's BVH layout; the obvhs backend always builds one BVH over all primitives.
+    pub layout: BvhLayout,
     /// Embree's `RTC_SCENE_FLAG_ROBUST`: avoids optimisations that reduce arithmetic accuracy.
     pub robust: bool,
     /// Embree's `RTC_SCENE_FLAG_COMPACT`: a more memory-frugal layout.
@@ -100,6 +115,8 @@ pub enum AccelError {
     Embree(String),
     #[error("the obvhs backend is not compiled in; rebuild with `--features obvhs`")]
     ObvhsDisabled,
+    #[error("{0}")]
+    Unsupported(&'static str),
     #[error("geometry {index}: {message}")]
     BadGeometry { index: usize, message: String },
 }
