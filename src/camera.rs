@@ -39,6 +39,10 @@ pub struct Camera {
     pub far_clip: f32,
     /// World → camera-local rotation (the inverse of `to_world`'s linear part).
     to_local: glam::Mat3,
+    /// `1 / tan_half` and `1 / A` (the image rectangle's area at unit distance), for the
+    /// projections of light tracing.
+    inv_tan_half: Vec2,
+    inv_area: f32,
 }
 
 /// The camera seen from a point: where on the film the point appears and the importance
@@ -50,6 +54,7 @@ pub struct CameraConnection {
     /// Unit direction from the point to the camera.
     pub wi: Vec3,
     pub dist2: f32,
+    pub inv_dist2: f32,
     /// `We · cos θ_camera`: the emitted importance times the camera-side cosine (the pinhole
     /// has no surface, so the cosine stays with the importance).
     pub we_cos: f32,
@@ -96,7 +101,18 @@ impl Camera {
         };
         let position = to_world.point(Vec3::ZERO);
         let to_local = glam::Mat3::from_mat4(to_world.matrix).inverse();
-        Camera { to_world, position, tan_half, resolution, near_clip, far_clip, to_local }
+        let inv_area = 1.0 / (4.0 * tan_half.x * tan_half.y);
+        Camera {
+            to_world,
+            position,
+            tan_half,
+            resolution,
+            near_clip,
+            far_clip,
+            to_local,
+            inv_tan_half: 1.0 / tan_half,
+            inv_area,
+        }
     }
 
     /// Area of the image rectangle on the plane at unit distance in front of the pinhole.
@@ -105,45 +121,45 @@ impl Camera {
         4.0 * self.tan_half.x * self.tan_half.y
     }
 
-    /// Film position (pixel units) and the cosine with the viewing axis of a world direction
-    /// leaving the camera, when it falls on the image.
+    /// Film position (pixel units) of a world direction `d` (of any length) leaving the
+    /// camera, when it falls on the image, and `d` in camera space (`z` along the view).
     #[inline]
-    fn raster_of(&self, d: Vec3) -> Option<(Vec2, f32)> {
+    fn raster_of(&self, d: Vec3) -> Option<(Vec2, Vec3)> {
         let l = self.to_local * d;
         if l.z <= 0.0 {
             return None;
         }
-        let sx = 0.5 * (1.0 - l.x / (l.z * self.tan_half.x));
-        let sy = 0.5 * (1.0 - l.y / (l.z * self.tan_half.y));
+        let inv_z = 1.0 / l.z;
+        let sx = 0.5 * (1.0 - l.x * inv_z * self.inv_tan_half.x);
+        let sy = 0.5 * (1.0 - l.y * inv_z * self.inv_tan_half.y);
         if !(0.0..1.0).contains(&sx) || !(0.0..1.0).contains(&sy) {
             return None;
         }
-        let raster = Vec2::new(sx * self.resolution.0 as f32, sy * self.resolution.1 as f32);
-        Some((raster, l.z / l.length()))
+        Some((Vec2::new(sx * self.resolution.0 as f32, sy * self.resolution.1 as f32), l))
+    }
+
+    /// `1 / (A cos³θ)` for the camera-space direction `l` at angle θ to the view axis.
+    #[inline]
+    fn inv_area_cos3(&self, l: Vec3) -> f32 {
+        let sec = l.length() / l.z;
+        self.inv_area * sec * sec * sec
     }
 
     /// Solid-angle density with which [`Camera::generate_ray`], at a uniformly random film
     /// position, produces direction `d` (unit): `1 / (A cos³θ)`; zero off the image.
     #[inline]
     pub fn pdf_direction(&self, d: Vec3) -> f32 {
-        // `connect` computes the same expression for its `pdf_dir`.
         match self.raster_of(d) {
-            Some((_, cos)) => 1.0 / (self.image_plane_area() * cos * cos * cos),
+            Some((_, l)) => self.inv_area_cos3(l),
             None => 0.0,
         }
-    }
-
-    /// `We = 1 / (A cos⁴θ)` for a direction at angle θ to the viewing axis.
-    #[inline]
-    fn we(&self, cos: f32) -> f32 {
-        1.0 / (self.image_plane_area() * cos * cos * cos * cos)
     }
 
     /// Importance `We = 1 / (A cos⁴θ)` of a direction (unit) leaving the camera, normalised
     /// so that `∫ We cos θ dω = 1` over the image.
     #[inline]
     pub fn importance(&self, d: Vec3) -> f32 {
-        self.raster_of(d).map_or(0.0, |(_, cos)| self.we(cos))
+        self.raster_of(d).map_or(0.0, |(_, l)| self.inv_area_cos3(l) * l.length() / l.z)
     }
 
     /// Connects a world point to the pinhole: `None` when the point is behind the camera,
@@ -156,14 +172,18 @@ impl Camera {
             return None;
         }
         let dist = dist2.sqrt();
-        let dir = d / dist;
-        let (raster, cos) = self.raster_of(dir)?;
-        let depth = dist * cos;
+        let inv_dist = 1.0 / dist;
+        // The unit direction, so that the density below is bit-for-bit `pdf_direction`'s.
+        let dir = d * inv_dist;
+        let (raster, l) = self.raster_of(dir)?;
+        // The depth along the view axis, `dist cos θ`, against the clip planes.
+        let depth = dist * l.z / l.length();
         if depth < self.near_clip || depth > self.far_clip {
             return None;
         }
-        let pdf_dir = 1.0 / (self.image_plane_area() * cos * cos * cos);
-        Some(CameraConnection { raster, wi: -dir, dist2, we_cos: self.we(cos) * cos, pdf_dir })
+        // `We cos θ = 1 / (A cos³θ)`, which is also the direction's density.
+        let pdf_dir = self.inv_area_cos3(l);
+        Some(CameraConnection { raster, wi: -dir, dist2, inv_dist2: inv_dist * inv_dist, we_cos: pdf_dir, pdf_dir })
     }
 
     /// The primary ray through a film position in pixel units (`(0,0)` is the top-left

@@ -57,7 +57,13 @@ impl Distribution1D {
             // One entry (of probability one): what the search below returns.
             return (0, u.clamp(0.0, 1.0 - f32::EPSILON));
         }
-        let i = self.cmf.partition_point(|&c| c <= u).min(n - 1);
+        // The number of CMF entries at or below `u`: a branch-free count for a few entries
+        // (an emitting quad's two triangles), a binary search for more; the same index.
+        let i = if n <= 8 {
+            self.cmf[..n - 1].iter().map(|&c| (c <= u) as usize).sum()
+        } else {
+            self.cmf.partition_point(|&c| c <= u).min(n - 1)
+        };
         // Skip zero-probability entries that a CMF plateau could land on.
         let mut i = i;
         while self.pmf[i] == 0.0 && i + 1 < n {
@@ -130,6 +136,34 @@ mod tests {
         // Negative control: the same samples against uniform expectations are rejected.
         let uniform = vec![n as f64 / w.len() as f64; w.len()];
         assert!(!discrete_chi2(&counts, &uniform).passed());
+    }
+
+    #[test]
+    fn small_and_large_distributions_pick_the_binary_search_index() {
+        // Up to 8 entries the index is a count; it must be the binary search's, also at
+        // `u` exactly on a CMF entry and one ulp either side, and on zero-weight plateaus.
+        let mut s = crate::sampling::Sampler::new(&[5]);
+        for n in 1..=12 {
+            for trial in 0..20 {
+                let w: Vec<f32> =
+                    (0..n).map(|i| if (i + trial) % 4 == 1 { 0.0 } else { 0.1 + s.next_1d() * 3.0 }).collect();
+                let d = Distribution1D::new(&w);
+                let mut us: Vec<f32> = (0..50).map(|_| s.next_1d()).collect();
+                for &c in &d.cmf {
+                    us.extend([c, c.next_down(), c.next_up()].iter().filter(|u| (0.0..1.0).contains(*u)));
+                }
+                us.push(0.0);
+                for u in us {
+                    let mut i = d.cmf.partition_point(|&c| c <= u).min(n - 1);
+                    while d.pmf[i] == 0.0 && i + 1 < n {
+                        i += 1;
+                    }
+                    let (j, r) = d.sample(u);
+                    assert_eq!(j, i, "n = {n}, u = {u}, cmf = {:?}", d.cmf);
+                    assert!(d.pmf[j] > 0.0 && (0.0..1.0).contains(&r));
+                }
+            }
+        }
     }
 
     #[test]

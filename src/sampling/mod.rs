@@ -92,9 +92,12 @@ pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
     if a == Vec2::ZERO {
         return Vec2::ZERO;
     }
-    let (r, theta) =
-        if a.x.abs() > a.y.abs() { (a.x, PI / 4.0 * (a.y / a.x)) } else { (a.y, PI / 2.0 - PI / 4.0 * (a.x / a.y)) };
-    Vec2::new(r * theta.cos(), r * theta.sin())
+    // Shirley and Chiu's map: the square's point at "radius" `r` and angle `θ = π/4 · q`
+    // from the x axis (or `π/2 - π/4 · q` from it, measured from the y axis), `|q| <= 1`.
+    let swap = a.x.abs() <= a.y.abs();
+    let (r, q) = if swap { (a.y, a.x / a.y) } else { (a.x, a.y / a.x) };
+    let (sin, cos) = crate::math::sin_cos_quarter(PI / 4.0 * q);
+    if swap { Vec2::new(r * sin, r * cos) } else { Vec2::new(r * cos, r * sin) }
 }
 
 /// Cosine-weighted direction on the hemisphere around +z.

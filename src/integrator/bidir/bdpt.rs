@@ -144,7 +144,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         if light_end.f == Rgb::ZERO {
             return;
         }
-        let inv_dist2 = 1.0 / k.dist2;
+        let inv_dist2 = k.inv_dist2;
         let c = qs.beta * light_end.f * (k.we_cos * inv_dist2);
         let z0 = Vertex::camera(scene.camera.position);
         let conn = Connection {

@@ -48,6 +48,8 @@ pub struct Vertex {
     /// Unit direction towards the previous vertex of its own walk (zero for endpoints).
     pub wo: Vec3,
     pub shape: u32,
+    /// The BSDF of a surface vertex (an index into `scene.bsdfs`; `u32::MAX` for endpoints).
+    pub bsdf: u32,
     /// Throughput of the subpath up to and including this vertex (over its densities).
     pub beta: Rgb,
     pub pdf_fwd: f32,
@@ -74,6 +76,7 @@ impl Vertex {
             uv: Vec2::ZERO,
             wo: Vec3::ZERO,
             shape: u32::MAX,
+            bsdf: u32::MAX,
             beta: Rgb::ONE,
             pdf_fwd: 1.0,
             pdf_rev: 0.0,
@@ -93,6 +96,7 @@ impl Vertex {
             uv,
             wo: Vec3::ZERO,
             shape: u32::MAX,
+            bsdf: u32::MAX,
             beta,
             pdf_fwd,
             pdf_rev: 0.0,
@@ -103,8 +107,9 @@ impl Vertex {
         }
     }
 
-    /// A surface vertex; `connectible` is false for purely specular BSDFs.
-    pub fn surface(si: &SurfaceInteraction, beta: Rgb, connectible: bool) -> Vertex {
+    /// A surface vertex with the BSDF `scene.bsdfs[bsdf]`; `connectible` is false for purely
+    /// specular BSDFs.
+    pub fn surface(si: &SurfaceInteraction, bsdf: u32, beta: Rgb, connectible: bool) -> Vertex {
         Vertex {
             kind: VertexKind::Surface,
             p: si.p,
@@ -113,6 +118,7 @@ impl Vertex {
             uv: si.uv,
             wo: si.wo,
             shape: si.shape,
+            bsdf,
             beta,
             pdf_fwd: 0.0,
             pdf_rev: 0.0,
@@ -126,7 +132,7 @@ impl Vertex {
     /// The BSDF of a surface vertex.
     #[inline]
     pub fn bsdf<'a>(&self, scene: &'a Scene) -> &'a crate::bsdf::Bsdf {
-        &scene.bsdfs[scene.shapes[self.shape as usize].bsdf]
+        &scene.bsdfs[self.bsdf as usize]
     }
 
     /// The emitter this vertex lies on: a light endpoint, or a surface of an area light.
@@ -432,8 +438,9 @@ fn random_walk<R: Random>(
             break;
         }
         si.wo = back / dist;
-        let bsdf = scene.bsdf(&si);
-        let mut v = Vertex::surface(&si, beta, !bsdf.is_delta());
+        let bsdf_index = scene.shapes[si.shape as usize].bsdf;
+        let bsdf = &scene.bsdfs[bsdf_index];
+        let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
         v.to_prev = prev.cos_area(si.wo) / (dist * dist);
         // A vertex left through a delta lobe has no density (zero marks the delta).
         if !prev.delta {

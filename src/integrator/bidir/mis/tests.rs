@@ -96,6 +96,7 @@ fn as_surface(scene: &Scene, v: &Vertex) -> Option<Vertex> {
     let mut s = *v;
     s.kind = VertexKind::Surface;
     s.shape = *shape as u32;
+    s.bsdf = scene.shapes[*shape].bsdf as u32;
     s.frame = Frame::from_normal(v.ng);
     s.connectible = !s.bsdf(scene).is_delta();
     Some(s)
