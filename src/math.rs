@@ -47,6 +47,9 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// The world axes.
+    pub const IDENTITY: Frame = Frame { s: Vec3::X, t: Vec3::Y, n: Vec3::Z };
+
     pub fn from_normal(n: Vec3) -> Frame {
         let sign = 1.0f32.copysign(n.z);
         let a = -1.0 / (sign + n.z);

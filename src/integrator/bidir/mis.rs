@@ -75,14 +75,20 @@ pub fn weight_from_pdfs<const N: usize>(
     count: &impl Fn(usize) -> f32,
 ) -> f32 {
     match heuristic {
-        Heuristic::Balance => walk::<N, false>(p, s, count),
-        Heuristic::Power => walk::<N, true>(p, s, count),
+        Heuristic::Balance => walk::<N, false, false>(p, s, count),
+        Heuristic::Power => walk::<N, true, false>(p, s, count),
     }
 }
 
 /// The ratio walk of [`weight_from_pdfs`], one copy per heuristic (`POWER`: β = 2).
+/// `PLAIN`: unit counts and a unit NEE ratio, so that each term is the ratio alone (the
+/// general terms multiply it by exact ones).
 #[inline(always)]
-fn walk<const N: usize, const POWER: bool>(p: &PathPdfs<N>, s: usize, count: &impl Fn(usize) -> f32) -> f32 {
+fn walk<const N: usize, const POWER: bool, const PLAIN: bool>(
+    p: &PathPdfs<N>,
+    s: usize,
+    count: &impl Fn(usize) -> f32,
+) -> f32 {
     let n_s = count(s);
     if n_s <= 0.0 {
         return 0.0;
@@ -93,6 +99,9 @@ fn walk<const N: usize, const POWER: bool>(p: &PathPdfs<N>, s: usize, count: &im
     let term = |i: usize, r: f32| -> f32 {
         if !p.valid(i) {
             return 0.0;
+        }
+        if PLAIN {
+            return if POWER { r * r } else { r };
         }
         let c = count(i);
         if c > 0.0 {
@@ -117,6 +126,20 @@ fn walk<const N: usize, const POWER: bool>(p: &PathPdfs<N>, s: usize, count: &im
     }
     let w = 1.0 / sum;
     if w.is_finite() { w } else { 0.0 }
+}
+
+/// [`weight_from_pdfs`] with every strategy count 1 (BDPT's): where next-event estimation
+/// also samples `x_0` with the light subpath's density (no sphere light), every ratio term
+/// is the plain ratio, and the walk needs no count or density-ratio factors. The same
+/// value, bit for bit, as the general walk with unit counts.
+pub fn weight_unit_counts<const N: usize>(p: &PathPdfs<N>, s: usize, heuristic: Heuristic) -> f32 {
+    if p.nee_ratio != 1.0 {
+        return weight_from_pdfs(p, s, heuristic, &|_| 1.0);
+    }
+    match heuristic {
+        Heuristic::Balance => walk::<N, false, true>(p, s, &|_| 1.0),
+        Heuristic::Power => walk::<N, true, true>(p, s, &|_| 1.0),
+    }
 }
 
 /// A full path given by its two subpath prefixes: `light = y_0..y_{s-1}`,
@@ -307,7 +330,7 @@ fn weight_in<const N: usize>(
         counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
         weight_from_pdfs(&p, s, heuristic, &|i| table[i])
     } else if counts.all_ones() {
-        weight_from_pdfs(&p, s, heuristic, &|_| 1.0)
+        weight_unit_counts(&p, s, heuristic)
     } else {
         weight_from_pdfs(&p, s, heuristic, &|sp| counts.count(&full, sp, n - sp))
     }

@@ -42,7 +42,8 @@ pub struct Vertex {
     pub p: Vec3,
     /// Geometric normal (zero for point lights and the pinhole).
     pub ng: Vec3,
-    /// Shading frame (surfaces).
+    /// Shading frame of a surface vertex (endpoints, which scatter nothing, keep the world
+    /// axes).
     pub frame: Frame,
     pub uv: Vec2,
     /// Unit direction towards the previous vertex of its own walk (zero for endpoints).
@@ -72,7 +73,7 @@ impl Vertex {
             kind: VertexKind::Camera,
             p,
             ng: Vec3::ZERO,
-            frame: Frame::from_normal(Vec3::Z),
+            frame: Frame::IDENTITY,
             uv: Vec2::ZERO,
             wo: Vec3::ZERO,
             shape: u32::MAX,
@@ -92,7 +93,7 @@ impl Vertex {
             kind: VertexKind::Light(light as u32),
             p,
             ng: n,
-            frame: Frame::from_normal(if n == Vec3::ZERO { Vec3::Z } else { n }),
+            frame: Frame::IDENTITY,
             uv,
             wo: Vec3::ZERO,
             shape: u32::MAX,
@@ -545,7 +546,8 @@ pub fn light_subpath<R: Random>(
     }
     let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::splat(1.0 / origin), origin);
     path.push(y0);
-    let le = y0.end(scene, es.d, TransportMode::Importance).f;
+    // What `y0.end(scene, es.d, ..).f` gives, without its direction density.
+    let le = light.emitted(es.n, es.uv, es.d) * y0.cos_area(es.d);
     let beta = le / (origin * es.pdf_dir);
     if limits.light_vertices <= 1 || beta == Rgb::ZERO {
         return;

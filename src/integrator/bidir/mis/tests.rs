@@ -439,3 +439,35 @@ fn weights_of_sampled_veach_ajar_paths_are_those_of_their_full_path_densities() 
     assert!(differ * 20 > total, "a 1% density error changed only {differ} of {total} weights");
     assert!((walk / full - 1.0).abs() > 1e-4, "a 1% density error left the weighted sum at {}", walk / full);
 }
+
+#[test]
+fn unit_count_walk_is_the_general_walk_with_unit_counts() {
+    // Random densities (some zero, as deltas leave them), random delta flags, every
+    // strategy, both heuristics: the specialised walk gives the same bits.
+    let mut rng = Sampler::new(&[31]);
+    for trial in 0..2000 {
+        let n = 2 + trial % 14;
+        let mut p = PathPdfs::<SHORT>::new(n);
+        for i in 0..n {
+            p.pl[i] = if rng.next_1d() < 0.1 { 0.0 } else { 10f32.powf(4.0 * rng.next_1d() - 2.0) };
+            p.pe[i] = if rng.next_1d() < 0.1 { 0.0 } else { 10f32.powf(4.0 * rng.next_1d() - 2.0) };
+            p.delta[i] = rng.next_1d() < 0.15;
+        }
+        p.delta_light = rng.next_1d() < 0.2;
+        p.nee_ratio = if trial % 3 == 0 { 0.5 + rng.next_1d() } else { 1.0 };
+        for s in 0..n {
+            for h in [Heuristic::Balance, Heuristic::Power] {
+                let general = weight_from_pdfs(&p, s, h, &|_| 1.0);
+                assert_eq!(weight_unit_counts(&p, s, h).to_bits(), general.to_bits(), "trial {trial}, s = {s}, {h:?}");
+            }
+        }
+    }
+    // The comparison can fail: other counts give other weights.
+    let mut p = PathPdfs::<SHORT>::new(4);
+    p.pl[..4].copy_from_slice(&[1.0, 2.0, 3.0, 4.0]);
+    p.pe[..4].copy_from_slice(&[4.0, 3.0, 2.0, 1.0]);
+    assert_ne!(
+        weight_unit_counts(&p, 2, Heuristic::Power),
+        weight_from_pdfs(&p, 2, Heuristic::Power, &|i| i as f32 + 1.0)
+    );
+}
