@@ -254,6 +254,15 @@ impl Bdpt {
         s + t >= 2 && s + t - 1 <= self.max_depth as usize && !(self.hide_emitters && s + t == 2)
     }
 
+    /// The light-subpath lengths `s <= s_max` with `(s, t)` allowed, as one range.
+    #[inline]
+    pub fn allowed_light_lengths(&self, t: usize, s_max: usize) -> std::ops::Range<usize> {
+        // `s + t >= 2`, or `>= 3` with emitters hidden; at most `max_depth` segments.
+        let lo = (if self.hide_emitters { 3usize } else { 2 }).saturating_sub(t);
+        let hi = (self.max_depth as usize).saturating_add(2).saturating_sub(t).min(s_max + 1);
+        lo..hi.max(lo)
+    }
+
     /// One camera sample at film position `pos`: a camera subpath (unless light tracing),
     /// one light subpath, and every strategy joining them.
     #[allow(clippy::too_many_arguments)]
@@ -279,10 +288,7 @@ impl Bdpt {
         rng.start_stream(2);
         let (camera, light) = (&scratch.camera, &scratch.light);
         for t in 1..=camera.len() {
-            for s in 0..=light.len() {
-                if !self.allowed(s, t) {
-                    continue;
-                }
+            for s in self.allowed_light_lengths(t, light.len()) {
                 match (s, t) {
                     (0, _) => conn.emission(&camera[..t], sink),
                     (_, 1) => conn.to_camera(&light[..s], rng, sink, counters),
@@ -316,4 +322,25 @@ pub fn check_lights(scene: &Scene, integrator: &str) -> Result<(), String> {
         return Err(format!("{}: the scene has no emitter", scene.path.display()));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn allowed_light_lengths_are_the_allowed_strategies() {
+        for max_depth in [0, 1, 2, 3, 5, 8, u32::MAX] {
+            for hide_emitters in [false, true] {
+                let b = Bdpt { limits: WalkLimits::new(max_depth, 3), max_depth, hide_emitters, light_only: false };
+                for t in 1..=12 {
+                    for s_max in 0..=12 {
+                        let want: Vec<usize> = (0..=s_max).filter(|&s| b.allowed(s, t)).collect();
+                        let got: Vec<usize> = b.allowed_light_lengths(t, s_max).collect();
+                        assert_eq!(got, want, "max_depth {max_depth}, hide {hide_emitters}, t {t}, s_max {s_max}");
+                    }
+                }
+            }
+        }
+    }
 }
