@@ -166,7 +166,7 @@ impl Vertex {
     /// importance mode; the solid-angle density of generating the other end; and that of
     /// generating this vertex's own predecessor given the other end — one BSDF lookup for all
     /// three.
-    #[inline]
+    #[inline(always)]
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
         match self.kind {
             VertexKind::Surface => {
