@@ -246,7 +246,7 @@ impl Vertex {
     /// direction `w`, distance `dist`), in area measure: of generating `next`, and of
     /// generating the predecessor given `next` (zero for endpoints, which have no
     /// predecessor). One BSDF lookup for both; the values of two calls of [`Vertex::pdf`].
-    #[inline]
+    #[inline(always)]
     pub fn densities(&self, scene: &Scene, next: &Vertex, w: Vec3, dist: f32) -> (f32, f32) {
         let to_next = next.cos_area(-w) / (dist * dist);
         match self.kind {
