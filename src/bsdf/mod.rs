@@ -190,18 +190,38 @@ impl Bsdf {
                 let (fwd, rev) = diffuse::pdf_pair(wo, wi);
                 (diffuse::eval(reflectance.eval(uv), wo, wi), fwd, rev)
             }
-            _ => {
-                let (fwd, rev) = self.pdf_pair(wo, wi, uv, mode);
-                (self.eval(wo, wi, uv, mode), fwd, rev)
-            }
+            _ => self.eval_pdfs_general(wo, wi, uv, mode),
         }
     }
 
+    /// [`Bsdf::eval_pdfs`] of the other models, out of line so that the diffuse case stays
+    /// small where it is inlined.
+    #[inline(never)]
+    fn eval_pdfs_general(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (Rgb, f32, f32) {
+        let (fwd, rev) = self.pdf_pair(wo, wi, uv, mode);
+        (self.eval(wo, wi, uv, mode), fwd, rev)
+    }
+
     /// Samples `wi` given `wo` with the random numbers `u1` (lobe choice) and `u2`.
+    #[inline]
     pub fn sample(&self, wo: Vec3, uv: Vec2, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let flip = self.two_sided && wo.z < 0.0;
         let wo_f = if flip { Vec3::new(wo.x, wo.y, -wo.z) } else { wo };
         let mut s = match &self.model {
+            BsdfModel::Diffuse { reflectance } => diffuse::sample(reflectance.eval(uv), wo_f, u2)?,
+            _ => self.sample_general(wo_f, uv, u1, u2, mode)?,
+        };
+        if flip {
+            s.wi.z = -s.wi.z;
+        }
+        Some(s)
+    }
+
+    /// [`Bsdf::sample`] of the other models (with `wo` already on the front side), out of
+    /// line so that the diffuse case stays small where it is inlined.
+    #[inline(never)]
+    fn sample_general(&self, wo_f: Vec3, uv: Vec2, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        let s = match &self.model {
             BsdfModel::Diffuse { reflectance } => diffuse::sample(reflectance.eval(uv), wo_f, u2)?,
             BsdfModel::Conductor { eta, k, specular_reflectance } => {
                 conductor::sample_smooth(*eta, *k, specular_reflectance.eval(uv), wo_f)?
@@ -229,10 +249,6 @@ impl Bsdf {
                 plastic::sample_rough(params, d, sp, wo_f, u1, u2)?
             }
         };
-        if flip {
-            s.wi.z = -s.wi.z;
-        }
-
         Some(s)
     }
 }
