@@ -55,10 +55,10 @@ pub struct CameraConnection {
     pub wi: Vec3,
     pub dist2: f32,
     pub inv_dist2: f32,
-    /// `We · cos θ_camera`: the emitted importance times the camera-side cosine (the pinhole
-    /// has no surface, so the cosine stays with the importance).
-    pub we_cos: f32,
-    /// [`Camera::pdf_direction`] of the direction from the camera to the point.
+    /// [`Camera::pdf_direction`] of the direction from the camera to the point,
+    /// `1 / (A cos³θ)`, which is also `We · cos θ_camera`: the emitted importance times the
+    /// camera-side cosine (the pinhole has no surface, so the cosine stays with the
+    /// importance).
     pub pdf_dir: f32,
 }
 
@@ -113,12 +113,6 @@ impl Camera {
             inv_tan_half: 1.0 / tan_half,
             inv_area,
         }
-    }
-
-    /// Area of the image rectangle on the plane at unit distance in front of the pinhole.
-    #[inline]
-    pub fn image_plane_area(&self) -> f32 {
-        4.0 * self.tan_half.x * self.tan_half.y
     }
 
     /// Film position (pixel units) of a world direction `d` (of any length) leaving the
@@ -181,9 +175,8 @@ impl Camera {
         if depth < self.near_clip || depth > self.far_clip {
             return None;
         }
-        // `We cos θ = 1 / (A cos³θ)`, which is also the direction's density.
         let pdf_dir = self.inv_area_cos3(l);
-        Some(CameraConnection { raster, wi: -dir, dist2, inv_dist2: inv_dist * inv_dist, we_cos: pdf_dir, pdf_dir })
+        Some(CameraConnection { raster, wi: -dir, dist2, inv_dist2: inv_dist * inv_dist, pdf_dir })
     }
 
     /// The primary ray through a film position in pixel units (`(0,0)` is the top-left

@@ -96,7 +96,13 @@ impl Scene {
     /// The BSDF of a surface point.
     #[inline]
     pub fn bsdf(&self, si: &SurfaceInteraction) -> &Bsdf {
-        &self.bsdfs[self.shapes[si.shape as usize].bsdf]
+        &self.bsdfs[self.bsdf_index(si)]
+    }
+
+    /// Where the BSDF of a surface point is in `bsdfs`.
+    #[inline]
+    pub fn bsdf_index(&self, si: &SurfaceInteraction) -> usize {
+        self.shapes[si.shape as usize].bsdf
     }
 
     /// The area light of a surface point, if its shape emits.

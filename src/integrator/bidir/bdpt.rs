@@ -145,7 +145,8 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return;
         }
         let inv_dist2 = k.inv_dist2;
-        let c = qs.beta * light_end.f * (k.we_cos * inv_dist2);
+        // `We cos θ_camera` is the direction's density `k.pdf_dir`.
+        let c = qs.beta * light_end.f * (k.pdf_dir * inv_dist2);
         let z0 = Vertex::camera(scene.camera.position);
         let conn = Connection {
             w: k.wi,

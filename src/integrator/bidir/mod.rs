@@ -439,7 +439,7 @@ fn random_walk<R: Random>(
             break;
         }
         si.wo = back / dist;
-        let bsdf_index = scene.shapes[si.shape as usize].bsdf;
+        let bsdf_index = scene.bsdf_index(&si);
         let bsdf = &scene.bsdfs[bsdf_index];
         let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
         v.to_prev = prev.cos_area(si.wo) / (dist * dist);
