@@ -132,10 +132,11 @@ impl Camera {
         Some((Vec2::new(sx * self.resolution.0 as f32, sy * self.resolution.1 as f32), l))
     }
 
-    /// `1 / (A cos³θ)` for the camera-space direction `l` at angle θ to the view axis.
+    /// `1 / (A cos³θ)` for a camera-space direction at angle θ to the view axis, given its
+    /// `z` and its length.
     #[inline]
-    fn inv_area_cos3(&self, l: Vec3) -> f32 {
-        let sec = l.length() / l.z;
+    fn inv_area_cos3(&self, z: f32, length: f32) -> f32 {
+        let sec = length / z;
         self.inv_area * sec * sec * sec
     }
 
@@ -144,7 +145,7 @@ impl Camera {
     #[inline]
     pub fn pdf_direction(&self, d: Vec3) -> f32 {
         match self.raster_of(d) {
-            Some((_, l)) => self.inv_area_cos3(l),
+            Some((_, l)) => self.inv_area_cos3(l.z, l.length()),
             None => 0.0,
         }
     }
@@ -153,7 +154,10 @@ impl Camera {
     /// so that `∫ We cos θ dω = 1` over the image.
     #[inline]
     pub fn importance(&self, d: Vec3) -> f32 {
-        self.raster_of(d).map_or(0.0, |(_, l)| self.inv_area_cos3(l) * l.length() / l.z)
+        self.raster_of(d).map_or(0.0, |(_, l)| {
+            let length = l.length();
+            self.inv_area_cos3(l.z, length) * length / l.z
+        })
     }
 
     /// Connects a world point to the pinhole: `None` when the point is behind the camera,
@@ -171,11 +175,12 @@ impl Camera {
         let dir = d * inv_dist;
         let (raster, l) = self.raster_of(dir)?;
         // The depth along the view axis, `dist cos θ`, against the clip planes.
-        let depth = dist * l.z / l.length();
+        let length = l.length();
+        let depth = dist * l.z / length;
         if depth < self.near_clip || depth > self.far_clip {
             return None;
         }
-        let pdf_dir = self.inv_area_cos3(l);
+        let pdf_dir = self.inv_area_cos3(l.z, length);
         Some(CameraConnection { raster, wi: -dir, dist2, inv_dist2: inv_dist * inv_dist, pdf_dir })
     }
 
