@@ -132,7 +132,7 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("build_1M_triangles");
     g.sample_size(10).measurement_time(Duration::from_secs(8));
     for (name, b, o) in backends() {
-        g.bench_function(name, |bench| bench.iter(|| black_box(Accel::build(b, &sphere_geo, o).unwrap())));
+        g.bench_function(name, |bench| bench.iter(|| black_box(Accel::build(b, &sphere_geo, o.clone()).unwrap())));
     }
     g.finish();
 
@@ -142,7 +142,7 @@ fn bench(c: &mut Criterion) {
         .warm_up_time(Duration::from_secs(1))
         .throughput(Throughput::Elements(N_RAYS as u64));
     for (name, b, o) in backends() {
-        let s = Accel::build(b, &sphere_geo, o).unwrap();
+        let s = Accel::build(b, &sphere_geo, o.clone()).unwrap();
         let t = Accel::build(b, &terrain_geo, o).unwrap();
         g.bench_function(format!("{name}/camera"), |bench| bench.iter(|| black_box(trace_closest(&s, &cam))));
         if name == "embree" {

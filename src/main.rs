@@ -93,6 +93,11 @@ struct RenderArgs {
     /// Embree's robust traversal mode (slower, fewer arithmetic shortcuts).
     #[arg(long)]
     robust: bool,
+    /// Embree device configuration, `key=value` pairs separated by commas (after those of
+    /// the PCBPT_EMBREE_CONFIG environment variable): `max_isa=sse4.2|avx|avx2|avx512` runs
+    /// the kernels another CPU would, `verbose=1` prints the ISA Embree selected.
+    #[arg(long, value_name = "CONFIG")]
+    embree_config: Option<String>,
     /// MIS heuristic of the bidirectional integrators.
     #[arg(long, value_enum, default_value_t = Heuristic::Power)]
     heuristic: Heuristic,
@@ -242,7 +247,13 @@ fn install_signal_handlers() -> Result<Arc<AtomicBool>> {
 fn render(a: RenderArgs) -> Result<ExitCode> {
     let stop = install_signal_handlers()?;
     let t0 = Instant::now();
-    let build = BuildOptions { quality: a.bvh_quality, layout: a.bvh_layout, robust: a.robust, compact: false };
+    let build = BuildOptions {
+        quality: a.bvh_quality,
+        layout: a.bvh_layout,
+        robust: a.robust,
+        compact: false,
+        embree_config: a.embree_config.clone(),
+    };
     let mut scene = Scene::load(&a.scene, &LoadOptions { overrides: a.define.clone(), backend: a.backend, build })?;
     if let Some(d) = a.max_depth {
         if d < -1 {

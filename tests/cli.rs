@@ -454,3 +454,36 @@ fn pcbpt_reports_its_phases_cache_and_shadow_rays() {
     }
     assert_eq!(r["bidir"]["pc"]["light_paths"].as_u64(), Some(500));
 }
+
+#[test]
+fn embree_configuration_is_passed_through_and_checked() {
+    let d = tempfile::tempdir().unwrap();
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let out = d.path().join("cb.exr");
+    let run = |config: &str, env: &str| {
+        Command::new(env!("CARGO_BIN_EXE_pcbpt"))
+            .args(["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-D", "resx=16", "-D", "resy=16"])
+            .args(["--spp", "1", "--quiet", "--embree-config", config])
+            .env("PCBPT_EMBREE_CONFIG", env)
+            .output()
+            .expect("runs the binary")
+    };
+    // Embree prints the instruction sets of its kernels with verbose=1: SSE4.2 at most.
+    let o = run("max_isa=sse4.2,verbose=1", "");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let targets = text.lines().find(|l| l.trim_start().starts_with("Targets") && l.contains("(supported)"));
+    let targets = targets.unwrap_or_else(|| panic!("no target line in Embree's report: {text}"));
+    assert!(targets.contains("SSE4.2") && !targets.contains("AVX"), "{targets}");
+    assert!(out.exists());
+    for (config, env, expect) in [
+        ("max_isa=avx3", "", "unknown instruction set `max_isa=avx3`"),
+        ("max_isa", "", "--embree-config: `max_isa` is not a `key=value` pair"),
+        ("", "threads", "PCBPT_EMBREE_CONFIG: `threads` is not a `key=value` pair"),
+    ] {
+        let o = run(config, env);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(err.contains(expect) && !err.contains("panicked"), "expected {expect:?} in: {err}");
+    }
+}

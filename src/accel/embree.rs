@@ -82,15 +82,74 @@ unsafe impl Send for Device {}
 // SAFETY: see `Send`; all shared access goes through Embree's thread-safe API or the mutex.
 unsafe impl Sync for Device {}
 
+/// The environment variable whose Embree device configuration every device gets (before
+/// the `--embree-config` option's): `PCBPT_EMBREE_CONFIG=max_isa=sse4.2 cargo test` runs the
+/// kernels an older CPU would.
+pub const CONFIG_ENV: &str = "PCBPT_EMBREE_CONFIG";
+
+/// The configuration string a device is created with: `verbose=0`, then the
+/// `PCBPT_EMBREE_CONFIG` environment variable's pairs, then `extra`'s (Embree reads them in
+/// order, so a later value of a key wins). Embree's keys include `isa=` and `max_isa=`
+/// (`sse2`, `sse4.2`, `avx`, `avx2`, `avx512`), which pick the kernels another CPU would
+/// run, `threads=` (build threads) and `verbose=` (1 prints the ISA Embree selected).
+/// Embree ignores keys it does not know; what is not a `key=value` pair, or names an
+/// unknown instruction set, is refused here.
+pub fn device_config(extra: Option<&str>) -> Result<String, AccelError> {
+    let env = std::env::var(CONFIG_ENV).ok();
+    config_string(env.as_deref(), extra)
+}
+
+/// The instruction sets Embree 3.13 and 4 dispatch to on x86-64, as `isa=`/`max_isa=` name them.
+const ISAS: [&str; 5] = ["sse2", "sse4.2", "avx", "avx2", "avx512"];
+
+fn config_string(env: Option<&str>, extra: Option<&str>) -> Result<String, AccelError> {
+    let mut config = String::from("verbose=0");
+    for (source, part) in [(CONFIG_ENV, env), ("--embree-config", extra)] {
+        let Some(part) = part.map(str::trim).filter(|p| !p.is_empty()) else { continue };
+        // Embree's parser stops at anything it does not know without an error: refuse what
+        // is not a list of `key=value` pairs here, so a typo is not silently ignored.
+        for pair in part.split(',').map(str::trim) {
+            let ok = pair.split_once('=').is_some_and(|(k, v)| {
+                !k.is_empty()
+                    && !v.is_empty()
+                    && k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                    && v.chars().all(|c| c.is_ascii_alphanumeric() || "._-".contains(c))
+            });
+            if !ok {
+                return Err(AccelError::Embree(format!(
+                    "{source}: `{pair}` is not a `key=value` pair of Embree's device configuration (e.g. max_isa=avx2)"
+                )));
+            }
+            // Embree takes an instruction set it does not know for its lowest one, silently.
+            if let Some((key @ ("isa" | "max_isa"), value)) = pair.split_once('=')
+                && !ISAS.contains(&value)
+            {
+                return Err(AccelError::Embree(format!(
+                    "{source}: unknown instruction set `{key}={value}` (one of {})",
+                    ISAS.join(", ")
+                )));
+            }
+            config.push(',');
+            config.push_str(pair);
+        }
+    }
+    Ok(config)
+}
+
 impl Device {
-    pub fn new() -> Result<Arc<Device>, AccelError> {
-        // SAFETY: the configuration string is a valid NUL-terminated C string.
-        let raw = unsafe { ffi::rtcNewDevice(c"verbose=0".as_ptr()) };
+    /// A device with [`device_config`]`(extra)` as its configuration.
+    pub fn new(extra: Option<&str>) -> Result<Arc<Device>, AccelError> {
+        let config = device_config(extra)?;
+        let c_config = std::ffi::CString::new(config.as_str())
+            .map_err(|_| AccelError::Embree(format!("device configuration `{config}` contains a NUL byte")))?;
+        // SAFETY: the configuration string is a valid NUL-terminated C string that outlives
+        // the call (Embree copies what it keeps).
+        let raw = unsafe { ffi::rtcNewDevice(c_config.as_ptr()) };
         if raw.is_null() {
             // SAFETY: querying the error of a null device is allowed and returns the last
             // device-creation error.
             let code = unsafe { ffi::rtcGetDeviceError(ptr::null_mut()) };
-            return Err(AccelError::Embree(format!("rtcNewDevice failed ({code:?})")));
+            return Err(AccelError::Embree(format!("rtcNewDevice(\"{config}\") failed ({code:?})")));
         }
         let errors: Box<ErrorLog> = Box::new(Mutex::new(Vec::new()));
         // SAFETY: `raw` is a live device; the user pointer points into a Box that lives as
@@ -169,8 +228,8 @@ fn quality(q: BuildQuality) -> ffi::RTCBuildQuality {
 
 impl EmbreeScene {
     /// Builds and commits a scene; geometry `i` gets geometry id `i`.
-    pub fn build(geometry: &[Geometry<'_>], options: BuildOptions) -> Result<EmbreeScene, AccelError> {
-        let device = Device::new()?;
+    pub fn build(geometry: &[Geometry<'_>], options: &BuildOptions) -> Result<EmbreeScene, AccelError> {
+        let device = Device::new(options.embree_config.as_deref())?;
         // SAFETY: `device.raw` is a live device.
         let raw = unsafe { ffi::rtcNewScene(device.raw) };
         if raw.is_null() {
@@ -418,5 +477,52 @@ impl EmbreeScene {
             unsafe { ffi::rtcOccluded1(self.raw, r, ptr::null_mut()) };
         }
         out.extend(buf.iter().map(|r| r.tfar == f32::NEG_INFINITY));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn device_configuration_joins_environment_and_option() {
+        assert_eq!(config_string(None, None).unwrap(), "verbose=0");
+        assert_eq!(config_string(Some(" "), Some("")).unwrap(), "verbose=0");
+        assert_eq!(
+            config_string(Some("max_isa=sse4.2"), Some("threads=1, verbose=1")).unwrap(),
+            "verbose=0,max_isa=sse4.2,threads=1,verbose=1"
+        );
+        for isa in ISAS {
+            assert!(config_string(Some(&format!("isa={isa}")), Some(&format!("max_isa={isa}"))).is_ok());
+        }
+        for bad in [
+            "max_isa",
+            "max_isa=",
+            "=avx2",
+            "max isa=avx2",
+            "max_isa=avx2;threads=1",
+            "a=b,,c=d",
+            "max_isa=avx3",
+            "isa=SSE4.2",
+        ] {
+            let e = config_string(None, Some(bad)).unwrap_err().to_string();
+            assert!(e.contains("--embree-config"), "{bad}: {e}");
+            let e = config_string(Some(bad), None).unwrap_err().to_string();
+            assert!(e.contains(CONFIG_ENV), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_device_runs_with_the_kernels_of_an_older_cpu() {
+        // SSE4.2 is the oldest instruction set Embree 3.13 and 4 dispatch to on x86-64.
+        let device = Device::new(Some("max_isa=sse4.2")).unwrap();
+        device.check("rtcNewDevice").unwrap();
+        let p = [glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y];
+        let geometry = [Geometry::Triangles { positions: &p, indices: &[[0, 1, 2]] }];
+        let options = BuildOptions { embree_config: Some("max_isa=sse4.2".into()), ..BuildOptions::default() };
+        let scene = EmbreeScene::build(&geometry, &options).unwrap();
+        let hit = scene.intersect(&Ray::new(glam::Vec3::new(0.25, 0.25, 1.0), -glam::Vec3::Z)).unwrap();
+        assert_eq!((hit.geom, hit.prim), (0, 0));
+        assert!((hit.t - 1.0).abs() < 1e-6 && (hit.u - 0.25).abs() < 1e-6 && (hit.v - 0.25).abs() < 1e-6);
     }
 }

@@ -79,7 +79,7 @@ pub enum BvhLayout {
 }
 
 /// Options for building an accelerator.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct BuildOptions {
     /// Build quality of the BVH (with the two-level layout: of each shape's BVH).
     pub quality: BuildQuality,
@@ -89,6 +89,10 @@ pub struct BuildOptions {
     pub robust: bool,
     /// Embree's `RTC_SCENE_FLAG_COMPACT`: a more memory-frugal layout.
     pub compact: bool,
+    /// Embree device configuration (`key=value` pairs separated by commas, such as
+    /// `max_isa=avx2` or `threads=1`), appended to the `PCBPT_EMBREE_CONFIG` environment
+    /// variable's; see [`embree::device_config`]. obvhs ignores it.
+    pub embree_config: Option<String>,
 }
 
 /// The ray-tracing backend to use.
@@ -132,7 +136,7 @@ impl Accel {
     pub fn build(backend: Backend, geometry: &[Geometry<'_>], options: BuildOptions) -> Result<Accel, AccelError> {
         validate(geometry)?;
         match backend {
-            Backend::Embree => Ok(Accel::Embree(embree::EmbreeScene::build(geometry, options)?)),
+            Backend::Embree => Ok(Accel::Embree(embree::EmbreeScene::build(geometry, &options)?)),
             #[cfg(feature = "obvhs")]
             Backend::Obvhs => Ok(Accel::Obvhs(bvh::ObvhsScene::build(geometry, options))),
             #[cfg(not(feature = "obvhs"))]

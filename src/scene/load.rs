@@ -132,7 +132,7 @@ impl Scene {
         let light_sampler = LightSampler::new(&b.lights, &b.shapes, &bounds);
         let infinite_lights = (0..b.lights.len()).filter(|&i| b.lights[i].is_infinite()).collect();
         let geometry: Vec<_> = b.shapes.iter().map(|s| s.accel_geometry()).collect();
-        let accel = Accel::build(options.backend, &geometry, options.build)?;
+        let accel = Accel::build(options.backend, &geometry, options.build.clone())?;
         drop(geometry);
         Ok(Scene {
             path: path.to_path_buf(),

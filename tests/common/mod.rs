@@ -8,6 +8,8 @@ use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutpu
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::{Path, PathBuf};
 
+pub mod hits;
+
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
