@@ -729,7 +729,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     } else {
         Counts::Bdpt
     });
-    let bar = progress_bar(opts, w, h);
+    let bar = progress_bar(opts, w, h, tile_list.len());
     let mut done = 0u32;
     let mut passes = 0u32;
     let mut interrupted = false;
@@ -833,7 +833,19 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 || -> Option<Vec<TileResult>> {
                     tile_list
                         .par_iter()
-                        .map(|&t| (!stopped()).then(|| render_tile(scene, &est, &pass, t, opts.seed, done, count)))
+                        .map(|&t| {
+                            (!stopped()).then(|| {
+                                let r = render_tile(scene, &est, &pass, t, opts.seed, done, count);
+                                // A pass of a large image takes long: the bar moves by tiles.
+                                if let Some(bar) = &bar {
+                                    match opts.budget {
+                                        Budget::Spp(_) => bar.inc(count as u64),
+                                        Budget::Time(secs) => bar.set_position(time_position(start, secs)),
+                                    }
+                                }
+                                r
+                            })
+                        })
                         .collect()
                 },
             );
@@ -865,10 +877,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             });
             if let Some(bar) = &bar {
                 match opts.budget {
-                    Budget::Spp(_) => bar.set_position(done as u64),
-                    Budget::Time(t) => {
-                        bar.set_position((start.elapsed().as_secs_f64() / t * 1000.0).min(1000.0) as u64)
-                    }
+                    Budget::Spp(_) => bar.set_position(done as u64 * tile_list.len() as u64),
+                    Budget::Time(t) => bar.set_position(time_position(start, t)),
                 }
                 let secs = start.elapsed().as_secs_f64().max(1e-9);
                 bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
@@ -909,18 +919,29 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats })
 }
 
-fn progress_bar(opts: &RenderOptions, w: u32, h: u32) -> Option<indicatif::ProgressBar> {
+/// The render's progress bar on a terminal: in tiles rendered times their samples per
+/// pixel (`tiles` per pass), or in thousandths of the time budget.
+fn progress_bar(opts: &RenderOptions, w: u32, h: u32, tiles: usize) -> Option<indicatif::ProgressBar> {
     use std::io::IsTerminal;
     if !opts.progress || !std::io::stderr().is_terminal() {
         return None;
     }
     let (len, template) = match opts.budget {
-        Budget::Spp(spp) => (spp as u64, format!("{w}×{h} {{bar:40}} {{pos}}/{{len}} spp, ETA {{eta}} — {{msg}}")),
-        Budget::Time(_) => (1000, format!("{w}×{h} {{bar:40}} {{elapsed}} — {{msg}}")),
+        Budget::Spp(spp) => (
+            spp as u64 * tiles as u64,
+            format!("{w}×{h} {{wide_bar}} {{percent}}% of {spp} spp, ETA {{eta}} — {{msg}}"),
+        ),
+        Budget::Time(_) => (1000, format!("{w}×{h} {{wide_bar}} {{elapsed}} — {{msg}}")),
     };
     let bar = indicatif::ProgressBar::new(len);
     if let Ok(style) = indicatif::ProgressStyle::with_template(&template) {
         bar.set_style(style);
     }
+    bar.enable_steady_tick(Duration::from_secs(1));
     Some(bar)
+}
+
+/// The position of a time budget's progress bar: thousandths of `budget` seconds elapsed.
+fn time_position(start: Instant, budget: f64) -> u64 {
+    (start.elapsed().as_secs_f64() / budget * 1000.0).min(1000.0) as u64
 }
