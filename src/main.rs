@@ -254,7 +254,8 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         compact: false,
         embree_config: a.embree_config.clone(),
     };
-    let mut scene = Scene::load(&a.scene, &LoadOptions { overrides: a.define.clone(), backend: a.backend, build })?;
+    let load = LoadOptions { overrides: a.define.clone(), backend: a.backend, build, progress: !a.quiet };
+    let mut scene = Scene::load(&a.scene, &load)?;
     if let Some(d) = a.max_depth {
         if d < -1 {
             return Err(Error::Usage(format!("--max-depth must be -1 (unlimited) or at least 0, got {d}")));
@@ -269,6 +270,17 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         for w in &scene.stats.warnings {
             eprintln!("warning: {w}");
         }
+        let l = &scene.stats;
+        eprintln!(
+            "loaded {}: {} triangles ({:.1} MiB of mesh arrays) in {:.2} s: reading {:.2} s, {} BVH {:.2} s",
+            a.scene.display(),
+            pcbpt::scene::load::group_thousands(l.triangles as u64),
+            l.mesh_bytes as f64 / (1024.0 * 1024.0),
+            load_seconds,
+            l.read_seconds,
+            a.backend,
+            l.bvh_seconds
+        );
     }
     let kind = match a.integrator {
         Some(k) => k,
@@ -341,7 +353,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     }
     image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
     if let Some(path) = &a.stats {
-        let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "degenerate_triangles": scene.stats.degenerate_triangles, "render": s });
+        let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "load": { "read_seconds": scene.stats.read_seconds, "bvh_seconds": scene.stats.bvh_seconds, "vertices": scene.stats.vertices, "mesh_bytes": scene.stats.mesh_bytes }, "degenerate_triangles": scene.stats.degenerate_triangles, "render": s });
         image_io::write_text(path, &serde_json::to_string_pretty(&json).unwrap_or_default())?;
     }
     if !a.quiet || s.interrupted {

@@ -404,11 +404,29 @@ fn pcbpt_cache_over_the_memory_limit_is_refused_and_bad_options_are_named() {
         args.extend_from_slice(extra);
         pcbpt(&args)
     };
-    let o = run(&["--pc-cache-stride", "1", "--pc-max-cache-mb", "1"]);
-    let err = String::from_utf8_lossy(&o.stderr);
+    let o = run(&["--pc-cache-stride", "1", "--pc-max-cache-mb", "8"]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("--pc-max-cache-mb") && err.contains("20480 records"), "{err}");
     assert!(!err.contains("panicked") && !out.exists());
+    // Each smaller cache the message suggests, made alone, fits the limit: the render goes
+    // ahead (the raised limit it also names is the needed size rounded up).
+    assert!(err.contains("raise the limit to --pc-max-cache-mb 149"), "{err}");
+    let mut suggested = 0;
+    for flag in ["--pc-cache-stride", "--pc-cache-depth", "--pc-light-paths"] {
+        let Some(tail) = err.split(&format!("{flag} ")).nth(1) else { continue };
+        let value: String = tail.chars().take_while(char::is_ascii_digit).collect();
+        let mut args = vec!["--pc-cache-stride", "1", "--pc-max-cache-mb", "8"];
+        match args.iter().position(|a| *a == flag) {
+            Some(i) => args[i + 1] = &value,
+            None => args.extend_from_slice(&[flag, &value]),
+        }
+        let o = run(&args);
+        assert!(o.status.success(), "{flag} {value}: {}", String::from_utf8_lossy(&o.stderr));
+        std::fs::remove_file(&out).unwrap();
+        suggested += 1;
+    }
+    assert!(suggested >= 2, "{err}");
     for (flag, value) in [("--pc-uniform-blend", "0"), ("--pc-connections", "0"), ("--pc-neighbours", "40")] {
         let o = run(&[flag, value]);
         let err = String::from_utf8_lossy(&o.stderr);

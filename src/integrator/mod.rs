@@ -599,19 +599,71 @@ fn check_memory(
         )));
     }
     if let Estimator::Pcbpt(pc) = est {
-        let records = pc.opts.max_records(w, h);
-        let v = (1.5 * m as f64 * pilot.mean_vertices() as f64).ceil() as usize;
-        let mb = Cache::bytes(records, v) / MIB;
+        let fit = CacheFit { opts: &pc.opts, light_paths: m, mean_vertices: pilot.mean_vertices() as f64, w, h };
+        let (records, v, mb) = fit.size(pc.opts.stride, pc.opts.cache_depth, m);
         if mb > pc.opts.max_cache_mb as f64 {
             return Err(crate::error::Error::Usage(format!(
                 "the PCBPT cache of up to {records} records × about {v} pool vertices needs about {mb:.0} MiB, over the \
-                 limit of {} MiB (--pc-max-cache-mb); raise --pc-cache-stride, lower --pc-cache-depth or \
-                 --pc-light-paths, or raise the limit",
-                pc.opts.max_cache_mb
+                 limit of {} MiB (--pc-max-cache-mb); {}",
+                pc.opts.max_cache_mb,
+                fit.suggestions()
             )));
         }
     }
     Ok(())
+}
+
+/// PCBPT's cache size before the first iteration, as a function of its options: the pool
+/// is sized at 1.5 times the pilot's mean connectible vertices per light path.
+#[derive(Clone, Copy)]
+struct CacheFit<'a> {
+    opts: &'a bidir::pcbpt::PcOptions,
+    light_paths: usize,
+    mean_vertices: f64,
+    w: u32,
+    h: u32,
+}
+
+impl CacheFit<'_> {
+    /// Records, pool vertices and MiB of the cache with this stride, depth and path count.
+    fn size(&self, stride: u32, depth: u32, light_paths: usize) -> (usize, usize, f64) {
+        let o = bidir::pcbpt::PcOptions { stride, cache_depth: depth, ..self.opts.clone() };
+        let records = o.max_records(self.w, self.h);
+        let v = (1.5 * light_paths as f64 * self.mean_vertices).ceil() as usize;
+        (records, v, Cache::bytes(records, v) / (1024.0 * 1024.0))
+    }
+
+    fn fits(&self, stride: u32, depth: u32, light_paths: usize) -> bool {
+        self.size(stride, depth, light_paths).2 <= self.opts.max_cache_mb as f64
+    }
+
+    /// The options that make the cache fit, each changed alone, with values that fit.
+    fn suggestions(&self) -> String {
+        let (s, d, m) = (self.opts.stride, self.opts.cache_depth, self.light_paths);
+        let mut ways = Vec::new();
+        if let Some(stride) = (s + 1..=self.w.max(self.h)).find(|&x| self.fits(x, d, m)) {
+            ways.push(format!("--pc-cache-stride {stride}"));
+        }
+        if let Some(depth) = (1..d).rev().find(|&x| self.fits(s, x, m)) {
+            ways.push(format!("--pc-cache-depth {depth}"));
+        }
+        // Fewer light paths also make a new pilot, whose vertices per path differ from this
+        // one's: the count suggested fits pools of up to twice this pilot's mean.
+        let wide = CacheFit { mean_vertices: 2.0 * self.mean_vertices, ..*self };
+        let mut paths = m - 1;
+        while paths > 0 && !wide.fits(s, d, paths) {
+            // The cache grows about linearly with the paths: jump close to the count that fits.
+            let (_, _, mb) = wide.size(s, d, paths);
+            paths = ((paths as f64 * self.opts.max_cache_mb as f64 / mb).floor() as usize).min(paths - 1);
+        }
+        if paths > 0 {
+            ways.push(format!("--pc-light-paths {paths}"));
+        }
+        let need = self.size(s, d, m).2.ceil() as usize;
+        ways.push(format!("raise the limit to --pc-max-cache-mb {need}"));
+        let last = ways.pop().unwrap_or_default();
+        if ways.is_empty() { last } else { format!("it fits with {}, or {last}", ways.join(", or ")) }
+    }
 }
 
 /// Traces PCBPT's record pixels for iteration `iteration` and evaluates their PMFs over
@@ -677,7 +729,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     } else {
         Counts::Bdpt
     });
-    let bar = progress_bar(opts, w, h);
+    let bar = progress_bar(opts, w, h, tile_list.len());
     let mut done = 0u32;
     let mut passes = 0u32;
     let mut interrupted = false;
@@ -781,7 +833,19 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
                 || -> Option<Vec<TileResult>> {
                     tile_list
                         .par_iter()
-                        .map(|&t| (!stopped()).then(|| render_tile(scene, &est, &pass, t, opts.seed, done, count)))
+                        .map(|&t| {
+                            (!stopped()).then(|| {
+                                let r = render_tile(scene, &est, &pass, t, opts.seed, done, count);
+                                // A pass of a large image takes long: the bar moves by tiles.
+                                if let Some(bar) = &bar {
+                                    match opts.budget {
+                                        Budget::Spp(_) => bar.inc(count as u64),
+                                        Budget::Time(secs) => bar.set_position(time_position(start, secs)),
+                                    }
+                                }
+                                r
+                            })
+                        })
                         .collect()
                 },
             );
@@ -813,10 +877,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
             });
             if let Some(bar) = &bar {
                 match opts.budget {
-                    Budget::Spp(_) => bar.set_position(done as u64),
-                    Budget::Time(t) => {
-                        bar.set_position((start.elapsed().as_secs_f64() / t * 1000.0).min(1000.0) as u64)
-                    }
+                    Budget::Spp(_) => bar.set_position(done as u64 * tile_list.len() as u64),
+                    Budget::Time(t) => bar.set_position(time_position(start, t)),
                 }
                 let secs = start.elapsed().as_secs_f64().max(1e-9);
                 bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
@@ -857,18 +919,29 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats })
 }
 
-fn progress_bar(opts: &RenderOptions, w: u32, h: u32) -> Option<indicatif::ProgressBar> {
+/// The render's progress bar on a terminal: in tiles rendered times their samples per
+/// pixel (`tiles` per pass), or in thousandths of the time budget.
+fn progress_bar(opts: &RenderOptions, w: u32, h: u32, tiles: usize) -> Option<indicatif::ProgressBar> {
     use std::io::IsTerminal;
     if !opts.progress || !std::io::stderr().is_terminal() {
         return None;
     }
     let (len, template) = match opts.budget {
-        Budget::Spp(spp) => (spp as u64, format!("{w}×{h} {{bar:40}} {{pos}}/{{len}} spp, ETA {{eta}} — {{msg}}")),
-        Budget::Time(_) => (1000, format!("{w}×{h} {{bar:40}} {{elapsed}} — {{msg}}")),
+        Budget::Spp(spp) => (
+            spp as u64 * tiles as u64,
+            format!("{w}×{h} {{wide_bar}} {{percent}}% of {spp} spp, ETA {{eta}} — {{msg}}"),
+        ),
+        Budget::Time(_) => (1000, format!("{w}×{h} {{wide_bar}} {{elapsed}} — {{msg}}")),
     };
     let bar = indicatif::ProgressBar::new(len);
     if let Ok(style) = indicatif::ProgressStyle::with_template(&template) {
         bar.set_style(style);
     }
+    bar.enable_steady_tick(Duration::from_secs(1));
     Some(bar)
+}
+
+/// The position of a time budget's progress bar: thousandths of `budget` seconds elapsed.
+fn time_position(start: Instant, budget: f64) -> u64 {
+    (start.elapsed().as_secs_f64() / budget * 1000.0).min(1000.0) as u64
 }

@@ -4,6 +4,7 @@
 //! names the file and line (as in Mitsuba), as is an unknown plugin type.
 
 use super::mesh::{self, TriangleMesh};
+use super::progress::LoadProgress;
 use super::shape::{Shape, ShapeGeometry};
 use super::xml::Value;
 use super::xml::{self, Document, Node, NodeId};
@@ -24,6 +25,7 @@ use glam::{Mat3, Mat4, Vec3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// BSDF plugins this renderer implements.
 pub const BSDF_PLUGINS: &[&str] = &[
@@ -47,16 +49,18 @@ pub const MAX_PIXELS: u64 = 1 << 28;
 impl Scene {
     /// Loads a Mitsuba XML scene and builds its accelerator.
     pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
-        Scene::from_document(xml::parse_file(path, &options.overrides)?, path, options)
+        let start = Instant::now();
+        Scene::from_document(xml::parse_file(path, &options.overrides)?, path, options, start)
     }
 
     /// Loads scene text as if read from `path` (messages name it; meshes, textures and
     /// includes resolve against its folder).
     pub fn load_str(text: &str, path: &Path, options: &LoadOptions) -> Result<Scene> {
-        Scene::from_document(xml::parse_str(text, path, &options.overrides)?, path, options)
+        let start = Instant::now();
+        Scene::from_document(xml::parse_str(text, path, &options.overrides)?, path, options, start)
     }
 
-    fn from_document(doc: Document, path: &Path, options: &LoadOptions) -> Result<Scene> {
+    fn from_document(doc: Document, path: &Path, options: &LoadOptions, start: Instant) -> Result<Scene> {
         let mut b = Builder {
             doc: &doc,
             base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
@@ -66,6 +70,7 @@ impl Scene {
             shapes: Vec::new(),
             lights: Vec::new(),
             stats: LoadStats::default(),
+            progress: LoadProgress::new(options.progress),
         };
         let mut sensor = None;
         let mut integrator = None;
@@ -131,9 +136,19 @@ impl Scene {
         let bounds = scene_bounds(&b.shapes, camera.position);
         let light_sampler = LightSampler::new(&b.lights, &b.shapes, &bounds);
         let infinite_lights = (0..b.lights.len()).filter(|&i| b.lights[i].is_infinite()).collect();
+        b.stats.mesh_bytes = b.shapes.iter().map(Shape::memory_bytes).sum();
+        b.stats.read_seconds = start.elapsed().as_secs_f64();
+        let bvh_start = Instant::now();
+        let spinner = b.progress.phase(format!(
+            "building the {} BVH over {} triangles",
+            options.backend,
+            group_thousands(b.stats.triangles as u64)
+        ));
         let geometry: Vec<_> = b.shapes.iter().map(|s| s.accel_geometry()).collect();
         let accel = Accel::build(options.backend, &geometry, options.build.clone())?;
         drop(geometry);
+        b.stats.bvh_seconds = bvh_start.elapsed().as_secs_f64();
+        LoadProgress::done(spinner, format!("built the {} BVH in {:.2} s", options.backend, b.stats.bvh_seconds));
         Ok(Scene {
             path: path.to_path_buf(),
             shapes: b.shapes,
@@ -161,6 +176,7 @@ struct Builder<'d> {
     shapes: Vec<Shape>,
     lights: Vec<Light>,
     stats: LoadStats,
+    progress: LoadProgress,
 }
 
 fn positive(node: &Node, name: &str, v: f32) -> Result<f32> {
@@ -463,15 +479,39 @@ impl<'d> Builder<'d> {
         Ok(self.base.join(f))
     }
 
-    fn load_mesh(&self, node: &Node, loader: fn(&Path) -> Result<TriangleMesh>) -> Result<TriangleMesh> {
+    /// Reads the mesh file a shape names (a PLY file streamed, with a progress bar).
+    fn load_mesh(&self, node: &Node) -> Result<TriangleMesh> {
         let path = self.resolve_path(node, "filename")?;
-        if !path.is_file() {
-            return Err(Error::input(
-                &node.prop_loc("filename"),
-                format!("mesh file {} does not exist", path.display()),
-            ));
-        }
-        loader(&path).map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))
+        let size = match std::fs::metadata(&path) {
+            Ok(m) if m.is_file() => m.len(),
+            _ => {
+                return Err(Error::input(
+                    &node.prop_loc("filename"),
+                    format!("mesh file {} does not exist", path.display()),
+                ));
+            }
+        };
+        let start = Instant::now();
+        let bar = self.progress.file(&path, size);
+        let loaded = if node.plugin == "obj" {
+            mesh::load_obj(&path)
+        } else {
+            mesh::load_ply_with_progress(&path, &mut |read| {
+                if let Some(b) = &bar {
+                    b.set_position(read);
+                }
+            })
+        };
+        let m = loaded.map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
+        let summary = format!(
+            "read {}: {} triangles, {:.1} MB in {:.2} s",
+            path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+            group_thousands(m.indices.len() as u64),
+            size as f64 / 1e6,
+            start.elapsed().as_secs_f64()
+        );
+        LoadProgress::done(bar, summary);
+        Ok(m)
     }
 
     fn shape(&mut self, id: NodeId) -> Result<()> {
@@ -481,7 +521,7 @@ impl<'d> Builder<'d> {
         let name = node.id.clone().unwrap_or_else(|| node.plugin.clone());
         let geometry = match node.plugin.as_str() {
             "obj" | "ply" => {
-                let mut m = self.load_mesh(node, if node.plugin == "obj" { mesh::load_obj } else { mesh::load_ply })?;
+                let mut m = self.load_mesh(node)?;
                 if node.boolean_or("face_normals", false)? {
                     m.normals = None;
                 }
@@ -545,6 +585,7 @@ impl<'d> Builder<'d> {
         let mut shape = Shape::new(geometry, bsdf, flip_normals, name);
         if let ShapeGeometry::Mesh(m) = &shape.geometry {
             self.stats.triangles += m.indices.len();
+            self.stats.vertices += m.positions.len();
             let degenerate = m.degenerate_count();
             if degenerate > 0 {
                 self.stats.degenerate_triangles += degenerate;
@@ -892,4 +933,30 @@ fn scene_bounds(shapes: &[Shape], camera: Vec3) -> Bounds {
     }
     let center = (lo + hi) * 0.5;
     Bounds { center, radius: ((hi - lo).length() * 0.5).max(1e-3) }
+}
+
+/// `n` with a space between groups of three digits (`10 000 000`).
+pub fn group_thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::with_capacity(digits.len() + digits.len() / 3);
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(' ');
+        }
+        out.push(c);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::group_thousands;
+
+    #[test]
+    fn thousands_are_grouped() {
+        let cases = [(0, "0"), (999, "999"), (1000, "1 000"), (10_000_000, "10 000 000"), (123_456, "123 456")];
+        for (n, s) in cases {
+            assert_eq!(group_thousands(n), s);
+        }
+    }
 }

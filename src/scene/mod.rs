@@ -3,6 +3,7 @@
 
 pub mod load;
 pub mod mesh;
+pub mod progress;
 pub mod shape;
 pub mod xml;
 
@@ -46,7 +47,15 @@ pub struct SamplerSpec {
 #[derive(Clone, Debug, Default)]
 pub struct LoadStats {
     pub triangles: usize,
+    pub vertices: usize,
     pub spheres: usize,
+    /// Bytes of the shapes' vertex and triangle arrays (positions, normals, uvs, indices,
+    /// emitters' sampling tables), not counting the accelerator's own copies and BVH.
+    pub mesh_bytes: usize,
+    /// Seconds spent reading the scene file and its meshes (everything before the BVH).
+    pub read_seconds: f64,
+    /// Seconds spent building the accelerator.
+    pub bvh_seconds: f64,
     pub degenerate_triangles: usize,
     pub warnings: Vec<String>,
 }
@@ -58,6 +67,8 @@ pub struct LoadOptions {
     pub overrides: Vec<(String, String)>,
     pub backend: Backend,
     pub build: BuildOptions,
+    /// Draw per-file and BVH-build progress on stderr when it is a terminal.
+    pub progress: bool,
 }
 
 /// A render-ready scene.

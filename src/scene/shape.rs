@@ -107,6 +107,19 @@ impl Shape {
         self.area
     }
 
+    /// Bytes held by the shape's per-vertex and per-triangle arrays (the mesh and, for an
+    /// emitting mesh, its sampling tables); zero for a sphere.
+    pub fn memory_bytes(&self) -> usize {
+        let ShapeGeometry::Mesh(m) = &self.geometry else { return 0 };
+        let vec3 = std::mem::size_of::<Vec3>();
+        m.positions.capacity() * vec3
+            + m.normals.as_ref().map_or(0, |n| n.capacity() * vec3)
+            + m.uvs.as_ref().map_or(0, |t| t.capacity() * std::mem::size_of::<Vec2>())
+            + m.indices.capacity() * std::mem::size_of::<[u32; 3]>()
+            + self.sample_normals.capacity() * vec3
+            + self.area_distribution.as_ref().map_or(0, |d| 2 * d.len() * std::mem::size_of::<f32>())
+    }
+
     pub fn accel_geometry(&self) -> Geometry<'_> {
         match &self.geometry {
             ShapeGeometry::Mesh(m) => Geometry::Triangles { positions: &m.positions, indices: &m.indices },
