@@ -3,6 +3,7 @@
 
 pub mod load;
 pub mod mesh;
+pub mod ply;
 pub mod progress;
 pub mod shape;
 pub mod xml;
