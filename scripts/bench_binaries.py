@@ -8,10 +8,15 @@ For each repeat and integrator, renders cornell-ply (256×256) for `--seconds` w
 with B (A first in odd repeats, B first in even ones), and prints samples/s and the Embree version each binary reports. The summary gives
 each binary's median and the median, minimum and maximum of the per-repeat ratios B / A:
 pairing neighbouring runs keeps the ratio fair on a machine whose load changes.
+
+With `--spp N` each run renders N samples per pixel instead, and the figure is samples per
+CPU second (user + system time of the render process, loading included): on a machine that
+other jobs keep busy, CPU time waits for no one, so it varies far less than wall time.
 """
 
 import argparse
 import os
+import resource
 import statistics
 import sys
 
@@ -31,6 +36,7 @@ def main():
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--spp", type=int, help="render this many spp and report samples per CPU second")
     a = ap.parse_args()
     for b in (a.a, a.b):
         if not os.path.exists(b):
@@ -41,12 +47,21 @@ def main():
         for i in a.integrators:
             order = (("a", a.a), ("b", a.b))
             for k, binary in order if r % 2 == 0 else order[::-1]:
-                j = render_json(binary, a.scene, "--integrator", i, "--time", a.seconds, "--threads", a.threads)
+                budget = ("--spp", a.spp) if a.spp else ("--time", a.seconds)
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                j = render_json(binary, a.scene, "--integrator", i, *budget, "--threads", a.threads)
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
                 versions[k] = j.get("embree_version")
-                rates[(i, k)].append(j["render"]["samples_per_second"])
-                print(f"repeat {r + 1} {i} {k} (Embree {versions[k]}): {rates[(i, k)][-1] / 1e6:.4f} M samples/s",
-                      flush=True)
-    print(f"{os.path.relpath(a.scene, ROOT)}, {a.threads} threads, {a.seconds:g} s per run, {a.repeats} repeats; "
+                s = j["render"]
+                if a.spp:
+                    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+                    rates[(i, k)].append(s["width"] * s["height"] * s["spp"] / cpu)
+                else:
+                    rates[(i, k)].append(s["samples_per_second"])
+                print(f"repeat {r + 1} {i} {k} (Embree {versions[k]}): {rates[(i, k)][-1] / 1e6:.4f} M samples/s"
+                      f"{' of CPU time' if a.spp else ''}", flush=True)
+    budget = f"{a.spp} spp per run, samples per CPU second" if a.spp else f"{a.seconds:g} s per run"
+    print(f"{os.path.relpath(a.scene, ROOT)}, {a.threads} threads, {budget}, {a.repeats} repeats; "
           f"A = Embree {versions['a']}, B = Embree {versions['b']}")
     print("| integrator | A M samples/s (median) | B M samples/s (median) | B / A median | B / A min–max |")
     print("|---|---|---|---|---|")

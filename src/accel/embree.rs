@@ -347,9 +347,9 @@ impl EmbreeScene {
 
     /// Embree 4's `rtcInitIntersectArguments` (a header-only inline function that the
     /// library does not export) with the coherence flag set as the Embree 3 context is:
-    /// the default features, no query context, no callbacks. For RTC_MIN_WIDTH = 0 (an
-    /// Embree built with min-width has one more field; bindgen's layout test guards the
-    /// struct shape).
+    /// the default features, no query context, no callbacks. For RTC_MIN_WIDTH = 0: headers
+    /// of an Embree built with min-width have one more field, and this literal does not
+    /// compile against them.
     #[cfg(embree4)]
     fn intersect_args(coherent: bool) -> ffi::RTCIntersectArguments {
         ffi::RTCIntersectArguments {
