@@ -4,7 +4,8 @@
 //! (`/usr/include`, `/usr/local/include`). Embree 4 headers, if present, are preferred;
 //! the choice is passed to the crate as `cfg(embree4)`. The library is linked as
 //! `embree4` or `embree3`, from `$EMBREE_DIR/lib` when given, else from the default
-//! linker paths (Debian's `libembree-dev` has no pkg-config file).
+//! linker paths (Debian's `libembree-dev` has no pkg-config file). With `$EMBREE_DIR` the
+//! binaries get an rpath to its library folder.
 
 use std::env;
 use std::path::{Path, PathBuf};
@@ -13,6 +14,7 @@ fn main() {
     println!("cargo:rerun-if-changed=wrapper.h");
     println!("cargo:rerun-if-env-changed=EMBREE_DIR");
     println!("cargo::rustc-check-cfg=cfg(embree4)");
+    println!("cargo::rustc-check-cfg=cfg(embree_inst_prim_id)");
 
     let embree_dir = env::var_os("EMBREE_DIR").map(PathBuf::from);
     let mut include_dirs: Vec<PathBuf> = Vec::new();
@@ -44,6 +46,9 @@ fn main() {
             let p = dir.join(lib);
             if p.is_dir() {
                 println!("cargo:rustc-link-search=native={}", p.display());
+                // The test binaries and `pcbpt` find this Embree at run time without
+                // LD_LIBRARY_PATH.
+                println!("cargo:rustc-link-arg=-Wl,-rpath,{}", p.display());
             }
         }
     }
@@ -72,6 +77,12 @@ fn main() {
         builder = builder.clang_arg("-DPCBPT_EMBREE4");
     }
     let bindings = builder.generate().expect("bindgen failed on wrapper.h");
+    // An Embree 4 built with instance arrays (rtcore_config.h defines
+    // RTC_GEOMETRY_INSTANCE_ARRAY) has an `instPrimID` stack in RTCHit, which the crate
+    // must initialise.
+    if bindings.to_string().contains("pub instPrimID:") {
+        println!("cargo:rustc-cfg=embree_inst_prim_id");
+    }
     let out = PathBuf::from(env::var("OUT_DIR").expect("OUT_DIR is set by cargo"));
     bindings.write_to_file(Path::new(&out).join("embree_bindings.rs")).expect("could not write the Embree bindings");
 }

@@ -346,6 +346,9 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     }
     let out = integrator::render(&scene, &opts)?;
     let s = &out.stats;
+    // The Embree library linked at run time (e.g. "4.4.0"), for the summary and the stats.
+    let embree_version =
+        (a.backend == Backend::Embree).then(|| pcbpt::accel::embree::version().map(|v| v.to_string()).ok()).flatten();
     if let Some(dir) = &a.strategy_images {
         for (name, pixels) in &out.strategy_images {
             image_io::write(&dir.join(format!("{name}.exr")), &Image::new(out.width, out.height, pixels.clone()))?;
@@ -353,7 +356,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     }
     image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
     if let Some(path) = &a.stats {
-        let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "load": { "read_seconds": scene.stats.read_seconds, "bvh_seconds": scene.stats.bvh_seconds, "vertices": scene.stats.vertices, "mesh_bytes": scene.stats.mesh_bytes }, "degenerate_triangles": scene.stats.degenerate_triangles, "render": s });
+        let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "load": { "read_seconds": scene.stats.read_seconds, "bvh_seconds": scene.stats.bvh_seconds, "vertices": scene.stats.vertices, "mesh_bytes": scene.stats.mesh_bytes }, "degenerate_triangles": scene.stats.degenerate_triangles, "embree_version": embree_version, "render": s });
         image_io::write_text(path, &serde_json::to_string_pretty(&json).unwrap_or_default())?;
     }
     if !a.quiet || s.interrupted {
@@ -364,7 +367,10 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             s.height,
             s.spp,
             s.integrator,
-            s.backend,
+            match &embree_version {
+                Some(v) => format!("{} {v}", s.backend),
+                None => s.backend.clone(),
+            },
             s.threads,
             s.seconds,
             load_seconds,

@@ -1,5 +1,7 @@
 //! The Embree backend: the system Embree (3.13 on Debian; Embree 4 when its headers are
-//! found, `cfg(embree4)`) through the bindings `build.rs` generates from `wrapper.h`.
+//! found, `cfg(embree4)`, e.g. the installation `scripts/embree4.sh` assembles) through
+//! the bindings `build.rs` generates from `wrapper.h`. [`version`] reports the library
+//! linked at run time.
 //!
 //! This is the only module of the crate with `unsafe` code. Ownership is RAII: [`Device`],
 //! [`EmbreeScene`] and the geometries release their Embree handles on `Drop`. Errors that
@@ -50,6 +52,45 @@ pub fn set_flush_denormals() {
 
 /// `RTC_INVALID_GEOMETRY_ID` (a cast macro that bindgen does not translate).
 const INVALID_ID: u32 = u32::MAX;
+
+/// The Embree version of the headers the bindings were generated from (`RTC_VERSION`,
+/// `10000 major + 100 minor + patch`).
+pub const HEADERS_VERSION: u32 = ffi::RTC_VERSION;
+
+/// Whether the crate was built against Embree 4 headers (`cfg(embree4)`).
+pub const EMBREE4: bool = cfg!(embree4);
+
+/// An Embree version number.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Version {
+    pub major: u32,
+    pub minor: u32,
+    pub patch: u32,
+}
+
+impl Version {
+    /// Splits Embree's `10000 major + 100 minor + patch`.
+    pub fn from_number(n: u32) -> Version {
+        Version { major: n / 10000, minor: n / 100 % 100, patch: n % 100 }
+    }
+}
+
+impl std::fmt::Display for Version {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}.{}.{}", self.major, self.minor, self.patch)
+    }
+}
+
+/// The version of the Embree library linked at run time (`RTC_DEVICE_PROPERTY_VERSION` of
+/// a new device).
+pub fn version() -> Result<Version, AccelError> {
+    let device = Device::new(None)?;
+    // SAFETY: `device.raw` is a live device; the property is a plain integer query.
+    let n = unsafe { ffi::rtcGetDeviceProperty(device.raw, ffi::RTCDeviceProperty::RTC_DEVICE_PROPERTY_VERSION) };
+    device.check("rtcGetDeviceProperty")?;
+    let n = u32::try_from(n).map_err(|_| AccelError::Embree(format!("Embree reports version {n}")))?;
+    Ok(Version::from_number(n))
+}
 
 /// Messages the device error callback has collected since the last check.
 type ErrorLog = Mutex<Vec<String>>;
@@ -364,6 +405,39 @@ impl EmbreeScene {
         }
     }
 
+    /// Embree 4's `rtcInitIntersectArguments` (a header-only inline function that the
+    /// library does not export) with the coherence flag set as the Embree 3 context is:
+    /// the default features, no query context, no callbacks. For RTC_MIN_WIDTH = 0: headers
+    /// of an Embree built with min-width have one more field, and this literal does not
+    /// compile against them.
+    #[cfg(embree4)]
+    fn intersect_args(coherent: bool) -> ffi::RTCIntersectArguments {
+        ffi::RTCIntersectArguments {
+            flags: Self::query_flags(coherent),
+            feature_mask: ffi::RTC_FEATURE_FLAG_ALL,
+            context: ptr::null_mut(),
+            filter: None,
+            intersect: None,
+        }
+    }
+
+    /// `rtcInitOccludedArguments`, as [`Self::intersect_args`].
+    #[cfg(embree4)]
+    fn occluded_args(coherent: bool) -> ffi::RTCOccludedArguments {
+        ffi::RTCOccludedArguments {
+            flags: Self::query_flags(coherent),
+            feature_mask: ffi::RTC_FEATURE_FLAG_ALL,
+            context: ptr::null_mut(),
+            filter: None,
+            occluded: None,
+        }
+    }
+
+    #[cfg(embree4)]
+    fn query_flags(coherent: bool) -> ffi::RTCRayQueryFlags {
+        if coherent { ffi::RTC_RAY_QUERY_FLAG_COHERENT } else { ffi::RTC_RAY_QUERY_FLAG_INCOHERENT }
+    }
+
     fn ray(r: &Ray) -> ffi::RTCRay {
         ffi::RTCRay {
             org_x: r.o.x,
@@ -393,6 +467,10 @@ impl EmbreeScene {
                 primID: INVALID_ID,
                 geomID: INVALID_ID,
                 instID: [INVALID_ID; 1],
+                // Present when the Embree 4 library has instance arrays (4.3 and later by
+                // default); Embree writes it on every hit.
+                #[cfg(embree_inst_prim_id)]
+                instPrimID: [INVALID_ID; 1],
             },
         }
     }
@@ -417,10 +495,13 @@ impl EmbreeScene {
             unsafe { ffi::rtcIntersect1(self.raw, &mut ctx, &mut rh) };
         }
         #[cfg(embree4)]
-        // SAFETY: as above; a null argument pointer selects Embree 4's defaults.
-        unsafe {
-            ffi::rtcIntersect1(self.raw, &mut rh, ptr::null_mut())
-        };
+        {
+            let mut args = Self::intersect_args(false);
+            // SAFETY: the scene is committed; `args` and `rh` are valid, initialised structs
+            // of the layout the library was built with (checked by `scripts/embree4.sh`
+            // for the Embree 4 it assembles).
+            unsafe { ffi::rtcIntersect1(self.raw, &mut rh, &mut args) };
+        }
         Self::hit(&rh)
     }
 
@@ -433,10 +514,11 @@ impl EmbreeScene {
             unsafe { ffi::rtcOccluded1(self.raw, &mut ctx, &mut ray) };
         }
         #[cfg(embree4)]
-        // SAFETY: as above; a null argument pointer selects Embree 4's defaults.
-        unsafe {
-            ffi::rtcOccluded1(self.raw, &mut ray, ptr::null_mut())
-        };
+        {
+            let mut args = Self::occluded_args(false);
+            // SAFETY: the scene is committed; `args` and `ray` are valid, initialised structs.
+            unsafe { ffi::rtcOccluded1(self.raw, &mut ray, &mut args) };
+        }
         // Embree marks an occluded ray by setting tfar to -inf.
         ray.tfar == f32::NEG_INFINITY
     }
@@ -452,11 +534,14 @@ impl EmbreeScene {
                 ffi::rtcIntersect1M(self.raw, &mut ctx, buf.as_mut_ptr(), buf.len() as u32, size_of::<ffi::RTCRayHit>())
             };
         }
+        // Embree 4 has no ray streams: one query per ray, with the coherence flag.
         #[cfg(embree4)]
-        for rh in &mut buf {
-            let _ = coherent;
-            // SAFETY: as in `intersect` (Embree 4 has no ray streams).
-            unsafe { ffi::rtcIntersect1(self.raw, rh, ptr::null_mut()) };
+        {
+            let mut args = Self::intersect_args(coherent);
+            for rh in &mut buf {
+                // SAFETY: as in `intersect`; Embree does not write to the arguments.
+                unsafe { ffi::rtcIntersect1(self.raw, rh, &mut args) };
+            }
         }
         out.extend(buf.iter().map(Self::hit));
     }
@@ -472,10 +557,12 @@ impl EmbreeScene {
             };
         }
         #[cfg(embree4)]
-        for r in &mut buf {
-            let _ = coherent;
-            // SAFETY: as in `occluded`.
-            unsafe { ffi::rtcOccluded1(self.raw, r, ptr::null_mut()) };
+        {
+            let mut args = Self::occluded_args(coherent);
+            for r in &mut buf {
+                // SAFETY: as in `occluded`.
+                unsafe { ffi::rtcOccluded1(self.raw, r, &mut args) };
+            }
         }
         out.extend(buf.iter().map(|r| r.tfar == f32::NEG_INFINITY));
     }
