@@ -134,7 +134,6 @@ impl Image {
 pub enum Format {
     Exr,
     Png,
-
     /// 32-bit float linear TIFF, written through OpenImageIO.
     #[cfg(feature = "oiio")]
     Tiff,

@@ -9,16 +9,18 @@
 //! by the same code as the `image` crate's: 8-bit integer data stays 8-bit, wider integers
 //! become 16-bit, half/float/double become float; alpha is read straight (unassociated), as
 //! stored. The C++ side is `oiio.h`/`oiio.cpp` beside this file, bound with `cxx`; its
-//! bridge module [`ffi`] is the only code here outside the compiler's safety checks.
+//! bridge module `ffi` is the only code here outside the compiler's safety checks.
 
 use super::{Image, encode_srgb8, write_atomically};
 use crate::error::{Error, Result};
 use image::{DynamicImage, ImageBuffer};
 use std::path::Path;
 
-// The `unsafe extern "C++"` block is cxx's assertion that the declarations match the C++
+// SAFETY: the `unsafe extern "C++"` block asserts that these declarations match the C++
 // ones in `oiio.h`; cxx's generated C++ checks each signature against them at compile
-// time, and the generated Rust wrappers are safe to call.
+// time. Slices are passed with their lengths (the C++ side checks them against the image
+// size before writing or reading), C++ exceptions become `Err`, and the generated Rust
+// wrappers are safe functions.
 #[allow(unsafe_code)]
 #[cxx::bridge(namespace = "pcbpt::oiio")]
 mod ffi {
