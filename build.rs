@@ -6,11 +6,16 @@
 //! `embree4` or `embree3`, from `$EMBREE_DIR/lib` when given, else from the default
 //! linker paths (Debian's `libembree-dev` has no pkg-config file). With `$EMBREE_DIR` the
 //! binaries get an rpath to its library folder.
+//!
+//! With `--features oiio`, it also compiles the C++ side of the OpenImageIO bridge
+//! (`src/image_io/oiio.cpp`, with `cxx`) against the system OpenImageIO: found by
+//! pkg-config (`OpenImageIO.pc`), or under `$OIIO_DIR` (`include/`, `lib/`) when given.
 
 use std::env;
 use std::path::{Path, PathBuf};
 
 fn main() {
+    build_oiio_bridge();
     println!("cargo:rerun-if-changed=wrapper.h");
     println!("cargo:rerun-if-env-changed=EMBREE_DIR");
     println!("cargo::rustc-check-cfg=cfg(embree4)");
@@ -86,3 +91,42 @@ fn main() {
     let out = PathBuf::from(env::var("OUT_DIR").expect("OUT_DIR is set by cargo"));
     bindings.write_to_file(Path::new(&out).join("embree_bindings.rs")).expect("could not write the Embree bindings");
 }
+
+/// Compiles the OpenImageIO bridge and links OpenImageIO (`--features oiio`).
+#[cfg(feature = "oiio")]
+fn build_oiio_bridge() {
+    for file in ["src/image_io/oiio.rs", "src/image_io/oiio.cpp", "src/image_io/oiio.h"] {
+        println!("cargo:rerun-if-changed={file}");
+    }
+    println!("cargo:rerun-if-env-changed=OIIO_DIR");
+    let mut include_dirs: Vec<PathBuf> = Vec::new();
+    if let Some(dir) = env::var_os("OIIO_DIR").map(PathBuf::from) {
+        include_dirs.push(dir.join("include"));
+        for lib in ["lib", "lib64"] {
+            let p = dir.join(lib);
+            if p.is_dir() {
+                println!("cargo:rustc-link-search=native={}", p.display());
+            }
+        }
+        println!("cargo:rustc-link-lib=dylib=OpenImageIO");
+        println!("cargo:rustc-link-lib=dylib=OpenImageIO_Util");
+    } else {
+        match pkg_config::Config::new().atleast_version("2.4").probe("OpenImageIO") {
+            Ok(lib) => include_dirs.extend(lib.include_paths),
+            Err(e) => panic!(
+                "OpenImageIO >= 2.4 not found by pkg-config ({e}). Install it with \
+                 `scripts/setup.sh --with-oiio` (Debian: `apt-get install libopenimageio-dev`) \
+                 or point OIIO_DIR at an OpenImageIO installation."
+            ),
+        }
+    }
+    cxx_build::bridge("src/image_io/oiio.rs")
+        .file("src/image_io/oiio.cpp")
+        .includes(&include_dirs)
+        .std("c++17")
+        .compile("pcbpt_oiio");
+}
+
+/// Nothing to build without `--features oiio`.
+#[cfg(not(feature = "oiio"))]
+fn build_oiio_bridge() {}

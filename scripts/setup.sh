@@ -1,9 +1,17 @@
 #!/usr/bin/env bash
 # Installs what pcbpt needs to build on Debian/Ubuntu: the system Embree (headers and
 # library), libclang for bindgen, pkg-config, g++ (the FLIP metric's C++ core). Idempotent: installs only what is missing.
+# `--with-oiio` also installs OpenImageIO (headers, library, pkg-config file) for
+# `cargo build --features oiio`.
 set -euo pipefail
 
 packages=(libembree-dev libclang-dev pkg-config g++)
+for arg in "$@"; do
+  case "$arg" in
+    --with-oiio) packages+=(libopenimageio-dev) ;;
+    *) echo "setup: unknown option $arg (known: --with-oiio)" >&2; exit 2 ;;
+  esac
+done
 missing=()
 for p in "${packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

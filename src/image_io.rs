@@ -2,11 +2,109 @@
 //! (`image`), chosen by the file extension. Every output is written to a temporary file
 //! beside the target and renamed over it, so a killed process never leaves a truncated
 //! image behind.
+//!
+//! Built with `--features oiio`, the formats these crates do not read (TIFF, Radiance HDR,
+//! TGA, tiled mip-mapped `.tx`, …) are read through the system OpenImageIO ([`oiio`]), and
+//! `.tif`/`.tiff` outputs are written through it (32-bit float, linear). The environment
+//! variable `PCBPT_IMAGE_IO` picks the library ([`Library`]): `auto` (the default), `native`
+//! or `oiio` (OpenImageIO for every format, EXR/PNG/JPEG included).
+//!
+//! Pixels become linear RGB the same way whichever library decoded them: float data as
+//! stored, 8/16-bit data divided by its largest value and decoded from sRGB (unless a texture
+//! asks for `raw` values); alpha is dropped and grey repeated into R, G and B.
 
 use crate::error::{Error, Result};
 use crate::math::Rgb;
 use exr::prelude::{Image as ExrImage, SpecificChannels, Vec2 as ExrVec2, WritableImage};
 use std::path::{Path, PathBuf};
+
+#[cfg(feature = "oiio")]
+pub mod oiio;
+
+/// Which library reads and writes image files; [`Library::from_env`] reads the choice from
+/// `PCBPT_IMAGE_IO`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Library {
+    /// `exr` for EXR, `image` for PNG and JPEG, and (with `--features oiio`) OpenImageIO
+    /// for every other format and for TIFF output.
+    Auto,
+    /// Only `exr` and `image`.
+    Native,
+    /// OpenImageIO for every format (needs `--features oiio`).
+    Oiio,
+}
+
+impl Library {
+    /// The environment variable that picks the library: `auto`, `native` or `oiio`.
+    pub const ENV: &'static str = "PCBPT_IMAGE_IO";
+
+    /// The library `PCBPT_IMAGE_IO` asks for; [`Library::Auto`] when it is unset or empty.
+    pub fn from_env() -> Result<Library> {
+        match std::env::var(Library::ENV) {
+            Err(std::env::VarError::NotPresent) => Ok(Library::Auto),
+            Ok(v) => match v.trim().to_ascii_lowercase().as_str() {
+                "" | "auto" => Ok(Library::Auto),
+                "native" => Ok(Library::Native),
+                "oiio" => Ok(Library::Oiio),
+                _ => Err(Error::Usage(format!("{}={v}: expected auto, native or oiio", Library::ENV))),
+            },
+            Err(e) => Err(Error::Usage(format!("{}: {e}", Library::ENV))),
+        }
+    }
+
+    /// [`Library::Oiio`] in a build without OpenImageIO is an error.
+    fn check(self) -> Result<Library> {
+        if self == Library::Oiio && !cfg!(feature = "oiio") {
+            return Err(Error::Usage(format!(
+                "{}=oiio: this pcbpt is built without OpenImageIO; rebuild it with `--features oiio`",
+                Library::ENV
+            )));
+        }
+        Ok(self)
+    }
+}
+
+/// Extensions of formats that only OpenImageIO reads here, for the error of a build without
+/// it.
+#[cfg(not(feature = "oiio"))]
+const OIIO_ONLY: &[&str] =
+    &["tif", "tiff", "tx", "hdr", "rgbe", "tga", "bmp", "dpx", "psd", "webp", "jp2", "dds", "gif"];
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase())
+}
+
+/// The library that decodes a file.
+enum Reader {
+    Exr,
+    Image,
+    #[cfg(feature = "oiio")]
+    Oiio,
+}
+
+fn reader(path: &Path, library: Library) -> Result<Reader> {
+    let ext = extension(path);
+    let native = if ext.as_deref() == Some("exr") { Reader::Exr } else { Reader::Image };
+    let native_format = matches!(ext.as_deref(), Some("exr" | "png" | "jpg" | "jpeg"));
+    match library.check()? {
+        Library::Native => Ok(native),
+        #[cfg(feature = "oiio")]
+        Library::Oiio => Ok(Reader::Oiio),
+        #[cfg(feature = "oiio")]
+        Library::Auto if !native_format => Ok(Reader::Oiio),
+        #[cfg(not(feature = "oiio"))]
+        Library::Auto if !native_format && ext.as_deref().is_some_and(|e| OIIO_ONLY.contains(&e)) => {
+            Err(Error::in_file(
+                path,
+                format!(
+                    "{} images are read through OpenImageIO: rebuild pcbpt with `--features oiio`",
+                    ext.unwrap_or_default().to_uppercase()
+                ),
+            ))
+        }
+        _ => Ok(native),
+    }
+}
 
 /// A linear RGB image, row-major from the top-left.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,13 +134,26 @@ impl Image {
 pub enum Format {
     Exr,
     Png,
+    /// 32-bit float linear TIFF, written through OpenImageIO.
+    #[cfg(feature = "oiio")]
+    Tiff,
 }
 
 impl Format {
     pub fn from_path(path: &Path) -> Result<Format> {
-        match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        match extension(path).as_deref() {
             Some("exr") => Ok(Format::Exr),
             Some("png") => Ok(Format::Png),
+            #[cfg(feature = "oiio")]
+            Some("tif" | "tiff") => Ok(Format::Tiff),
+            #[cfg(not(feature = "oiio"))]
+            Some("tif" | "tiff") => Err(Error::Usage(format!(
+                "{}: TIFF images are written through OpenImageIO: rebuild pcbpt with `--features oiio`",
+                path.display()
+            ))),
+            #[cfg(feature = "oiio")]
+            _ => Err(Error::Usage(format!("{}: unknown image format (use .exr, .png or .tif)", path.display()))),
+            #[cfg(not(feature = "oiio"))]
             _ => Err(Error::Usage(format!("{}: unknown image format (use .exr or .png)", path.display()))),
         }
     }
@@ -68,13 +179,42 @@ pub fn write_text(path: &Path, text: &str) -> Result<()> {
         .map_err(|e| Error::Output { path: path.to_path_buf(), msg: e.to_string() })
 }
 
-/// Writes `image` to `path` (EXR or PNG by extension) atomically.
-pub fn write(path: &Path, image: &Image) -> Result<()> {
-    let format = Format::from_path(path)?;
+/// Runs `write_to` on a temporary file beside `path`, then renames it over `path`; on
+/// failure the temporary file is removed and the error names `path`.
+pub(crate) fn write_atomically(
+    path: &Path,
+    write_to: impl FnOnce(&Path) -> std::result::Result<(), String>,
+) -> Result<()> {
     let tmp = temp_path(path);
     let out_err = |msg: String| Error::Output { path: path.to_path_buf(), msg };
-    let result = match format {
-        Format::Exr => {
+    if let Err(msg) = write_to(&tmp) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(out_err(msg));
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        out_err(format!("cannot move the finished image into place: {e}"))
+    })
+}
+
+/// The pixels as 8-bit sRGB-encoded RGB, as PNG files store them.
+pub(crate) fn encode_srgb8(image: &Image) -> Vec<u8> {
+    image.pixels.iter().flat_map(|p| [p.x, p.y, p.z]).map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8).collect()
+}
+
+/// Writes `image` to `path` (EXR or PNG, and TIFF with `--features oiio`, by extension)
+/// atomically, with the library `PCBPT_IMAGE_IO` picks.
+pub fn write(path: &Path, image: &Image) -> Result<()> {
+    write_with(path, image, Library::from_env()?)
+}
+
+/// Writes `image` to `path` (format by extension) atomically, with `library`.
+pub fn write_with(path: &Path, image: &Image, library: Library) -> Result<()> {
+    let format = Format::from_path(path)?;
+    match (format, library.check()?) {
+        #[cfg(feature = "oiio")]
+        (Format::Tiff, _) | (_, Library::Oiio) => oiio::write(path, image),
+        (Format::Exr, _) => write_atomically(path, |tmp| {
             let w = image.width as usize;
             // Compressed on one thread so that the blocks are written in order: the same
             // pixels always give the same bytes.
@@ -85,45 +225,25 @@ pub fn write(path: &Path, image: &Image) -> Result<()> {
             ExrImage::from_channels((w, image.height as usize), channels)
                 .write()
                 .non_parallel()
-                .to_file(&tmp)
-                .map_err(|e| out_err(format!("cannot write EXR: {e}")))
-        }
-        Format::Png => {
-            let bytes: Vec<u8> = image
-                .pixels
-                .iter()
-                .flat_map(|p| [p.x, p.y, p.z])
-                .map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8)
-                .collect();
-            image::save_buffer_with_format(
-                &tmp,
-                &bytes,
-                image.width,
-                image.height,
-                image::ExtendedColorType::Rgb8,
-                image::ImageFormat::Png,
-            )
-            .map_err(|e| out_err(format!("cannot write PNG: {e}")))
-        }
-    };
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e);
+                .to_file(tmp)
+                .map_err(|e| format!("cannot write EXR: {e}"))
+        }),
+        (Format::Png, _) => write_png_rgb8(path, image.width, image.height, &encode_srgb8(image)),
     }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        out_err(format!("cannot move the finished image into place: {e}"))
-    })
 }
 
 /// Writes 8-bit RGB pixels as PNG atomically (false-colour images and figures).
 pub fn write_png_rgb8(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<()> {
-    let tmp = temp_path(path);
-    image::save_buffer_with_format(&tmp, bytes, width, height, image::ExtendedColorType::Rgb8, image::ImageFormat::Png)
-        .map_err(|e| Error::Output { path: path.to_path_buf(), msg: format!("cannot write PNG: {e}") })?;
-    std::fs::rename(&tmp, path).map_err(|e| Error::Output {
-        path: path.to_path_buf(),
-        msg: format!("cannot move the finished image into place: {e}"),
+    write_atomically(path, |tmp| {
+        image::save_buffer_with_format(
+            tmp,
+            bytes,
+            width,
+            height,
+            image::ExtendedColorType::Rgb8,
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| format!("cannot write PNG: {e}"))
     })
 }
 
@@ -141,21 +261,46 @@ pub fn read_exr(path: &Path) -> Result<Image> {
     Ok(Image::new(w as u32, h as u32, px))
 }
 
-/// Reads an EXR (linear) or PNG/JPEG (sRGB, decoded to linear) image.
+/// Reads an image as linear RGB with the library `PCBPT_IMAGE_IO` picks: EXR (linear),
+/// PNG/JPEG (sRGB, decoded to linear), and with `--features oiio` every format OpenImageIO
+/// reads.
 pub fn read(path: &Path) -> Result<Image> {
-    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
-        Some("exr") => read_exr(path),
-        _ => {
-            let img =
-                image::open(path).map_err(|e| Error::in_file(path, format!("cannot read image: {e}")))?.to_rgb32f();
-            let (w, h) = img.dimensions();
-            let px = img
-                .pixels()
-                .map(|p| Rgb::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2])))
-                .collect();
-            Ok(Image::new(w, h, px))
+    read_as(path, false, Library::from_env()?, "image")
+}
+
+/// Reads a texture as linear RGB with the library `PCBPT_IMAGE_IO` picks, as [`read`]
+/// does; `raw` keeps 8/16-bit values as stored (divided by their largest value) instead of
+/// decoding them from sRGB.
+pub fn read_texture(path: &Path, raw: bool) -> Result<Image> {
+    read_as(path, raw, Library::from_env()?, "texture")
+}
+
+/// Reads an image as linear RGB with `library`; `raw` as for [`read_texture`].
+pub fn read_with(path: &Path, raw: bool, library: Library) -> Result<Image> {
+    read_as(path, raw, library, "image")
+}
+
+fn read_as(path: &Path, raw: bool, library: Library, what: &str) -> Result<Image> {
+    match reader(path, library)? {
+        Reader::Exr => read_exr(path),
+        Reader::Image => {
+            let img = image::open(path).map_err(|e| Error::in_file(path, format!("cannot read {what}: {e}")))?;
+            Ok(to_linear(img, raw))
         }
+        #[cfg(feature = "oiio")]
+        Reader::Oiio => Ok(to_linear(oiio::read(path)?, raw)),
     }
+}
+
+/// Linear RGB of decoded pixels: float data as stored; 8/16-bit data divided by its
+/// largest value, then decoded from sRGB unless `raw`. Alpha is dropped, grey repeated.
+fn to_linear(img: image::DynamicImage, raw: bool) -> Image {
+    let float_data = matches!(img.color(), image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+    let rgb = img.into_rgb32f();
+    let (w, h) = rgb.dimensions();
+    let decode = |v: f32| if raw || float_data { v } else { srgb_to_linear(v) };
+    let px = rgb.pixels().map(|p| Rgb::new(decode(p[0]), decode(p[1]), decode(p[2]))).collect();
+    Image::new(w, h, px)
 }
 
 /// Inverse of [`linear_to_srgb`].
@@ -192,6 +337,37 @@ mod tests {
 
     #[test]
     fn unknown_extension_is_an_error() {
-        assert!(write(Path::new("x.tiff"), &Image::new(1, 1, vec![Rgb::ZERO])).is_err());
+        let e = write(Path::new("x.xyz"), &Image::new(1, 1, vec![Rgb::ZERO])).unwrap_err().to_string();
+        assert!(e.contains("x.xyz") && e.contains("unknown image format"), "{e}");
+    }
+
+    #[cfg(not(feature = "oiio"))]
+    #[test]
+    fn oiio_formats_name_the_file_and_the_feature() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["a.tif", "b.HDR", "c.tga", "d.tx"] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, b"not read").unwrap();
+            let e = read(&path).unwrap_err().to_string();
+            assert!(e.contains(name) && e.contains("--features oiio"), "{e}");
+        }
+        let e = write(&dir.path().join("out.tiff"), &Image::new(1, 1, vec![Rgb::ZERO])).unwrap_err().to_string();
+        assert!(e.contains("out.tiff") && e.contains("--features oiio"), "{e}");
+        let e = read_with(&dir.path().join("a.tif"), false, Library::Oiio).unwrap_err().to_string();
+        assert!(e.contains("PCBPT_IMAGE_IO=oiio") && e.contains("--features oiio"), "{e}");
+    }
+
+    #[test]
+    fn grey_and_alpha_become_rgb_like_the_image_crate() {
+        // 2×1 grey+alpha, 8-bit: grey repeated, alpha dropped, sRGB decoded unless raw.
+        let ga = image::DynamicImage::ImageLumaA8(image::ImageBuffer::from_raw(2, 1, vec![0, 7, 188, 255]).unwrap());
+        let img = to_linear(ga.clone(), false);
+        assert_eq!(img.get(1, 0), Rgb::splat(srgb_to_linear(188.0 / 255.0)));
+        assert_eq!(img.get(0, 0), Rgb::ZERO);
+        assert_eq!(to_linear(ga, true).get(1, 0), Rgb::splat(188.0 / 255.0));
+        // Float data is linear whatever `raw` says.
+        let f =
+            image::DynamicImage::ImageRgba32F(image::ImageBuffer::from_raw(1, 1, vec![0.25, 2.0, 0.5, 0.1]).unwrap());
+        assert_eq!(to_linear(f, false).get(0, 0), Rgb::new(0.25, 2.0, 0.5));
     }
 }

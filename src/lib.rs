@@ -4,7 +4,8 @@
 //! The crate is organised by what things are: ray queries ([`accel`]), scene loading and
 //! the render-ready scene ([`scene`]), the camera and film, BSDFs, lights, textures,
 //! sampling ([`sampling`], with the χ² harness), integrators, image I/O and comparison.
-//! Code outside the compiler's safety checks lives only in [`accel::embree`].
+//! Code outside the compiler's safety checks lives only in [`accel::embree`] and, with
+//! `--features oiio`, in the `cxx` bridge of `image_io::oiio`.
 #![deny(unsafe_code)]
 
 pub mod accel;

@@ -53,7 +53,8 @@ struct ExperimentArgs {
 struct RenderArgs {
     /// The scene file (Mitsuba 3 XML; version 0.x files are upgraded).
     scene: PathBuf,
-    /// Output image; `.exr` (linear float RGB) or `.png` (sRGB). Default: the scene's name with `.exr`.
+    /// Output image; `.exr` (linear float RGB) or `.png` (sRGB), and `.tif` (linear float RGB) in a
+    /// build with `--features oiio`. Default: the scene's name with `.exr`.
     #[arg(short, long)]
     output: Option<PathBuf>,
     /// Integrator (default: the one the scene names).
@@ -168,9 +169,10 @@ struct RenderArgs {
 
 #[derive(Args)]
 struct CompareArgs {
-    /// The reference image (EXR).
+    /// The reference image (EXR; PNG/JPEG decoded from sRGB; with `--features oiio`, any format
+    /// OpenImageIO reads; `PCBPT_IMAGE_IO` = auto, native or oiio picks the library).
     reference: PathBuf,
-    /// The image to test (EXR).
+    /// The image to test (formats as for the reference).
     test: PathBuf,
     /// Write a false-colour image of the per-pixel relMSE (PNG).
     #[arg(long)]

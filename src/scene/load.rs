@@ -892,26 +892,17 @@ impl<'d> Builder<'d> {
     }
 }
 
-/// Loads an image texture: 8-bit PNG/JPEG decoded from sRGB unless `raw`, EXR as linear.
+/// Loads an image texture: 8-bit PNG/JPEG decoded from sRGB unless `raw`, EXR as linear;
+/// with `--features oiio`, every format OpenImageIO reads (see [`crate::image_io`]).
 fn load_bitmap(path: &Path, raw: bool, filter: FilterType, wrap: WrapMode) -> Result<Bitmap> {
     if !path.is_file() {
         return Err(Error::in_file(path, "texture file does not exist"));
     }
-    let is_exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-    if is_exr {
-        let img = crate::image_io::read_exr(path)?;
-        return Ok(Bitmap::new(img.width, img.height, img.pixels, filter, wrap));
-    }
-    let img = image::open(path).map_err(|e| Error::in_file(path, format!("cannot read texture: {e}")))?;
-    let float_data = matches!(img.color(), image::ColorType::Rgb32F | image::ColorType::Rgba32F);
-    let rgb = img.to_rgb32f();
-    let (w, h) = rgb.dimensions();
-    if w == 0 || h == 0 {
+    let img = crate::image_io::read_texture(path, raw)?;
+    if img.width == 0 || img.height == 0 {
         return Err(Error::in_file(path, "texture has no pixels"));
     }
-    let decode = |v: f32| if raw || float_data { v } else { crate::image_io::srgb_to_linear(v) };
-    let texels = rgb.pixels().map(|p| Vec3::new(decode(p[0]), decode(p[1]), decode(p[2]))).collect();
-    Ok(Bitmap::new(w, h, texels, filter, wrap))
+    Ok(Bitmap::new(img.width, img.height, img.pixels, filter, wrap))
 }
 
 /// A sphere around every shape and the camera position.
