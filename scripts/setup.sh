@@ -2,14 +2,16 @@
 # Installs what pcbpt needs to build on Debian/Ubuntu: the system Embree (headers and
 # library), libclang for bindgen, pkg-config, g++ (the FLIP metric's C++ core). Idempotent: installs only what is missing.
 # `--with-oiio` also installs OpenImageIO (headers, library, pkg-config file) for
-# `cargo build --features oiio`.
+# `cargo build --features oiio`; `--with-embree4` what `scripts/embree4.sh` needs to
+# assemble an Embree 4 (python3 with pip, binutils' readelf; the C compiler comes with g++).
 set -euo pipefail
 
 packages=(libembree-dev libclang-dev pkg-config g++)
 for arg in "$@"; do
   case "$arg" in
     --with-oiio) packages+=(libopenimageio-dev) ;;
-    *) echo "setup: unknown option $arg (known: --with-oiio)" >&2; exit 2 ;;
+    --with-embree4) packages+=(python3 python3-pip binutils) ;;
+    *) echo "setup: unknown option $arg (known: --with-oiio, --with-embree4)" >&2; exit 2 ;;
   esac
 done
 missing=()
