@@ -9,7 +9,7 @@
 //! ray that starts on a surface, is an edge tie that the tests cap.
 
 use glam::Vec3;
-use pcbpt::accel::{Geometry, Hit, Ray};
+use pcbpt::accel::{Accel, Geometry, Hit, Ray};
 
 /// How close to an edge (in barycentric units) a hit must be to count as an edge tie.
 pub const EDGE: f32 = 1e-4;
@@ -124,5 +124,16 @@ impl Tally {
     /// The ties the tests cap: edge ties of hits and of occlusion.
     pub fn capped(&self) -> usize {
         self.edge_ties + self.occlusion_ties
+    }
+}
+
+/// Whether two traversals `a` and `b` that disagree on whether segment `seg` is occluded do
+/// so by a tie: the blocking hit (either's, looked for a little past the segment's end) is at
+/// an edge, at the segment's end, or on a surface the segment starts on.
+pub fn occlusion_tie(a: &Accel, b: &Accel, seg: &Ray, geometry: &[Geometry<'_>], grazing: f32) -> bool {
+    let longer = Ray { tmax: seg.tmax * 1.001, ..*seg };
+    match a.intersect(&longer).or(b.intersect(&longer)) {
+        Some(h) => near_edge(&h, geometry) || h.t < grazing || (h.t - seg.tmax).abs() <= 1e-3 * seg.tmax,
+        None => false,
     }
 }
