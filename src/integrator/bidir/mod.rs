@@ -8,6 +8,7 @@
 //! by its own walk, `pdf_rev` the density had it been generated from the other end.
 
 pub mod bdpt;
+pub mod cache_fit;
 pub mod mis;
 pub mod pcbpt;
 pub mod pool;
