@@ -4,29 +4,61 @@
 # `--with-oiio` also installs OpenImageIO (headers, library, pkg-config file) for
 # `cargo build --features oiio`; `--with-embree4` what `scripts/embree4.sh` needs to
 # assemble an Embree 4 (python3 with pip, binutils' readelf; the C compiler comes with g++).
+# `--with-slurm` installs Slurm's controller, node daemon and client commands with MUNGE
+# (distributed renders through `scripts/slurm/`, and `tests/slurm.rs`, which starts its own
+# single-node cluster: the packages' services are not started or needed); `--with-dask`
+# installs Dask's distributed scheduler for `scripts/dask_render.py` (python3 with pip
+# from the system if there is no python3, then `dask[distributed]` from PyPI).
 set -euo pipefail
 
 packages=(libembree-dev libclang-dev pkg-config g++)
+with_dask=0
 for arg in "$@"; do
   case "$arg" in
     --with-oiio) packages+=(libopenimageio-dev) ;;
     --with-embree4) packages+=(python3 python3-pip binutils) ;;
-    *) echo "setup: unknown option $arg (known: --with-oiio, --with-embree4)" >&2; exit 2 ;;
+    --with-slurm) packages+=(slurmctld slurmd slurm-client munge) ;;
+    --with-dask) with_dask=1 ;;
+    *) echo "setup: unknown option $arg (known: --with-oiio, --with-embree4, --with-slurm, --with-dask)" >&2; exit 2 ;;
   esac
 done
+# Dask needs a python3 with pip; a python3 already on PATH (a virtual environment, pyenv)
+# is used as it is, otherwise the system's is installed.
+if [ "$with_dask" -eq 1 ] && ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then
+  packages+=(python3 python3-pip)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
 done
 
+sudo=""
+if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
 if [ ${#missing[@]} -gt 0 ]; then
-  sudo=""
-  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
   echo "setup: installing ${missing[*]}" >&2
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${missing[@]}" >/dev/null
 else
   echo "setup: system packages present (${packages[*]})" >&2
+fi
+
+if [ "$with_dask" -eq 1 ]; then
+  if python3 -c 'import dask.distributed' >/dev/null 2>&1; then
+    echo "setup: dask.distributed present ($(python3 -c 'import dask; print(dask.__version__)'))" >&2
+  else
+    echo "setup: installing dask[distributed] for $(command -v python3)" >&2
+    pip_args=(--quiet --disable-pip-version-check --root-user-action=ignore)
+    # A system python3 (Debian 12's) refuses pip installs outside a virtual environment
+    # unless told to (PEP 668); nothing of Debian's depends on Dask.
+    if [ -e "$(python3 -c 'import sysconfig; print(sysconfig.get_path("stdlib"))')/EXTERNALLY-MANAGED" ]; then
+      pip_args+=(--break-system-packages)
+    fi
+    pip_sudo=""
+    if [ -n "$sudo" ] && [ ! -w "$(python3 -c 'import sysconfig; print(sysconfig.get_path("purelib"))')" ]; then
+      pip_sudo="$sudo"
+    fi
+    $pip_sudo python3 -m pip install "${pip_args[@]}" 'dask[distributed]'
+  fi
 fi
 
 if ! command -v cargo >/dev/null 2>&1; then
