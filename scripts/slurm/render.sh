@@ -87,15 +87,18 @@ if [ "$state" = COMPLETED ]; then
   exit 0
 fi
 echo "render.sh: merge job $merge ended ${state:-(no longer known to slurmctld)}" >&2
-# Name the chunks that did not complete, with the end of their logs.
-scontrol -o show job "$chunks" 2>/dev/null | while read -r line; do
-  task=$(grep -o 'ArrayTaskId=[^ ]*' <<<"$line" | cut -d= -f2)
+# Name the chunks that did not complete, in order, with the end of the first three logs.
+shown=0
+while read -r task line; do
   st=$(grep -o 'JobState=[^ ]*' <<<"$line" | cut -d= -f2)
   [ "$st" = COMPLETED ] && continue
   log=$(grep -o 'StdOut=[^ ]*' <<<"$line" | cut -d= -f2)
-  echo "render.sh: chunk $task: $st ($(grep -o 'ExitCode=[^ ]*' <<<"$line")), log $log:" >&2
-  tail -n 20 "$log" >&2 2>/dev/null || true
-done
+  echo "render.sh: chunk $task: $st ($(grep -o 'ExitCode=[^ ]*' <<<"$line")), log $log" >&2
+  if [ "$shown" -lt 3 ] && [ -s "$log" ]; then
+    tail -n 20 "$log" >&2
+    shown=$((shown + 1))
+  fi
+done < <(scontrol -o show job "$chunks" 2>/dev/null | sed -E 's/.*ArrayTaskId=([^ ]*).*/\1 &/' | sort -n)
 log="$outdir/logs/merge_$merge.log"
 if [ -s "$log" ]; then
   echo "render.sh: merge log $log:" >&2

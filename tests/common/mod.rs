@@ -8,6 +8,7 @@ use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutpu
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::{Path, PathBuf};
 
+pub mod distributed;
 pub mod hits;
 
 pub fn root() -> PathBuf {
