@@ -10,6 +10,7 @@
 pub mod bdpt;
 pub mod cache_fit;
 pub mod mis;
+pub mod pc_cache;
 pub mod pcbpt;
 pub mod pool;
 
