@@ -102,9 +102,13 @@ struct RenderArgs {
     /// MIS heuristic of the bidirectional integrators.
     #[arg(long, value_enum, default_value_t = Heuristic::Power)]
     heuristic: Heuristic,
-    /// EORR: Russian-roulette threshold as a fraction of the pixel's running mean luminance.
+    /// EORR: Russian-roulette threshold as a fraction of the pixel's mean luminance.
     #[arg(long, default_value_t = 0.1)]
     eorr_fraction: f32,
+    /// EORR: the pixel means come from the first this many samples per pixel (0: from every
+    /// earlier pass, a running mean, which a render cut into chunks cannot use).
+    #[arg(long, default_value_t = BidirOptions::default().eorr_pilot_spp)]
+    eorr_pilot_spp: u32,
     /// LVC: light paths per iteration (0 = one per pixel).
     #[arg(long, default_value_t = 0)]
     lvc_light_paths: usize,
@@ -320,6 +324,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     opts.bidir = BidirOptions {
         heuristic: a.heuristic,
         eorr_fraction: a.eorr_fraction,
+        eorr_pilot_spp: a.eorr_pilot_spp,
         lvc_light_paths: a.lvc_light_paths,
         lvc_connections: a.lvc_connections,
         max_pool_mb: a.max_pool_mb,

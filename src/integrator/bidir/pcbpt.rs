@@ -30,16 +30,25 @@
 //! times more often the cache's draws reach a vertex than uniform ones would.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::mis::{FullPath, StrategyCounts};
-use super::pool::{CONCENTRATION_DEPTHS, LightPool, PoolPass, PoolSelection, concentration_depth, draw_one_by_one};
+use super::cache_fit::CacheFit;
+use super::mis::{Counts, FullPath, Heuristic, StrategyCounts};
+use super::pool::{
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, concentration_depth,
+    draw_one_by_one,
+};
 use super::{Sink, Vertex};
 use crate::bsdf::TransportMode;
-use crate::integrator::Counters;
+use crate::error::Error;
+use crate::film::Tile;
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
+use crate::integrator::{CacheStats, Counters, RenderStats};
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::Vec2;
 use serde::Serialize;
+use std::ops::Range;
+use std::time::Instant;
 
 pub use super::pc_cache::{Blend, Cache, MAX_NEIGHBOURS, Nearest, Neighbours, Record, trace_records};
 
@@ -322,6 +331,159 @@ impl Pcbpt {
         let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.opts.sampling };
         let pass = PoolPass { bdpt: &self.bdpt, connections: self.opts.connections, conn, pool };
         pass.sample(&select, pos, rng, scratch, sink, counters);
+    }
+}
+
+/// PCBPT in the render loop. Per iteration: a light pool, the cache's records and PMFs over
+/// it, then the camera pass. What the counts of iteration `i` take from iteration `i - 1`
+/// (`V̄`, the concentration `κ` of its camera pass's unoccluded draws, and its cache for the
+/// resampling weights; a pilot pool's `V̄` before the first) is kept here; a chunk that
+/// starts at `A` re-runs iteration `A - 1` for it (its camera pass only when `κ` is used),
+/// which gives exactly what one process has: the pool, the records and the draws of `A - 1`
+/// depend on the seed and `A - 1` alone, not on the counts.
+pub struct PcbptRender {
+    pub pc: Pcbpt,
+    pub heuristic: Heuristic,
+    pub max_pool_mb: usize,
+    vbar: f32,
+    concentration: [f32; CONCENTRATION_DEPTHS],
+    previous: Option<Cache>,
+    pool_size: Option<(usize, usize)>,
+    cache_stats: Option<CacheStats>,
+}
+
+impl PcbptRender {
+    pub fn new(pc: Pcbpt, heuristic: Heuristic, max_pool_mb: usize) -> PcbptRender {
+        PcbptRender {
+            pc,
+            heuristic,
+            max_pool_mb,
+            vbar: 0.0,
+            concentration: [1.0; CONCENTRATION_DEPTHS],
+            previous: None,
+            pool_size: None,
+            cache_stats: None,
+        }
+    }
+
+    fn counts<'a>(&'a self, scene: &'a Scene) -> PcCounts<'a> {
+        let pixels = scene.film.width as f32 * scene.film.height as f32;
+        let (m, vbar, kappa) = (self.pc.opts.light_paths, self.vbar, &self.concentration);
+        PcCounts::for_iteration(scene, &self.pc.opts, m, pixels, vbar, kappa, self.previous.as_ref())
+    }
+
+    /// Traces the record pixels of iteration `iteration` and evaluates their PMFs over
+    /// `pool`. Records beyond what `--pc-max-cache-mb` holds (possible only when a pool is
+    /// much larger than the pilot promised) are left out: lookups then blend fewer records.
+    fn build_cache(&self, scene: &Scene, pool: &LightPool, seed: u64, iteration: u64) -> (Cache, CacheStats, Counters) {
+        let o = &self.pc.opts;
+        let (mut records, mut counters) = trace_records(scene, &self.pc.bdpt.limits, o, seed, iteration);
+        let v = pool.connectible.len();
+        let fit = (o.max_cache_mb as f64 * 1024.0 * 1024.0 / Cache::bytes(1, v)).floor() as usize;
+        let dropped = records.len().saturating_sub(fit);
+        records.truncate(fit);
+        let blend = Blend { neighbours: o.neighbours, uniform: o.uniform_blend, distance_term: o.distance_term };
+        let (cache, c) = Cache::build(scene, pool, records, blend, o.visibility);
+        counters += c;
+        let stats = CacheStats {
+            records: cache.records.len(),
+            empty_records: cache.totals.iter().filter(|&&q| q <= 0.0).count(),
+            dropped_records: dropped,
+            pool_vertices: v,
+            megabytes: cache.memory() / (1024.0 * 1024.0),
+        };
+        (cache, stats, counters)
+    }
+}
+
+impl Iterative for PcbptRender {
+    type Pass = (LightPool, Cache, CacheStats);
+
+    /// Measures `V̄` on a pilot pool and checks the pool and the cache against their memory
+    /// limits from it.
+    fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
+        let (m, o) = (self.pc.opts.light_paths, &self.pc.opts);
+        let (pilot, _, _) =
+            LightPool::trace::<Counts>(ctx.scene, &self.pc.bdpt.limits, m, ctx.seed, PILOT_ITERATION, None);
+        check_pool_memory(m, &pilot, self.max_pool_mb, "--pc-light-paths")?;
+        let (w, h) = (ctx.scene.film.width, ctx.scene.film.height);
+        let fit = CacheFit { opts: o, light_paths: m, mean_vertices: pilot.mean_vertices() as f64, w, h };
+        let (records, v, mb) = fit.size(o.stride, o.cache_depth, m);
+        if mb > o.max_cache_mb as f64 {
+            return Err(Error::Usage(format!(
+                "the PCBPT cache of up to {records} records × about {v} pool vertices needs about {mb:.0} MiB, over the \
+                 limit of {} MiB (--pc-max-cache-mb); {}",
+                o.max_cache_mb,
+                fit.suggestions()
+            )));
+        }
+        self.vbar = pilot.mean_vertices();
+        Ok(())
+    }
+
+    fn pass_end(&self, first: u32, _: u32) -> u32 {
+        first + 1
+    }
+
+    fn warmup(&self, first: u32) -> Warmup {
+        Warmup { iterations: first.saturating_sub(1)..first, tiles: self.pc.opts.mis == PcMis::Harmonic }
+    }
+
+    fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<(LightPool, Cache, CacheStats)> {
+        let t = Instant::now();
+        let counts = self.counts(ctx.scene);
+        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let splat = keep.then_some((&conn, &self.pc.bdpt, ctx.layers));
+        let (m, limits) = (self.pc.opts.light_paths, &self.pc.bdpt.limits);
+        let (pool, splats, mut counters) = LightPool::trace(ctx.scene, limits, m, ctx.seed, first as u64, splat);
+        work.phases.light_pool += t.elapsed().as_secs_f64();
+        work.shadow.light_pool += counters.shadow_rays;
+        let t = Instant::now();
+        let (cache, stats, c) = self.build_cache(ctx.scene, &pool, ctx.seed, first as u64);
+        work.phases.cache += t.elapsed().as_secs_f64();
+        work.shadow.cache += c.shadow_rays;
+        counters += c;
+        Prepared { pass: (pool, cache, stats), splats, counters }
+    }
+
+    fn render_tile(
+        &self,
+        ctx: &Ctx,
+        pass: &(LightPool, Cache, CacheStats),
+        tile: Tile,
+        first: u32,
+        count: u32,
+    ) -> TileResult {
+        let (pool, cache, _) = pass;
+        let counts = self.counts(ctx.scene);
+        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let mut scratch = Scratch::default();
+        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+            self.pc.sample(&conn, pool, cache, pos, rng, &mut scratch, sink, counters);
+            true
+        })
+    }
+
+    /// Keeps `V̄`, the cache and the concentration of the camera pass's draws (summed in
+    /// tile order) for the next iteration.
+    fn finish(&mut self, _: &Ctx, pass: (LightPool, Cache, CacheStats), _: Range<u32>, results: &[TileResult]) {
+        let (pool, cache, stats) = pass;
+        self.vbar = pool.mean_vertices();
+        self.pool_size = Some((pool.paths, pool.connectible.len()));
+        let mut counters = Counters::default();
+        for r in results {
+            counters += r.counters;
+        }
+        if let Some((_, by_depth)) = counters.concentration() {
+            self.concentration = by_depth.map(|c| c as f32);
+        }
+        self.cache_stats = Some(stats);
+        self.previous = Some(cache);
+    }
+
+    fn report(&self, stats: &mut RenderStats) {
+        stats.pool = self.pool_size;
+        stats.cache = self.cache_stats;
     }
 }
 
