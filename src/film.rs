@@ -16,7 +16,8 @@ use crate::math::{Rgb, floor_i32};
 use glam::Vec2;
 
 /// Mitsuba's reconstruction filters (`rfilter`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Filter {
     /// Radius 0.5 by default: each sample belongs to its pixel.
     Box { radius: f32 },
@@ -415,6 +416,54 @@ impl Film {
         self.add_film_splats(other);
         self.light_paths += other.light_paths;
         self.invalid_samples += other.invalid_samples;
+    }
+
+    /// The exact sums of every pixel: the camera samples' `(Σ w r, Σ w g, Σ w b, Σ w)`, then
+    /// the splats' `(r, g, b)` (zero without splats). Strategy layers are not included.
+    pub fn sums(&self) -> Vec<[ExactSum; 7]> {
+        let zero = [ExactSum::default(); 3];
+        (0..self.data.len())
+            .map(|i| {
+                let (c, s) = (self.data[i], self.splats.get(i).unwrap_or(&zero));
+                [c[0], c[1], c[2], c[3], s[0], s[1], s[2]]
+            })
+            .collect()
+    }
+
+    /// A film from the sums [`Film::sums`] gives, and its light paths and dropped samples.
+    pub fn from_sums(
+        width: u32,
+        height: u32,
+        filter: Filter,
+        sums: &[[ExactSum; 7]],
+        light_paths: u64,
+        invalid_samples: u64,
+    ) -> Film {
+        let mut film = Film::new(width, height, filter);
+        assert_eq!(sums.len(), film.data.len(), "one entry per pixel");
+        film.data = sums.iter().map(|s| [s[0], s[1], s[2], s[3]]).collect();
+        if sums.iter().any(|s| s[4..].iter().any(|x| *x != ExactSum::default())) {
+            film.splats = sums.iter().map(|s| [s[4], s[5], s[6]]).collect();
+        }
+        film.light_paths = light_paths;
+        film.invalid_samples = invalid_samples;
+        film
+    }
+
+    /// Adds another film's splats times `scale` (films whose splats carry different
+    /// normalisations; the result is rounded, not exact).
+    pub fn add_scaled_splats(&mut self, other: &Film, scale: f64) {
+        if other.splats.is_empty() {
+            return;
+        }
+        if self.splats.is_empty() {
+            self.splats = vec![[ExactSum::default(); 3]; self.width as usize * self.height as usize];
+        }
+        for (d, s) in self.splats.iter_mut().zip(&other.splats) {
+            for c in 0..3 {
+                d[c].add(s[c].value() * scale);
+            }
+        }
     }
 
     /// Pixels per light path: the factor that turns summed splats into pixel values.

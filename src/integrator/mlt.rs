@@ -58,6 +58,8 @@ pub struct MltStats {
     pub normalisation: f64,
     /// `b` from the bootstrap alone (what the chains splat with before the final rescale).
     pub bootstrap_normalisation: f64,
+    /// Independent samples of the bootstrap.
+    pub bootstrap_samples: u64,
     pub chains: usize,
     pub mutations: u64,
     pub small_proposed: u64,
@@ -385,6 +387,7 @@ pub fn render(
     let mut stats = MltStats {
         normalisation: b,
         bootstrap_normalisation: b,
+        bootstrap_samples: weights.len() as u64,
         chains: threads,
         bootstrap_seconds,
         ..Default::default()
@@ -509,6 +512,10 @@ pub fn render(
     let render_stats = RenderStats {
         bidir: (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone()),
         mlt: Some(stats),
+        iterations: match opts.budget {
+            Budget::Spp(spp) => Some(iterations.clone().unwrap_or(0..spp)),
+            Budget::Time(_) => None,
+        },
         ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
     // The chains splatted with the bootstrap's b; the final b also counts the large steps.
