@@ -236,8 +236,9 @@ pub fn read_part(path: &Path) -> Result<Part> {
         .map_err(|e| bad(format!("cannot read EXR: {e}")))?;
     let layer = &image.layer_data;
     let info: PartInfo = match layer.attributes.other.get(&Text::from(ATTRIBUTE)) {
-        Some(AttributeValue::Text(t)) => serde_json::from_str(&t.to_string())
-            .map_err(|e| bad(format!("the part's metadata cannot be read: {e}")))?,
+        Some(AttributeValue::Text(t)) => {
+            serde_json::from_str(&t.to_string()).map_err(|e| bad(format!("the part's metadata cannot be read: {e}")))?
+        }
         _ => return Err(bad("not a partial render (no pcbpt.part metadata): render it with --chunk".into())),
     };
     if info.format != FORMAT {
