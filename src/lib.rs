@@ -19,6 +19,7 @@ pub mod image_io;
 pub mod integrator;
 pub mod light;
 pub mod math;
+pub mod partial;
 pub mod sampling;
 pub mod scene;
 pub mod texture;

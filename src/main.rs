@@ -35,6 +35,24 @@ enum Command {
     Compare(CompareArgs),
     /// Run an equal-time experiment described by a TOML file (scenes × methods).
     Experiment(ExperimentArgs),
+    /// Merge the partial renders of one render (`render --chunk`) into its image.
+    Merge(MergeArgs),
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The parts (EXR files written by `render --chunk` or `--iterations`).
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// The merged image (`.exr` or `.png`).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Merge the parts that exist even if iterations are missing (a preview).
+    #[arg(long)]
+    partial: bool,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -72,6 +90,13 @@ struct RenderArgs {
     /// Seed of the random number streams (default: the scene sampler's seed).
     #[arg(long)]
     seed: Option<u64>,
+    /// Render chunk I of N (0-based) of the render's iterations and write a partial render
+    /// (an EXR with the film's sums) for `pcbpt merge`.
+    #[arg(long, value_name = "I/N", value_parser = parse_chunk, conflicts_with_all = ["time", "iterations"])]
+    chunk: Option<(u32, u32)>,
+    /// Render iterations A..B (end excluded) of the render and write a partial render.
+    #[arg(long, value_name = "A..B", value_parser = parse_range, conflicts_with = "time")]
+    iterations: Option<(u32, u32)>,
     /// Scene parameter overrides, `-D name=value` (e.g. `-D spp=64 -D resx=320`).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     define: Vec<(String, String)>,
@@ -102,9 +127,13 @@ struct RenderArgs {
     /// MIS heuristic of the bidirectional integrators.
     #[arg(long, value_enum, default_value_t = Heuristic::Power)]
     heuristic: Heuristic,
-    /// EORR: Russian-roulette threshold as a fraction of the pixel's running mean luminance.
+    /// EORR: Russian-roulette threshold as a fraction of the pixel's mean luminance.
     #[arg(long, default_value_t = 0.1)]
     eorr_fraction: f32,
+    /// EORR: the pixel means come from the first this many samples per pixel (0: from every
+    /// earlier pass, a running mean, which a render cut into chunks cannot use).
+    #[arg(long, default_value_t = BidirOptions::default().eorr_pilot_spp)]
+    eorr_pilot_spp: u32,
     /// LVC: light paths per iteration (0 = one per pixel).
     #[arg(long, default_value_t = 0)]
     lvc_light_paths: usize,
@@ -202,6 +231,18 @@ fn parse_crop(s: &str) -> std::result::Result<[u32; 4], String> {
     v.try_into().map_err(|_| format!("\"{s}\" is not x,y,width,height"))
 }
 
+fn parse_chunk(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (i, n) = s.split_once('/').ok_or_else(|| format!("\"{s}\" is not I/N"))?;
+    let num = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("\"{s}\" is not I/N"));
+    Ok((num(i)?, num(n)?))
+}
+
+fn parse_range(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("\"{s}\" is not A..B"))?;
+    let num = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("\"{s}\" is not A..B"));
+    Ok((num(a)?, num(b)?))
+}
+
 fn parse_define(s: &str) -> std::result::Result<(String, String), String> {
     let (k, v) = s.split_once('=').ok_or_else(|| format!("\"{s}\" is not NAME=VALUE"))?;
     if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
@@ -215,6 +256,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => render(a),
         Command::Compare(a) => compare_images(a),
+        Command::Merge(a) => merge_parts(a),
         Command::Experiment(a) => pcbpt::experiment::run(&a.file, a.output.as_deref(), a.quiet).map(|r| {
             if !a.quiet {
                 eprintln!("{} runs done", r.len());
@@ -320,6 +362,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
     opts.bidir = BidirOptions {
         heuristic: a.heuristic,
         eorr_fraction: a.eorr_fraction,
+        eorr_pilot_spp: a.eorr_pilot_spp,
         lvc_light_paths: a.lvc_light_paths,
         lvc_connections: a.lvc_connections,
         max_pool_mb: a.max_pool_mb,
@@ -346,7 +389,27 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::Output { path: dir.clone(), msg: format!("cannot create the folder: {e}") })?;
     }
-    let out = integrator::render(&scene, &opts)?;
+    // A chunk of a distributed render: its iterations, and what identifies the render.
+    let part = match (a.chunk, a.iterations) {
+        (None, None) => None,
+        (chunk, range) => {
+            let Budget::Spp(total) = budget else { unreachable!("--chunk and --iterations conflict with --time") };
+            let iterations = match (chunk, range) {
+                (Some((i, n)), _) => pcbpt::partial::chunk(i, n, total)?,
+                (_, Some((start, end))) => start..end,
+                (None, None) => unreachable!(),
+            };
+            if opts.strategy_images {
+                return Err(Error::Usage("--strategy-images are not kept in partial renders".into()));
+            }
+            if image_io::Format::from_path(&output)? != image_io::Format::Exr {
+                return Err(Error::Usage(format!("{}: a partial render is written as an EXR file", output.display())));
+            }
+            let hash = pcbpt::partial::scene_hash(&scene, &a.define)?;
+            Some((iterations, total, pcbpt::partial::render_identity(&scene, &opts, &hash)))
+        }
+    };
+    let out = integrator::render_iterations(&scene, &opts, part.as_ref().map(|p| p.0.clone()))?;
     let s = &out.stats;
     // The Embree library linked at run time (e.g. "4.4.0"), for the summary and the stats.
     let embree_version =
@@ -356,15 +419,28 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             image_io::write(&dir.join(format!("{name}.exr")), &Image::new(out.width, out.height, pixels.clone()))?;
         }
     }
-    image_io::write(&output, &Image::new(out.width, out.height, out.image))?;
+    match part {
+        Some((_, total, render)) if !s.interrupted => {
+            let info = pcbpt::partial::part_info(&out, render, total, scene.film.filter)?;
+            let film = out.film.as_ref().expect("a render keeps its film");
+            pcbpt::partial::write_part(&output, &out.image, film, &info)?;
+        }
+        // An interrupted chunk writes no part: a merge would take it for a whole one.
+        Some(_) => {}
+        None => image_io::write(&output, &Image::new(out.width, out.height, out.image.clone()))?,
+    }
     if let Some(path) = &a.stats {
         let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "load": { "read_seconds": scene.stats.read_seconds, "bvh_seconds": scene.stats.bvh_seconds, "vertices": scene.stats.vertices, "mesh_bytes": scene.stats.mesh_bytes }, "degenerate_triangles": scene.stats.degenerate_triangles, "embree_version": embree_version, "render": s });
         image_io::write_text(path, &serde_json::to_string_pretty(&json).unwrap_or_default())?;
     }
     if !a.quiet || s.interrupted {
         eprintln!(
-            "{}: {}×{} at {} spp ({:?}, {}, {} threads) in {:.2} s (+{:.2} s loading): {:.3} M samples/s, {:.2} M rays/s, {} NaN/Inf samples dropped → {}",
+            "{}{}: {}×{} at {} spp ({:?}, {}, {} threads) in {:.2} s (+{:.2} s loading): {:.3} M samples/s, {:.2} M rays/s, {} NaN/Inf samples dropped → {}",
             if s.interrupted { "interrupted" } else { "rendered" },
+            match &s.iterations {
+                Some(r) if a.chunk.is_some() || a.iterations.is_some() => format!(" iterations {}..{}", r.start, r.end),
+                _ => String::new(),
+            },
             s.width,
             s.height,
             s.spp,
@@ -424,6 +500,32 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         }
     }
     Ok(if s.interrupted { ExitCode::from(INTERRUPTED) } else { ExitCode::SUCCESS })
+}
+
+fn merge_parts(a: MergeArgs) -> Result<ExitCode> {
+    let t0 = Instant::now();
+    image_io::Format::from_path(&a.output)?;
+    let parts = a.parts.iter().map(|p| pcbpt::partial::read_part(p)).collect::<Result<Vec<_>>>()?;
+    let n = parts.len();
+    let read_seconds = t0.elapsed().as_secs_f64();
+    let m = pcbpt::partial::merge(parts, a.partial)?;
+    image_io::write(&a.output, &Image::new(m.width, m.height, m.image))?;
+    if !a.quiet {
+        let missing: Vec<String> = m.missing.iter().map(|r| format!("{}..{}", r.start, r.end)).collect();
+        eprintln!(
+            "merged {n} parts of {}×{} ({} of {} iterations{}) in {:.2} s ({:.2} s reading); the parts rendered for {:.1} s → {}",
+            m.width,
+            m.height,
+            m.total - m.missing.iter().map(|r| r.len() as u32).sum::<u32>(),
+            m.total,
+            if missing.is_empty() { String::new() } else { format!("; missing {}", missing.join(", ")) },
+            t0.elapsed().as_secs_f64(),
+            read_seconds,
+            m.render_seconds,
+            a.output.display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn compare_images(a: CompareArgs) -> Result<ExitCode> {

@@ -58,6 +58,8 @@ pub struct MltStats {
     pub normalisation: f64,
     /// `b` from the bootstrap alone (what the chains splat with before the final rescale).
     pub bootstrap_normalisation: f64,
+    /// Independent samples of the bootstrap.
+    pub bootstrap_samples: u64,
     pub chains: usize,
     pub mutations: u64,
     pub small_proposed: u64,
@@ -301,8 +303,14 @@ fn merge_chains(chains: &[Chain], film: &mut Film, b: f64, n_boot: usize) -> f64
 const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 
-/// Renders with PSSMLT.
-pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate::error::Error> {
+/// Renders with PSSMLT: all of the budget, or for `iterations` `A..B` (a chunk of a
+/// distributed render) `B - A` mutations per pixel by chains of their own, with their own
+/// bootstrap (streams keyed by `A` as well), whose films merge by their normalisations.
+pub fn render(
+    scene: &Scene,
+    opts: &RenderOptions,
+    iterations: Option<std::ops::Range<u32>>,
+) -> Result<RenderOutput, crate::error::Error> {
     let mo = &opts.mlt;
     if !(mo.large_step_prob > 0.0 && mo.large_step_prob <= 1.0) {
         return Err(crate::error::Error::Usage(format!(
@@ -336,7 +344,15 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let pixels = w as u64 * h as u64;
     let start = Instant::now();
     let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
-    let key = |stream: u64, i: u64| [opts.seed, stream, i];
+    // Chunk `A..B` of a render, `A > 0`, runs chains (and a bootstrap) of its own.
+    let chunk_key = iterations.as_ref().map_or(0, |r| r.start as u64);
+    let key = |stream: u64, i: u64| {
+        let mut k = vec![opts.seed, stream, i];
+        if chunk_key > 0 {
+            k.push(chunk_key);
+        }
+        k
+    };
 
     // Bootstrap: independent samples estimate b and give the chains their start states.
     let chunk = 1024usize;
@@ -371,6 +387,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let mut stats = MltStats {
         normalisation: b,
         bootstrap_normalisation: b,
+        bootstrap_samples: weights.len() as u64,
         chains: threads,
         bootstrap_seconds,
         ..Default::default()
@@ -380,6 +397,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     if b > 0.0 && !interrupted {
         let dist = Distribution1D::new(&weights);
         let total = match opts.budget {
+            Budget::Spp(_) if let Some(r) = &iterations => r.len() as u64 * pixels,
             Budget::Spp(spp) => spp as u64 * pixels,
             Budget::Time(_) => u64::MAX,
         };
@@ -494,12 +512,24 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate
     let render_stats = RenderStats {
         bidir: (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone()),
         mlt: Some(stats),
+        iterations: match opts.budget {
+            Budget::Spp(spp) => Some(iterations.clone().unwrap_or(0..spp)),
+            Budget::Time(_) => None,
+        },
         ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
     // The chains splatted with the bootstrap's b; the final b also counts the large steps.
     let rescale = if b > 0.0 { (stats.normalisation / b) as f32 } else { 0.0 };
     let image = film.develop().into_iter().map(|p| p * rescale).collect();
-    Ok(RenderOutput { image, strategy_images: Vec::new(), snapshots, width: w, height: h, stats: render_stats })
+    Ok(RenderOutput {
+        image,
+        strategy_images: Vec::new(),
+        snapshots,
+        width: w,
+        height: h,
+        stats: render_stats,
+        film: Some(film),
+    })
 }
 
 #[cfg(test)]

@@ -1,39 +1,26 @@
-//! Integrators and the render loop they share.
-//!
-//! The loop renders progressive passes: in each pass every pixel receives the same number
-//! of samples; tiles are rendered in parallel (`rayon`) into their own image blocks and
-//! merged in tile order. Every pixel sample draws its random numbers from a stream keyed by
-//! (seed, pixel, sample index), so a fixed seed gives the same image whatever the number of
-//! threads. A time budget (`--time`) runs whole passes until the budget is spent; a stop
-//! flag (set by Ctrl-C) ends the render after the pass in flight.
-//!
-//! Light-tracing contributions (`t = 1`) are splatted: each tile (and each chunk of a light
-//! pool) collects its splats in a list, and the lists are added to the film in order, so
-//! splatting is as deterministic as the rest. Integrators with a light pool (`lvc`) trace
-//! the pool at the start of every pass; each pass is then one iteration of one sample per
-//! pixel.
+//! Integrators, their options and statistics, and [`render`], which hands the chosen one to
+//! its render loop: [`render_loop`] for every integrator that renders iterations of one
+//! sample per pixel, [`mlt`]'s own for the Markov chains.
 
 pub mod bidir;
 pub mod mlt;
 pub mod path;
+pub(crate) mod render_loop;
 
-use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
+use crate::film::Film;
 use crate::math::Rgb;
-use crate::sampling::Sampler;
 use crate::scene::Scene;
-use bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
-use bidir::cache_fit::CacheFit;
-use bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
-use bidir::pcbpt::{Blend, Cache, PcCounts, PcOptions, Pcbpt};
+use bidir::WalkLimits;
+use bidir::bdpt::{Bdpt, BdptRender};
+use bidir::eorr::Eorr;
+use bidir::mis::Heuristic;
+use bidir::pcbpt::{PcOptions, Pcbpt, PcbptRender};
 pub use bidir::pool::CONCENTRATION_DEPTHS;
-use bidir::pool::{LightPool, Lvc};
-use bidir::{Sink, WalkLimits};
-use glam::Vec2;
-use rayon::prelude::*;
+use bidir::pool::{Lvc, LvcRender};
 use serde::Serialize;
+use std::ops::Range;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::sync::atomic::AtomicBool;
 
 /// The integrators selectable with `--integrator`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -137,8 +124,11 @@ impl std::ops::AddAssign for Counters {
 #[derive(Clone, Debug, Serialize)]
 pub struct BidirOptions {
     pub heuristic: Heuristic,
-    /// EORR: the roulette threshold as a fraction of the pixel's running mean luminance.
+    /// EORR: the roulette threshold as a fraction of the pixel's mean luminance.
     pub eorr_fraction: f32,
+    /// EORR: the pixel means come from the first this many samples per pixel (0: from every
+    /// earlier pass, a running mean).
+    pub eorr_pilot_spp: u32,
     /// LVC: light paths per iteration (0 = one per pixel).
     pub lvc_light_paths: usize,
     /// LVC: connections per camera vertex.
@@ -154,6 +144,7 @@ impl Default for BidirOptions {
         BidirOptions {
             heuristic: Heuristic::Power,
             eorr_fraction: 0.1,
+            eorr_pilot_spp: 16,
             lvc_light_paths: 0,
             lvc_connections: 1,
             max_pool_mb: 4096,
@@ -173,6 +164,8 @@ pub struct PhaseTimes {
     pub camera_pass: f64,
     /// Merging blocks into the film and splatting.
     pub merge: f64,
+    /// Re-running the iterations before a chunk's first one that its state comes from.
+    pub warmup: f64,
 }
 
 /// Shadow rays traced in each phase of the render loop.
@@ -274,6 +267,10 @@ pub struct RenderStats {
     pub invalid_samples: u64,
     /// The render stopped early (interrupted).
     pub interrupted: bool,
+    /// The iterations rendered (samples per pixel, or mutations per pixel for the Markov
+    /// chains), when known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<Range<u32>>,
 }
 
 impl RenderStats {
@@ -310,6 +307,7 @@ impl RenderStats {
             mlt: None,
             invalid_samples,
             interrupted,
+            iterations: None,
         }
     }
 }
@@ -359,537 +357,80 @@ pub struct RenderOutput {
     pub width: u32,
     pub height: u32,
     pub stats: RenderStats,
-}
-
-/// An integrator ready to estimate camera samples.
-enum Estimator {
-    Path(path::PathTracer),
-    Bdpt(Bdpt),
-    Lvc(Lvc),
-    Pcbpt(Pcbpt),
-}
-
-impl Estimator {
-    /// The light-pool integrators' light paths per iteration.
-    fn pool_paths(&self) -> Option<(usize, &Bdpt)> {
-        match self {
-            Estimator::Lvc(l) => Some((l.light_paths, &l.bdpt)),
-            Estimator::Pcbpt(p) => Some((p.opts.light_paths, &p.bdpt)),
-            _ => None,
-        }
-    }
-}
-
-/// The strategy counts of a pass.
-#[derive(Clone, Copy)]
-enum PassCounts<'a> {
-    Fixed(Counts),
-    Pc(PcCounts<'a>),
-}
-
-impl StrategyCounts for PassCounts<'_> {
-    #[inline]
-    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
-        match self {
-            PassCounts::Fixed(c) => c.count(path, s, t),
-            PassCounts::Pc(c) => c.count(path, s, t),
-        }
-    }
-
-    fn all_ones(&self) -> bool {
-        matches!(self, PassCounts::Fixed(c) if c.all_ones())
-    }
-
-    fn path_dependent(&self) -> bool {
-        match self {
-            PassCounts::Fixed(_) => false,
-            PassCounts::Pc(c) => c.path_dependent(),
-        }
-    }
-
-    fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
-        match self {
-            PassCounts::Fixed(c) => c.fill(path, needed, out),
-            PassCounts::Pc(c) => c.fill(path, needed, out),
-        }
-    }
-}
-
-/// What a pass shares between its tiles.
-struct PassData<'a> {
-    pool: Option<&'a LightPool>,
-    cache: Option<&'a Cache>,
-    counts: PassCounts<'a>,
-    roulette: Option<RouletteMap<'a>>,
-    heuristic: Heuristic,
-    layers: bool,
-}
-
-impl Estimator {
-    fn new(kind: IntegratorKind, scene: &Scene, opts: &BidirOptions) -> Result<Estimator, crate::error::Error> {
-        let spec = &scene.integrator;
-        let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
-        let bdpt = |light_only| Bdpt {
-            limits: WalkLimits::new(max_depth, spec.rr_depth),
-            max_depth,
-            hide_emitters: spec.hide_emitters,
-            light_only,
-        };
-        if kind != IntegratorKind::Path {
-            bidir::bdpt::check_lights(scene, &format!("{kind:?}").to_lowercase())
-                .map_err(crate::error::Error::Usage)?;
-        }
-        Ok(match kind {
-            IntegratorKind::Path => Estimator::Path(path::PathTracer::new(spec)),
-            IntegratorKind::Lighttrace => Estimator::Bdpt(bdpt(true)),
-            IntegratorKind::Bdpt | IntegratorKind::Eorr => Estimator::Bdpt(bdpt(false)),
-            IntegratorKind::Pssmlt => unreachable!("PSSMLT has its own render loop"),
-            IntegratorKind::Pcbpt => {
-                opts.pc.validate().map_err(crate::error::Error::Usage)?;
-                Estimator::Pcbpt(Pcbpt { bdpt: bdpt(false), opts: opts.pc.clone() })
-            }
-            IntegratorKind::Lvc => {
-                if opts.lvc_connections == 0 {
-                    return Err(crate::error::Error::Usage("--lvc-connections must be at least 1".into()));
-                }
-                let pixels = scene.film.width as usize * scene.film.height as usize;
-                let m = if opts.lvc_light_paths == 0 { pixels } else { opts.lvc_light_paths };
-                Estimator::Lvc(Lvc { bdpt: bdpt(false), light_paths: m, connections: opts.lvc_connections })
-            }
-        })
-    }
-}
-
-/// Sink of one camera sample: its radiance, its per-strategy parts, and its splats.
-struct PixelSink<'a> {
-    l: Rgb,
-    parts: Vec<(u16, Rgb)>,
-    layers: bool,
-    splats: &'a mut Vec<Splat>,
-}
-
-impl Sink for PixelSink<'_> {
-    #[inline]
-    fn add(&mut self, s: usize, t: usize, value: Rgb) {
-        self.l += value;
-        if self.layers {
-            self.parts.push((strategy_layer(s, t) as u16, value));
-        }
-    }
-
-    #[inline]
-    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
-        self.splats.push(Splat::of_strategy(s, t, pos, value, self.layers));
-    }
-}
-
-struct TileResult {
-    block: ImageBlock,
-    splats: Vec<Splat>,
-    counters: Counters,
-}
-
-/// A finished camera pass not yet in the film: the light pool's splats and the tiles'
-/// results.
-struct PendingPass {
-    pool_splats: Vec<Splat>,
-    pool_light_paths: u64,
-    results: Vec<TileResult>,
-}
-
-/// Adds a finished pass to the film, in a fixed order (pool splats, then tile by tile), so
-/// the sums are the same whatever the thread count; returns the seconds it took.
-fn add_pass(film: &mut Film, pass: Option<PendingPass>) -> f64 {
-    let Some(pass) = pass else { return 0.0 };
-    let t = Instant::now();
-    film.add_splats(&pass.pool_splats);
-    film.light_paths += pass.pool_light_paths;
-    for r in &pass.results {
-        film.merge(&r.block);
-        film.add_splats(&r.splats);
-        film.light_paths += r.counters.light_paths;
-    }
-    t.elapsed().as_secs_f64()
-}
-
-fn render_tile(
-    scene: &Scene,
-    est: &Estimator,
-    pass: &PassData,
-    tile: Tile,
-    seed: u64,
-    first: u32,
-    count: u32,
-) -> TileResult {
-    crate::accel::embree::set_flush_denormals();
-    let layers = if pass.layers { STRATEGY_LAYERS } else { 0 };
-    let mut block = ImageBlock::with_layers(tile, scene.film.filter, layers);
-    let mut counters = Counters::default();
-    let mut splats = Vec::new();
-    let mut scratch = Scratch::default();
-    let mut sink = PixelSink { l: Rgb::ZERO, parts: Vec::new(), layers: pass.layers, splats: &mut splats };
-    let conn = Connector { scene, heuristic: pass.heuristic, counts: &pass.counts, roulette: pass.roulette };
-    let width = scene.film.width as u64;
-    for y in tile.y0..tile.y0 + tile.height {
-        for x in tile.x0..tile.x0 + tile.width {
-            let pixel = y as u64 * width + x as u64;
-            for s in first..first + count {
-                let mut sampler = Sampler::new(&[seed, pixel, s as u64]);
-                let pos = Vec2::new(x as f32, y as f32) + sampler.next_2d();
-                sink.l = Rgb::ZERO;
-                sink.parts.clear();
-                match est {
-                    Estimator::Path(p) => {
-                        let ray = scene.camera.generate_ray(pos);
-                        counters.camera_rays += 1;
-                        let l = p.li(scene, ray, &mut sampler, &mut counters);
-                        block.put(pos, l);
-                    }
-                    Estimator::Bdpt(b) => {
-                        b.sample(&conn, pos, &mut sampler, &mut scratch, &mut sink, &mut counters);
-                        if !b.light_only {
-                            block.put_layers(pos, sink.l, &sink.parts);
-                        }
-                    }
-                    Estimator::Lvc(lvc) => {
-                        let pool = pass.pool.expect("a pool integrator has a pool");
-                        lvc.sample(&conn, pool, pos, &mut sampler, &mut scratch, &mut sink, &mut counters);
-                        block.put_layers(pos, sink.l, &sink.parts);
-                    }
-                    Estimator::Pcbpt(pc) => {
-                        let pool = pass.pool.expect("a pool integrator has a pool");
-                        let cache = pass.cache.expect("PCBPT has a cache");
-                        pc.sample(&conn, pool, cache, pos, &mut sampler, &mut scratch, &mut sink, &mut counters);
-                        block.put_layers(pos, sink.l, &sink.parts);
-                    }
-                }
-                counters.samples += 1;
-            }
-        }
-    }
-    TileResult { block, splats, counters }
-}
-
-/// Bytes a light pool spends per vertex (the vertex and its path-start index).
-fn pool_vertex_bytes() -> usize {
-    std::mem::size_of::<bidir::Vertex>() + std::mem::size_of::<u32>() * 2
-}
-
-/// Key of the pilot pool that measures `V̄` before the first iteration.
-const PILOT_ITERATION: u64 = u64::MAX;
-
-/// Checks a pool integrator's light pool (and PCBPT's cache) against their memory limits,
-/// from the size per path measured on the pilot pool `pilot`, with a margin.
-fn check_memory(
-    est: &Estimator,
-    opts: &BidirOptions,
-    pilot: &LightPool,
-    w: u32,
-    h: u32,
-) -> Result<(), crate::error::Error> {
-    const MIB: f64 = 1024.0 * 1024.0;
-    let Some((m, _)) = est.pool_paths() else { return Ok(()) };
-    let per_path = pilot.vertices.len() as f64 / pilot.paths.max(1) as f64;
-    let mb = 1.5 * m as f64 * per_path.max(1.0) * pool_vertex_bytes() as f64 / MIB;
-    let option = if matches!(est, Estimator::Pcbpt(_)) { "--pc-light-paths" } else { "--lvc-light-paths" };
-    if mb > opts.max_pool_mb as f64 {
-        return Err(crate::error::Error::Usage(format!(
-            "the light pool of {m} paths ({per_path:.1} vertices per path) needs about {mb:.0} MiB, over the limit of {} MiB \
-             (--max-pool-mb); use fewer light paths ({option}) or raise the limit",
-            opts.max_pool_mb
-        )));
-    }
-    if let Estimator::Pcbpt(pc) = est {
-        let fit = CacheFit { opts: &pc.opts, light_paths: m, mean_vertices: pilot.mean_vertices() as f64, w, h };
-        let (records, v, mb) = fit.size(pc.opts.stride, pc.opts.cache_depth, m);
-        if mb > pc.opts.max_cache_mb as f64 {
-            return Err(crate::error::Error::Usage(format!(
-                "the PCBPT cache of up to {records} records × about {v} pool vertices needs about {mb:.0} MiB, over the \
-                 limit of {} MiB (--pc-max-cache-mb); {}",
-                pc.opts.max_cache_mb,
-                fit.suggestions()
-            )));
-        }
-    }
-    Ok(())
-}
-
-/// Traces PCBPT's record pixels for iteration `iteration` and evaluates their PMFs over
-/// `pool`. Records beyond what `--pc-max-cache-mb` holds (possible only when a pool is much
-/// larger than the pilot promised) are left out: lookups then blend fewer records.
-fn build_cache(
-    scene: &Scene,
-    pc: &Pcbpt,
-    pool: &LightPool,
-    seed: u64,
-    iteration: u64,
-) -> (Cache, CacheStats, Counters) {
-    let (mut records, mut counters) = bidir::pcbpt::trace_records(scene, &pc.bdpt.limits, &pc.opts, seed, iteration);
-    let v = pool.connectible.len();
-    let fit = (pc.opts.max_cache_mb as f64 * 1024.0 * 1024.0 / Cache::bytes(1, v)).floor() as usize;
-    let dropped = records.len().saturating_sub(fit);
-    records.truncate(fit);
-    let blend =
-        Blend { neighbours: pc.opts.neighbours, uniform: pc.opts.uniform_blend, distance_term: pc.opts.distance_term };
-    let (cache, c) = Cache::build(scene, pool, records, blend, pc.opts.visibility);
-    counters += c;
-    let stats = CacheStats {
-        records: cache.records.len(),
-        empty_records: cache.totals.iter().filter(|&&q| q <= 0.0).count(),
-        dropped_records: dropped,
-        pool_vertices: v,
-        megabytes: cache.memory() / (1024.0 * 1024.0),
-    };
-    (cache, stats, counters)
+    /// The film's sums (what a chunk of a distributed render keeps).
+    pub film: Option<Film>,
 }
 
 /// Renders the scene's image.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<RenderOutput, crate::error::Error> {
-    if opts.integrator == IntegratorKind::Pssmlt {
-        return mlt::render(scene, opts);
-    }
-    let pool = thread_pool(opts.threads)?;
-    let threads = pool.current_num_threads();
-    let (w, h) = (scene.film.width, scene.film.height);
-    let est = Estimator::new(opts.integrator, scene, &opts.bidir)?;
-    let bidirectional = !matches!(est, Estimator::Path(_));
-    let layers = opts.strategy_images && bidirectional;
-    let tile_list = tiles(w, h, opts.tile_size.max(1));
-    let mut film = Film::with_layers(w, h, scene.film.filter, if layers { STRATEGY_LAYERS } else { 0 });
-    let mut counters = Counters::default();
-    let mut phases = PhaseTimes::default();
-    let start = Instant::now();
-    let one_per_pass = est.pool_paths().is_some();
-    let (pass_spp, total_passes) = match opts.budget {
-        Budget::Spp(spp) if one_per_pass => (1, spp),
-        Budget::Spp(spp) => {
-            // About 32 passes, each of at most ~1 M samples so that progress and Ctrl-C
-            // stay responsive; the split depends only on spp and resolution.
-            let cap = ((1u64 << 20) / (w as u64 * h as u64)).max(1) as u32;
-            let per = spp.div_ceil(32).clamp(1, cap);
-            (per, spp.div_ceil(per))
-        }
-        Budget::Time(_) => (1, u32::MAX),
-    };
-    let pixels = w as f32 * h as f32;
-    let counts = PassCounts::Fixed(if opts.integrator == IntegratorKind::Lighttrace {
-        Counts::LightTrace
-    } else {
-        Counts::Bdpt
-    });
-    let bar = progress_bar(opts, w, h, tile_list.len());
-    let mut done = 0u32;
-    let mut passes = 0u32;
-    let mut interrupted = false;
-    let mut pool_size = None;
-    let mut pool_error = None;
-    let mut snapshots = Vec::new();
-    let mut shadow = PhaseRays::default();
-    let mut cache_stats = None;
-    pool.install(|| {
-        // The pool integrators' strategy counts use V̄ of the previous iteration (a pilot
-        // pool before the first).
-        let mut vbar = match est.pool_paths() {
-            Some((m, bdpt)) => {
-                let (p, _, _) = LightPool::trace::<Counts>(scene, &bdpt.limits, m, opts.seed, PILOT_ITERATION, None);
-                match check_memory(&est, &opts.bidir, &p, w, h) {
-                    Ok(()) => p.mean_vertices(),
-                    Err(e) => {
-                        pool_error = Some(e);
-                        return;
-                    }
-                }
-            }
-            None => 0.0,
+    render_iterations(scene, opts, None)
+}
+
+/// Renders iterations `iterations` of the render `opts` describes (all of them when `None`):
+/// for a sample budget of `n` samples per pixel, a chunk `A..B` of `0..n` gives the very
+/// film sums the one-process render adds for those iterations.
+pub fn render_iterations(
+    scene: &Scene,
+    opts: &RenderOptions,
+    iterations: Option<Range<u32>>,
+) -> Result<RenderOutput, crate::error::Error> {
+    use crate::error::Error;
+    if let Some(r) = &iterations {
+        let Budget::Spp(spp) = opts.budget else {
+            return Err(Error::Usage("a chunk of iterations needs a sample count, not a time budget".into()));
         };
-        // PCBPT's resampling weights use the previous iteration's cache, its harmonic
-        // weights the concentration of the previous camera pass's unoccluded draws by camera
-        // depth (1, uniform, before the first).
-        let mut previous: Option<Cache> = None;
-        let mut concentration = [1.0f32; CONCENTRATION_DEPTHS];
-        let mut pending: Option<PendingPass> = None;
-        while passes < total_passes {
-            let count = match opts.budget {
-                Budget::Spp(spp) => pass_spp.min(spp - done),
-                Budget::Time(_) => 1,
-            };
-            let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
-            let t_pool = Instant::now();
-            let mut pass_counts = counts;
-            let mut pool_data = None;
-            let mut pool_splats = Vec::new();
-            let mut pool_counters = Counters::default();
-            if let Some((m, bdpt)) = est.pool_paths() {
-                pass_counts = match &est {
-                    Estimator::Pcbpt(pc) => PassCounts::Pc(PcCounts::for_iteration(
-                        scene,
-                        &pc.opts,
-                        m,
-                        pixels,
-                        vbar,
-                        &concentration,
-                        previous.as_ref(),
-                    )),
-                    _ => PassCounts::Fixed(Counts::Pool {
-                        light_trace: m as f32 / pixels,
-                        connect: if vbar > 0.0 { opts.bidir.lvc_connections as f32 / vbar } else { 0.0 },
-                    }),
-                };
-                let conn = Connector { scene, heuristic: opts.bidir.heuristic, counts: &pass_counts, roulette: None };
-                let (p, sp, c) =
-                    LightPool::trace(scene, &bdpt.limits, m, opts.seed, passes as u64, Some((&conn, bdpt, layers)));
-                vbar = p.mean_vertices();
-                pool_size = Some((p.paths, p.connectible.len()));
-                pool_data = Some(p);
-                pool_splats = sp;
-                pool_counters = c;
-            }
-            phases.light_pool += t_pool.elapsed().as_secs_f64();
-            shadow.light_pool += pool_counters.shadow_rays;
-            // PCBPT: records and their PMFs over this pool.
-            let t_cache = Instant::now();
-            let cache = match (&est, &pool_data) {
-                (Estimator::Pcbpt(pc), Some(p)) => {
-                    let (c, stats, cc) = build_cache(scene, pc, p, opts.seed, passes as u64);
-                    cache_stats = Some(stats);
-                    shadow.cache += cc.shadow_rays;
-                    counters += cc;
-                    Some(c)
-                }
-                _ => None,
-            };
-            phases.cache += t_cache.elapsed().as_secs_f64();
-            // EORR: thresholds from the image of the passes so far (none before the first).
-            let tau: Option<Vec<f32>> = (opts.integrator == IntegratorKind::Eorr && passes > 0).then(|| {
-                phases.merge += add_pass(&mut film, pending.take());
-                film.develop().iter().map(|c| crate::math::luminance(*c).max(0.0) * opts.bidir.eorr_fraction).collect()
-            });
-            let pass = PassData {
-                pool: pool_data.as_ref(),
-                cache: cache.as_ref(),
-                counts: pass_counts,
-                roulette: tau.as_deref().map(|tau| RouletteMap { tau, width: w, height: h }),
-                heuristic: opts.bidir.heuristic,
-                layers,
-            };
-            let t_cam = Instant::now();
-            // The previous pass goes into the film while this one renders (one thread merges,
-            // then joins the tiles). A pass interrupted part-way is discarded whole, so every
-            // pixel keeps the same number of samples.
-            let (merge_seconds, results) = rayon::join(
-                || add_pass(&mut film, pending.take()),
-                || -> Option<Vec<TileResult>> {
-                    tile_list
-                        .par_iter()
-                        .map(|&t| {
-                            (!stopped()).then(|| {
-                                let r = render_tile(scene, &est, &pass, t, opts.seed, done, count);
-                                // A pass of a large image takes long: the bar moves by tiles.
-                                if let Some(bar) = &bar {
-                                    match opts.budget {
-                                        Budget::Spp(_) => bar.inc(count as u64),
-                                        Budget::Time(secs) => bar.set_position(time_position(start, secs)),
-                                    }
-                                }
-                                r
-                            })
-                        })
-                        .collect()
-                },
-            );
-            phases.merge += merge_seconds;
-            phases.camera_pass += t_cam.elapsed().as_secs_f64();
-            let Some(results) = results else {
-                interrupted = true;
-                break;
-            };
-            counters += pool_counters;
-            // The camera pass's counters, summed in tile order (the same sums whatever the
-            // thread count).
-            let mut pass_counters = Counters::default();
-            for r in &results {
-                pass_counters += r.counters;
-            }
-            counters += pass_counters;
-            shadow.camera_pass += pass_counters.shadow_rays;
-            // The concentration of this pass's pool draws weights the next pass.
-            if let Some((_, by_depth)) = pass_counters.concentration() {
-                concentration = by_depth.map(|c| c as f32);
-            }
-            pending = Some(PendingPass { pool_splats, pool_light_paths: pool_counters.light_paths, results });
-            done += count;
-            passes += 1;
-            take_snapshots(&opts.checkpoints, &mut snapshots, start.elapsed().as_secs_f64(), done, || {
-                phases.merge += add_pass(&mut film, pending.take());
-                film.develop()
-            });
-            if let Some(bar) = &bar {
-                match opts.budget {
-                    Budget::Spp(_) => bar.set_position(done as u64 * tile_list.len() as u64),
-                    Budget::Time(t) => bar.set_position(time_position(start, t)),
-                }
-                let secs = start.elapsed().as_secs_f64().max(1e-9);
-                bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
-            }
-            if cache.is_some() {
-                previous = cache;
-            }
-            if stopped() {
-                interrupted = true;
-                break;
-            }
-            if let Budget::Time(t) = opts.budget
-                && start.elapsed() >= Duration::from_secs_f64(t)
-            {
-                break;
-            }
+        if r.start >= r.end || r.end > spp {
+            return Err(Error::Usage(format!(
+                "iterations {}..{} are not a non-empty part of the render's 0..{spp}",
+                r.start, r.end
+            )));
         }
-        phases.merge += add_pass(&mut film, pending.take());
-    });
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
     }
-    if let Some(e) = pool_error {
-        return Err(e);
-    }
-    let seconds = start.elapsed().as_secs_f64();
-    let stats = RenderStats {
-        passes,
-        phases,
-        bidir: bidirectional.then(|| opts.bidir.clone()),
-        pool: pool_size,
-        shadow_rays: shadow,
-        cache: cache_stats,
-        ..RenderStats::new(opts, scene, threads, counters, seconds, done, film.invalid_samples, interrupted)
+    let spec = &scene.integrator;
+    let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
+    let bdpt = |light_only| Bdpt {
+        limits: WalkLimits::new(max_depth, spec.rr_depth),
+        max_depth,
+        hide_emitters: spec.hide_emitters,
+        light_only,
     };
-    let strategy_images =
-        (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
-    Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats })
-}
-
-/// The render's progress bar on a terminal: in tiles rendered times their samples per
-/// pixel (`tiles` per pass), or in thousandths of the time budget.
-fn progress_bar(opts: &RenderOptions, w: u32, h: u32, tiles: usize) -> Option<indicatif::ProgressBar> {
-    use std::io::IsTerminal;
-    if !opts.progress || !std::io::stderr().is_terminal() {
-        return None;
+    let kind = opts.integrator;
+    if !matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt) {
+        bidir::bdpt::check_lights(scene, &format!("{kind:?}").to_lowercase()).map_err(Error::Usage)?;
     }
-    let (len, template) = match opts.budget {
-        Budget::Spp(spp) => (
-            spp as u64 * tiles as u64,
-            format!("{w}×{h} {{wide_bar}} {{percent}}% of {spp} spp, ETA {{eta}} — {{msg}}"),
-        ),
-        Budget::Time(_) => (1000, format!("{w}×{h} {{wide_bar}} {{elapsed}} — {{msg}}")),
-    };
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(&template) {
-        bar.set_style(style);
+    let b = &opts.bidir;
+    let heuristic = b.heuristic;
+    match kind {
+        IntegratorKind::Pssmlt => mlt::render(scene, opts, iterations),
+        IntegratorKind::Path => render_loop::run(scene, opts, path::PathTracer::new(spec), false, iterations),
+        IntegratorKind::Lighttrace | IntegratorKind::Bdpt => {
+            let method = BdptRender { bdpt: bdpt(kind == IntegratorKind::Lighttrace), heuristic };
+            render_loop::run(scene, opts, method, true, iterations)
+        }
+        IntegratorKind::Eorr => {
+            if b.eorr_pilot_spp == 0 && iterations.as_ref().is_some_and(|r| r.start > 0) {
+                return Err(Error::Usage(
+                    "EORR's running-mean thresholds (--eorr-pilot-spp 0) depend on every earlier pass: render \
+                     them in one process, or give the pilot a sample count"
+                        .into(),
+                ));
+            }
+            let method = Eorr::new(bdpt(false), heuristic, b.eorr_fraction, b.eorr_pilot_spp, scene);
+            render_loop::run(scene, opts, method, true, iterations)
+        }
+        IntegratorKind::Lvc => {
+            if b.lvc_connections == 0 {
+                return Err(Error::Usage("--lvc-connections must be at least 1".into()));
+            }
+            let pixels = scene.film.width as usize * scene.film.height as usize;
+            let m = if b.lvc_light_paths == 0 { pixels } else { b.lvc_light_paths };
+            let lvc = Lvc { bdpt: bdpt(false), light_paths: m, connections: b.lvc_connections };
+            render_loop::run(scene, opts, LvcRender::new(lvc, heuristic, b.max_pool_mb), true, iterations)
+        }
+        IntegratorKind::Pcbpt => {
+            b.pc.validate().map_err(Error::Usage)?;
+            let pc = Pcbpt { bdpt: bdpt(false), opts: b.pc.clone() };
+            render_loop::run(scene, opts, PcbptRender::new(pc, heuristic, b.max_pool_mb), true, iterations)
+        }
     }
-    bar.enable_steady_tick(Duration::from_secs(1));
-    Some(bar)
-}
-
-/// The position of a time budget's progress bar: thousandths of `budget` seconds elapsed.
-fn time_position(start: Instant, budget: f64) -> u64 {
-    (start.elapsed().as_secs_f64() / budget * 1000.0).min(1000.0) as u64
 }

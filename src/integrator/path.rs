@@ -3,11 +3,14 @@
 //! from `rr_depth` on, and Mitsuba's `max_depth` (segments from the camera; -1 unlimited).
 
 use super::Counters;
+use super::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
+use crate::film::Tile;
 use crate::math::{Rgb, max_component};
 use crate::sampling::{Random, power_heuristic};
 use crate::scene::{IntegratorSpec, Scene};
+use std::ops::Range;
 
 #[derive(Clone, Debug)]
 pub struct PathTracer {
@@ -139,4 +142,23 @@ impl PathTracer {
         }
         l
     }
+}
+/// The path tracer in the render loop: no state between iterations.
+impl Iterative for PathTracer {
+    type Pass = ();
+
+    fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {
+        Prepared::only(())
+    }
+
+    fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
+        sample_tile(ctx, tile, first, count, |pos, sampler, sink, counters| {
+            let ray = ctx.scene.camera.generate_ray(pos);
+            counters.camera_rays += 1;
+            sink.l = self.li(ctx.scene, ray, sampler, counters);
+            true
+        })
+    }
+
+    fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 }

@@ -69,7 +69,7 @@ impl Scene {
             textures: HashMap::new(),
             shapes: Vec::new(),
             lights: Vec::new(),
-            stats: LoadStats::default(),
+            stats: LoadStats { files: doc.files.clone(), ..LoadStats::default() },
             progress: LoadProgress::new(options.progress),
         };
         let mut sensor = None;
@@ -271,6 +271,7 @@ impl<'d> Builder<'d> {
                 let raw = node.boolean_or("raw", false)?;
                 let bitmap = load_bitmap(&path, raw, filter, wrap)
                     .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
+                self.stats.files.push(path.clone());
                 Texture::Bitmap { bitmap: Arc::new(bitmap), to_uv }
             }
             "checkerboard" => {
@@ -480,7 +481,7 @@ impl<'d> Builder<'d> {
     }
 
     /// Reads the mesh file a shape names (a PLY file streamed, with a progress bar).
-    fn load_mesh(&self, node: &Node) -> Result<TriangleMesh> {
+    fn load_mesh(&mut self, node: &Node) -> Result<TriangleMesh> {
         let path = self.resolve_path(node, "filename")?;
         let size = match std::fs::metadata(&path) {
             Ok(m) if m.is_file() => m.len(),
@@ -503,6 +504,7 @@ impl<'d> Builder<'d> {
             })
         };
         let m = loaded.map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
+        self.stats.files.push(path.clone());
         let summary = format!(
             "read {}: {} triangles, {:.1} MB in {:.2} s",
             path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
@@ -686,6 +688,7 @@ impl<'d> Builder<'d> {
                 }
                 let bitmap = load_bitmap(&path, false, FilterType::Bilinear, WrapMode::Repeat)
                     .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
+                self.stats.files.push(path.clone());
                 if bitmap.texels.iter().any(|t| !t.is_finite() || t.min_element() < 0.0) {
                     return Err(Error::input(
                         &node.prop_loc("filename"),

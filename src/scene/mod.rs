@@ -59,6 +59,9 @@ pub struct LoadStats {
     pub bvh_seconds: f64,
     pub degenerate_triangles: usize,
     pub warnings: Vec<String>,
+    /// Every file the scene was read from: the scene file, its includes, meshes and
+    /// textures (what identifies a render's input, with the parameter overrides).
+    pub files: Vec<std::path::PathBuf>,
 }
 
 /// Options for loading a scene.

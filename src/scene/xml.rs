@@ -207,6 +207,8 @@ pub struct Document {
     pub path: PathBuf,
     /// Parameters after `<default>`s and command-line overrides.
     pub params: HashMap<String, String>,
+    /// The files read: the scene file and its `<include>`s, in the order read.
+    pub files: Vec<PathBuf>,
 }
 
 impl Document {
@@ -258,10 +260,11 @@ pub fn parse_str(text: &str, path: &Path, overrides: &[(String, String)]) -> Res
         overrides: overrides.iter().cloned().collect(),
         pending_refs: Vec::new(),
         include_depth: 0,
+        files: vec![path.to_path_buf()],
     };
     let root = p.parse_root(path, text)?;
     p.resolve_refs()?;
-    Ok(Document { nodes: p.nodes, root, path: path.to_path_buf(), params: p.params })
+    Ok(Document { nodes: p.nodes, root, path: path.to_path_buf(), params: p.params, files: p.files })
 }
 
 struct PendingRef {
@@ -278,6 +281,7 @@ struct Parser {
     overrides: HashMap<String, String>,
     pending_refs: Vec<PendingRef>,
     include_depth: usize,
+    files: Vec<PathBuf>,
 }
 
 /// `camelCase` → `snake_case`, Mitsuba 3's rule for upgrading version 0.x names.
@@ -453,6 +457,7 @@ impl Parser {
                         return Err(Error::input(&loc, "includes nested too deeply (a cycle?)"));
                     }
                     let text = Self::read(&path).map_err(|e| Error::input(&loc, format!("in <include>: {e}")))?;
+                    self.files.push(path.clone());
                     let inc = roxmltree::Document::parse(&text).map_err(|e| xml_error(&path, &e))?;
                     let r = inc.root_element();
                     let rloc = FileCtx { path: Arc::new(path.clone()), upgrade: false }.loc(&inc, r);

@@ -3,16 +3,19 @@
 //! `(s,t)`), and BDPT with efficiency-optimised Russian roulette on connections (EORR,
 //! contract §4).
 
-use super::mis::{Heuristic, StrategyCounts, mis_weight_with};
+use super::mis::{Counts, Heuristic, StrategyCounts, mis_weight_with};
 use super::{
     Connection, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
 };
 use crate::bsdf::TransportMode;
+use crate::film::Tile;
 use crate::integrator::Counters;
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::Vec2;
+use std::ops::Range;
 use std::slice::from_ref;
 
 /// Per-pixel thresholds of efficiency-optimised Russian roulette: a connection whose
@@ -323,6 +326,32 @@ pub fn check_lights(scene: &Scene, integrator: &str) -> Result<(), String> {
         return Err(format!("{}: the scene has no emitter", scene.path.display()));
     }
     Ok(())
+}
+
+/// BDPT (or light tracing, `light_only`) in the render loop: no state between iterations.
+pub struct BdptRender {
+    pub bdpt: Bdpt,
+    pub heuristic: Heuristic,
+}
+
+impl Iterative for BdptRender {
+    type Pass = ();
+
+    fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {
+        Prepared::only(())
+    }
+
+    fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
+        let counts = if self.bdpt.light_only { Counts::LightTrace } else { Counts::Bdpt };
+        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let mut scratch = Scratch::default();
+        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+            self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);
+            !self.bdpt.light_only
+        })
+    }
+
+    fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 }
 
 #[cfg(test)]

@@ -9,7 +9,9 @@
 
 pub mod bdpt;
 pub mod cache_fit;
+pub mod eorr;
 pub mod mis;
+pub mod pc_cache;
 pub mod pcbpt;
 pub mod pool;
 

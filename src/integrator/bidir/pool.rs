@@ -4,14 +4,18 @@
 //! uniformly — PCBPT without its cached PMFs.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::mis::StrategyCounts;
+use super::mis::{Counts, Heuristic, StrategyCounts};
 use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
-use crate::film::Splat;
-use crate::integrator::Counters;
+use crate::error::Error;
+use crate::film::{Splat, Tile};
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
+use crate::integrator::{Counters, RenderStats};
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
+use std::ops::Range;
+use std::time::Instant;
 
 /// Camera depths the concentration of pool draws is measured for: `z_1 .. z_15` each, deeper
 /// vertices together.
@@ -278,5 +282,103 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
                 }
             }
         }
+    }
+}
+/// Key of the pilot pool that measures `V̄` before the first iteration.
+pub(crate) const PILOT_ITERATION: u64 = u64::MAX;
+
+/// Bytes a light pool spends per vertex (the vertex and its path-start index).
+fn pool_vertex_bytes() -> usize {
+    std::mem::size_of::<Vertex>() + std::mem::size_of::<u32>() * 2
+}
+
+/// Checks that a pool of `m` light paths fits `max_pool_mb`, from the vertices per path of
+/// the pilot pool `pilot`, with a margin; `option` is the option that sets `m`.
+pub(crate) fn check_pool_memory(m: usize, pilot: &LightPool, max_pool_mb: usize, option: &str) -> Result<(), Error> {
+    const MIB: f64 = 1024.0 * 1024.0;
+    let per_path = pilot.vertices.len() as f64 / pilot.paths.max(1) as f64;
+    let mb = 1.5 * m as f64 * per_path.max(1.0) * pool_vertex_bytes() as f64 / MIB;
+    if mb > max_pool_mb as f64 {
+        return Err(Error::Usage(format!(
+            "the light pool of {m} paths ({per_path:.1} vertices per path) needs about {mb:.0} MiB, over the limit of \
+             {max_pool_mb} MiB (--max-pool-mb); use fewer light paths ({option}) or raise the limit"
+        )));
+    }
+    Ok(())
+}
+
+/// LVC in the render loop: one pool per iteration; the strategy counts use `V̄` of the
+/// previous iteration's pool (of a pilot pool before the first), so a chunk that starts at
+/// iteration `A` re-traces pool `A - 1`.
+pub struct LvcRender {
+    pub lvc: Lvc,
+    pub heuristic: Heuristic,
+    pub max_pool_mb: usize,
+    vbar: f32,
+    pool_size: Option<(usize, usize)>,
+}
+
+impl LvcRender {
+    pub fn new(lvc: Lvc, heuristic: Heuristic, max_pool_mb: usize) -> LvcRender {
+        LvcRender { lvc, heuristic, max_pool_mb, vbar: 0.0, pool_size: None }
+    }
+
+    fn counts(&self, scene: &Scene) -> Counts {
+        let pixels = scene.film.width as f32 * scene.film.height as f32;
+        Counts::Pool {
+            light_trace: self.lvc.light_paths as f32 / pixels,
+            connect: if self.vbar > 0.0 { self.lvc.connections as f32 / self.vbar } else { 0.0 },
+        }
+    }
+}
+
+impl Iterative for LvcRender {
+    type Pass = LightPool;
+
+    fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
+        let (m, limits) = (self.lvc.light_paths, &self.lvc.bdpt.limits);
+        let (pilot, _, _) = LightPool::trace::<Counts>(ctx.scene, limits, m, ctx.seed, PILOT_ITERATION, None);
+        check_pool_memory(m, &pilot, self.max_pool_mb, "--lvc-light-paths")?;
+        self.vbar = pilot.mean_vertices();
+        Ok(())
+    }
+
+    fn pass_end(&self, first: u32, _: u32) -> u32 {
+        first + 1
+    }
+
+    fn warmup(&self, first: u32) -> Warmup {
+        Warmup { iterations: first.saturating_sub(1)..first, tiles: false }
+    }
+
+    fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<LightPool> {
+        let t = Instant::now();
+        let counts = self.counts(ctx.scene);
+        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let splat = keep.then_some((&conn, &self.lvc.bdpt, ctx.layers));
+        let (pool, splats, counters) =
+            LightPool::trace(ctx.scene, &self.lvc.bdpt.limits, self.lvc.light_paths, ctx.seed, first as u64, splat);
+        work.phases.light_pool += t.elapsed().as_secs_f64();
+        work.shadow.light_pool += counters.shadow_rays;
+        Prepared { pass: pool, splats, counters }
+    }
+
+    fn render_tile(&self, ctx: &Ctx, pool: &LightPool, tile: Tile, first: u32, count: u32) -> TileResult {
+        let counts = self.counts(ctx.scene);
+        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let mut scratch = Scratch::default();
+        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+            self.lvc.sample(&conn, pool, pos, rng, &mut scratch, sink, counters);
+            true
+        })
+    }
+
+    fn finish(&mut self, _: &Ctx, pool: LightPool, _: Range<u32>, _: &[TileResult]) {
+        self.vbar = pool.mean_vertices();
+        self.pool_size = Some((pool.paths, pool.connectible.len()));
+    }
+
+    fn report(&self, stats: &mut RenderStats) {
+        stats.pool = self.pool_size;
     }
 }

@@ -1,0 +1,435 @@
+//! The render loop every integrator but the Metropolis ones shares. It knows no particular
+//! integrator: what one does per iteration is the [`Iterative`] interface (prepare a pass:
+//! pools, caches, counts; render a tile; finish: keep what the next iteration needs), and
+//! each integrator's state between iterations lives in that integrator's own file.
+//!
+//! An *iteration* is one sample per pixel. Iteration `i` of pixel `p` draws its random
+//! numbers from the stream keyed by (seed, p, i), and everything an integrator keeps from one
+//! iteration to the next is a function of the seed and the iteration index, so a render of
+//! iterations `A..B` (a chunk of a distributed render) computes what one process rendering
+//! `0..B` computes for those iterations. An integrator whose state at `A` comes from earlier
+//! iterations names them ([`Iterative::warmup`]) and the loop re-runs them first without
+//! keeping their images. The film's sums are exact ([`crate::film::ExactSum`]), so the films
+//! of the chunks add up to the one-process film bit for bit.
+//!
+//! Iterations are grouped into passes: tiles of a pass are rendered in parallel (`rayon`)
+//! into their own image blocks and merged in tile order, so a fixed seed gives the same
+//! image whatever the number of threads. Pass boundaries depend only on the render's total
+//! sample count (and on where an integrator's state changes), never on where a chunk starts.
+//! A time budget (`--time`) runs whole passes of one iteration until the budget is spent; a
+//! stop flag (set by Ctrl-C) ends the render after the pass in flight.
+//!
+//! Light-tracing contributions (`t = 1`) are splatted: each tile (and each part of a light
+//! pool) collects its splats in a list, and the lists are added to the film in order.
+
+use super::{
+    Budget, Counters, PhaseRays, PhaseTimes, RenderOptions, RenderOutput, RenderStats, take_snapshots, thread_pool,
+};
+use crate::error::Error;
+use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
+use crate::math::Rgb;
+use crate::sampling::Sampler;
+use crate::scene::Scene;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::ops::Range;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// What the passes of one render share.
+pub(crate) struct Ctx<'a> {
+    pub scene: &'a Scene,
+    pub seed: u64,
+    /// Keep per-strategy layers.
+    pub layers: bool,
+}
+
+/// A prepared pass: what its tiles share, and the splats and counters of the preparation
+/// (a light pool's light tracing, a cache's records).
+pub(crate) struct Prepared<P> {
+    pub pass: P,
+    pub splats: Vec<Splat>,
+    pub counters: Counters,
+}
+
+impl<P> Prepared<P> {
+    pub fn only(pass: P) -> Prepared<P> {
+        Prepared { pass, splats: Vec::new(), counters: Counters::default() }
+    }
+}
+
+/// Iterations to re-run before a chunk's first one, so that the integrator's state is the
+/// one a single process would have there.
+pub(crate) struct Warmup {
+    pub iterations: Range<u32>,
+    /// Whether their camera passes are needed too (or only their preparation).
+    pub tiles: bool,
+}
+
+/// Time and shadow rays of the passes' preparation.
+#[derive(Default)]
+pub(crate) struct Work {
+    pub phases: PhaseTimes,
+    pub shadow: PhaseRays,
+}
+
+/// What an integrator does per iteration, driven by [`run`].
+pub(crate) trait Iterative: Send + Sync {
+    /// What the tiles of a pass share (a light pool, a cache).
+    type Pass: Send + Sync;
+
+    /// Before the first pass: pilot measurements and memory checks.
+    fn begin(&mut self, _ctx: &Ctx) -> Result<(), Error> {
+        Ok(())
+    }
+
+    /// The end of a pass that starts at iteration `first` and may run to `end`: an
+    /// integrator whose state changes between iterations ends passes where it changes.
+    fn pass_end(&self, _first: u32, end: u32) -> u32 {
+        end
+    }
+
+    /// The iterations before `first` whose passes rebuild the state a one-process render
+    /// has when it reaches `first`.
+    fn warmup(&self, first: u32) -> Warmup {
+        Warmup { iterations: first..first, tiles: false }
+    }
+
+    /// Prepares the pass starting at iteration `first`. `keep` is false in warm-up passes,
+    /// whose images are not kept (splats may be skipped).
+    fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<Self::Pass>;
+
+    /// Renders iterations `first..first + count` of a tile.
+    fn render_tile(&self, ctx: &Ctx, pass: &Self::Pass, tile: Tile, first: u32, count: u32) -> TileResult;
+
+    /// After a pass's tiles (`results`, empty in a warm-up without tiles): keeps what the
+    /// next iterations need.
+    fn finish(&mut self, ctx: &Ctx, pass: Self::Pass, iterations: Range<u32>, results: &[TileResult]);
+
+    /// Adds the integrator's own statistics.
+    fn report(&self, _stats: &mut RenderStats) {}
+}
+
+/// Sink of one camera sample: its radiance, its per-strategy parts, and its splats.
+pub(crate) struct PixelSink<'a> {
+    pub l: Rgb,
+    parts: Vec<(u16, Rgb)>,
+    layers: bool,
+    splats: &'a mut Vec<Splat>,
+}
+
+impl super::bidir::Sink for PixelSink<'_> {
+    #[inline]
+    fn add(&mut self, s: usize, t: usize, value: Rgb) {
+        self.l += value;
+        if self.layers {
+            self.parts.push((strategy_layer(s, t) as u16, value));
+        }
+    }
+
+    #[inline]
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
+        self.splats.push(Splat::of_strategy(s, t, pos, value, self.layers));
+    }
+}
+
+/// A rendered tile of a pass.
+pub(crate) struct TileResult {
+    pub block: ImageBlock,
+    pub splats: Vec<Splat>,
+    pub counters: Counters,
+}
+
+/// Renders iterations `first..first + count` of every pixel of `tile`: `sample` estimates one
+/// camera sample at film position `pos` into the sink and says whether its radiance goes to
+/// the image (light tracing only splats).
+pub(crate) fn sample_tile(
+    ctx: &Ctx,
+    tile: Tile,
+    first: u32,
+    count: u32,
+    mut sample: impl FnMut(Vec2, &mut Sampler, &mut PixelSink, &mut Counters) -> bool,
+) -> TileResult {
+    crate::accel::embree::set_flush_denormals();
+    let layers = if ctx.layers { STRATEGY_LAYERS } else { 0 };
+    let mut block = ImageBlock::with_layers(tile, ctx.scene.film.filter, layers);
+    let mut counters = Counters::default();
+    let mut splats = Vec::new();
+    let mut sink = PixelSink { l: Rgb::ZERO, parts: Vec::new(), layers: ctx.layers, splats: &mut splats };
+    let width = ctx.scene.film.width as u64;
+    for y in tile.y0..tile.y0 + tile.height {
+        for x in tile.x0..tile.x0 + tile.width {
+            let pixel = y as u64 * width + x as u64;
+            for s in first..first + count {
+                let mut sampler = Sampler::new(&[ctx.seed, pixel, s as u64]);
+                let pos = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                sink.l = Rgb::ZERO;
+                sink.parts.clear();
+                if sample(pos, &mut sampler, &mut sink, &mut counters) {
+                    block.put_layers(pos, sink.l, &sink.parts);
+                }
+                counters.samples += 1;
+            }
+        }
+    }
+    TileResult { block, splats, counters }
+}
+
+/// Adds a pass's preparation splats and its tiles to a film, in a fixed order (preparation
+/// splats, then tile by tile).
+pub(crate) fn add_results(film: &mut Film, splats: &[Splat], light_paths: u64, results: &[TileResult]) {
+    film.add_splats(splats);
+    film.light_paths += light_paths;
+    for r in results {
+        film.merge(&r.block);
+        film.add_splats(&r.splats);
+        film.light_paths += r.counters.light_paths;
+    }
+}
+
+/// A finished camera pass not yet in the film: the preparation's splats and the tiles.
+struct PendingPass {
+    splats: Vec<Splat>,
+    light_paths: u64,
+    results: Vec<TileResult>,
+}
+
+/// Adds a finished pass to the film; returns the seconds it took.
+fn add_pass(film: &mut Film, pass: Option<PendingPass>) -> f64 {
+    let Some(pass) = pass else { return 0.0 };
+    let t = Instant::now();
+    add_results(film, &pass.splats, pass.light_paths, &pass.results);
+    t.elapsed().as_secs_f64()
+}
+
+/// Iterations per pass of a render of `total` samples per pixel at `w × h`: about 32
+/// passes, each of at most ~1 M samples so that progress and Ctrl-C stay responsive. Passes
+/// start at multiples of it, whatever range of iterations a chunk renders.
+fn pass_size(total: u32, w: u32, h: u32) -> u32 {
+    let cap = ((1u64 << 20) / (w as u64 * h as u64)).max(1) as u32;
+    total.div_ceil(32).clamp(1, cap)
+}
+
+/// The passes that cover `range`: boundaries at multiples of `per` and wherever the
+/// integrator ends one.
+fn next_pass<M: Iterative>(method: &M, first: u32, range_end: u32, per: u32) -> u32 {
+    let aligned = (first / per + 1) * per;
+    method.pass_end(first, aligned.min(range_end)).clamp(first + 1, range_end)
+}
+
+/// Renders iterations `iterations` (all of the budget when `None`) with `method`.
+pub(crate) fn run<M: Iterative>(
+    scene: &Scene,
+    opts: &RenderOptions,
+    mut method: M,
+    bidirectional: bool,
+    iterations: Option<Range<u32>>,
+) -> Result<RenderOutput, Error> {
+    let pool = thread_pool(opts.threads)?;
+    let threads = pool.current_num_threads();
+    let (w, h) = (scene.film.width, scene.film.height);
+    let layers = opts.strategy_images && bidirectional;
+    let ctx = Ctx { scene, seed: opts.seed, layers };
+    let tile_list = tiles(w, h, opts.tile_size.max(1));
+    let mut film = Film::with_layers(w, h, scene.film.filter, if layers { STRATEGY_LAYERS } else { 0 });
+    let (range, per) = match opts.budget {
+        Budget::Spp(spp) => (iterations.unwrap_or(0..spp), pass_size(spp, w, h)),
+        Budget::Time(_) => (0..u32::MAX, 1),
+    };
+    let mut counters = Counters::default();
+    let mut work = Work::default();
+    let start = Instant::now();
+    let bar = progress_bar(opts, w, h, tile_list.len(), range.len() as u32);
+    let mut first = range.start;
+    let mut passes = 0u32;
+    let mut interrupted = false;
+    let mut snapshots = Vec::new();
+    let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+    let result = pool.install(|| -> Result<(), Error> {
+        method.begin(&ctx)?;
+        // A chunk that starts late rebuilds the state of the iterations before it.
+        let warm = method.warmup(range.start);
+        let t_warm = Instant::now();
+        let mut i = warm.iterations.start;
+        while i < warm.iterations.end {
+            let end = next_pass(&method, i, warm.iterations.end, per);
+            let mut scratch = Work::default();
+            let prepared = method.prepare(&ctx, i, false, &mut scratch);
+            let results: Vec<TileResult> = if warm.tiles {
+                tile_list.par_iter().map(|&t| method.render_tile(&ctx, &prepared.pass, t, i, end - i)).collect()
+            } else {
+                Vec::new()
+            };
+            method.finish(&ctx, prepared.pass, i..end, &results);
+            i = end;
+        }
+        work.phases.warmup += t_warm.elapsed().as_secs_f64();
+        let mut pending: Option<PendingPass> = None;
+        while first < range.end {
+            let end = next_pass(&method, first, range.end, per);
+            let count = end - first;
+            let prepared = method.prepare(&ctx, first, true, &mut work);
+            let t_cam = Instant::now();
+            // The previous pass goes into the film while this one renders (one thread merges,
+            // then joins the tiles). A pass interrupted part-way is discarded whole, so every
+            // pixel keeps the same number of samples.
+            let (merge_seconds, results) = rayon::join(
+                || add_pass(&mut film, pending.take()),
+                || -> Option<Vec<TileResult>> {
+                    tile_list
+                        .par_iter()
+                        .map(|&t| {
+                            (!stopped()).then(|| {
+                                let r = method.render_tile(&ctx, &prepared.pass, t, first, count);
+                                // A pass of a large image takes long: the bar moves by tiles.
+                                if let Some(bar) = &bar {
+                                    match opts.budget {
+                                        Budget::Spp(_) => bar.inc(count as u64),
+                                        Budget::Time(secs) => bar.set_position(time_position(start, secs)),
+                                    }
+                                }
+                                r
+                            })
+                        })
+                        .collect()
+                },
+            );
+            work.phases.merge += merge_seconds;
+            work.phases.camera_pass += t_cam.elapsed().as_secs_f64();
+            let Some(results) = results else {
+                interrupted = true;
+                break;
+            };
+            counters += prepared.counters;
+            // The camera pass's counters, summed in tile order (the same sums whatever the
+            // thread count).
+            let mut pass_counters = Counters::default();
+            for r in &results {
+                pass_counters += r.counters;
+            }
+            counters += pass_counters;
+            work.shadow.camera_pass += pass_counters.shadow_rays;
+            method.finish(&ctx, prepared.pass, first..end, &results);
+            pending =
+                Some(PendingPass { splats: prepared.splats, light_paths: prepared.counters.light_paths, results });
+            first = end;
+            passes += 1;
+            let done = first - range.start;
+            take_snapshots(&opts.checkpoints, &mut snapshots, start.elapsed().as_secs_f64(), done, || {
+                work.phases.merge += add_pass(&mut film, pending.take());
+                film.develop()
+            });
+            if let Some(bar) = &bar {
+                match opts.budget {
+                    Budget::Spp(_) => bar.set_position(done as u64 * tile_list.len() as u64),
+                    Budget::Time(t) => bar.set_position(time_position(start, t)),
+                }
+                let secs = start.elapsed().as_secs_f64().max(1e-9);
+                bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
+            }
+            if stopped() {
+                interrupted = true;
+                break;
+            }
+            if let Budget::Time(t) = opts.budget
+                && start.elapsed() >= Duration::from_secs_f64(t)
+            {
+                break;
+            }
+        }
+        work.phases.merge += add_pass(&mut film, pending.take());
+        Ok(())
+    });
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    result?;
+    let seconds = start.elapsed().as_secs_f64();
+    let spp = first - range.start;
+    let mut stats = RenderStats {
+        passes,
+        phases: work.phases,
+        bidir: bidirectional.then(|| opts.bidir.clone()),
+        shadow_rays: work.shadow,
+        iterations: Some(range.start..first),
+        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
+    };
+    method.report(&mut stats);
+    let strategy_images =
+        (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
+    Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats, film: Some(film) })
+}
+
+/// The render's progress bar on a terminal: in tiles rendered times their samples per
+/// pixel (`tiles` per pass), or in thousandths of the time budget.
+fn progress_bar(opts: &RenderOptions, w: u32, h: u32, tiles: usize, spp: u32) -> Option<indicatif::ProgressBar> {
+    use std::io::IsTerminal;
+    if !opts.progress || !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let (len, template) = match opts.budget {
+        Budget::Spp(_) => (
+            spp as u64 * tiles as u64,
+            format!("{w}×{h} {{wide_bar}} {{percent}}% of {spp} spp, ETA {{eta}} — {{msg}}"),
+        ),
+        Budget::Time(_) => (1000, format!("{w}×{h} {{wide_bar}} {{elapsed}} — {{msg}}")),
+    };
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(&template) {
+        bar.set_style(style);
+    }
+    bar.enable_steady_tick(Duration::from_secs(1));
+    Some(bar)
+}
+
+/// The position of a time budget's progress bar: thousandths of `budget` seconds elapsed.
+fn time_position(start: Instant, budget: f64) -> u64 {
+    (start.elapsed().as_secs_f64() / budget * 1000.0).min(1000.0) as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Boundaries(Vec<u32>);
+
+    impl Iterative for Boundaries {
+        type Pass = ();
+        fn pass_end(&self, first: u32, end: u32) -> u32 {
+            self.0.iter().copied().find(|&b| b > first).map_or(end, |b| b.min(end))
+        }
+        fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {
+            Prepared::only(())
+        }
+        fn render_tile(&self, _: &Ctx, _: &(), _: Tile, _: u32, _: u32) -> TileResult {
+            unreachable!()
+        }
+        fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
+    }
+
+    /// The passes of a chunk are those of the one-process render that fall inside it.
+    #[test]
+    fn chunks_cut_passes_where_one_process_does() {
+        let m = Boundaries(vec![1, 2, 4]);
+        let passes = |r: Range<u32>| {
+            let mut out = Vec::new();
+            let mut i = r.start;
+            while i < r.end {
+                let e = next_pass(&m, i, r.end, 5);
+                out.push(e);
+                i = e;
+            }
+            out
+        };
+        let whole = passes(0..23);
+        assert_eq!(whole, vec![1, 2, 4, 5, 10, 15, 20, 23]);
+        for cut in 1..23 {
+            let mut parts = passes(0..cut);
+            parts.extend(passes(cut..23));
+            let mut expected: Vec<u32> = whole.iter().copied().filter(|&e| e != cut).collect();
+            expected.push(cut);
+            expected.sort();
+            assert_eq!(parts, expected, "cut at {cut}");
+        }
+    }
+}

@@ -1,0 +1,98 @@
+//! The render loop's images, bit for bit, for every integrator and option: the hashes of
+//! small renders (obvhs backend, pure Rust, so they do not depend on the CPU's Embree
+//! kernels) are kept in `tests/data/render_hashes.txt`. A change of the render loop that
+//! only moves code must leave them all unchanged; a change that is meant to change images
+//! re-records them with `PCBPT_BLESS_HASHES=1` and says why in its commit.
+#![cfg(feature = "obvhs")]
+
+mod common;
+
+use common::*;
+use pcbpt::accel::Backend;
+use pcbpt::integrator::bidir::mis::Heuristic;
+use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcSampling};
+use pcbpt::integrator::mlt::MltBase;
+use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+
+/// Every integrator with each of its options that changes what the loop does.
+fn cases() -> Vec<(&'static str, RenderOptions)> {
+    use IntegratorKind::*;
+    let base = |kind| {
+        let mut o = RenderOptions::new(kind, Budget::Spp(5));
+        o.seed = 7;
+        o.threads = 2;
+        o.tile_size = 16;
+        o
+    };
+    let with = |kind, f: &dyn Fn(&mut RenderOptions)| {
+        let mut o = base(kind);
+        f(&mut o);
+        o
+    };
+    vec![
+        ("path", base(Path)),
+        ("lighttrace", base(Lighttrace)),
+        ("bdpt", base(Bdpt)),
+        ("bdpt_balance", with(Bdpt, &|o| o.bidir.heuristic = Heuristic::Balance)),
+        ("bdpt_layers", with(Bdpt, &|o| o.strategy_images = true)),
+        ("eorr_running_mean", with(Eorr, &|o| o.bidir.eorr_pilot_spp = 0)),
+        ("eorr", base(Eorr)),
+        ("lvc", base(Lvc)),
+        ("lvc_3_connections", with(Lvc, &|o| o.bidir.lvc_connections = 3)),
+        ("pcbpt", base(Pcbpt)),
+        ("pcbpt_uniform", with(Pcbpt, &|o| o.bidir.pc.mis = PcMis::Uniform)),
+        ("pcbpt_resampling", with(Pcbpt, &|o| o.bidir.pc.mis = PcMis::Resampling)),
+        (
+            "pcbpt_cmf_printed",
+            with(Pcbpt, &|o| {
+                o.bidir.pc.sampling = PcSampling::Cmf;
+                o.bidir.pc.distance_term = DistanceTerm::Printed;
+            }),
+        ),
+        ("pcbpt_layers", with(Pcbpt, &|o| o.strategy_images = true)),
+        ("pssmlt", with(Pssmlt, &|o| o.mlt.bootstrap = 2000)),
+        (
+            "pssmlt_path",
+            with(Pssmlt, &|o| {
+                o.mlt.bootstrap = 2000;
+                o.mlt.base = MltBase::Path;
+            }),
+        ),
+    ]
+}
+
+/// FNV-1a over the image's bits and those of its per-strategy images.
+fn hash(out: &integrator::RenderOutput) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let images = std::iter::once(&out.image).chain(out.strategy_images.iter().map(|(_, i)| i));
+    for bits in images.flat_map(|i| i.iter().flat_map(|p| p.to_array().map(f32::to_bits))) {
+        for b in bits.to_le_bytes() {
+            h = (h ^ b as u64).wrapping_mul(0x100_0000_01b3);
+        }
+    }
+    h
+}
+
+#[test]
+fn images_are_those_recorded() {
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "40"), ("resy", "30")], Backend::Obvhs);
+    let file = root().join("tests/data/render_hashes.txt");
+    let got: Vec<(String, u64)> = cases()
+        .into_iter()
+        .map(|(name, o)| (name.to_string(), hash(&integrator::render(&scene, &o).unwrap())))
+        .collect();
+    if std::env::var_os("PCBPT_BLESS_HASHES").is_some() {
+        let text: String = got.iter().map(|(n, h)| format!("{n} {h:016x}\n")).collect();
+        std::fs::write(&file, text).unwrap();
+        return;
+    }
+    let recorded = std::fs::read_to_string(&file).unwrap();
+    let mut mismatches = Vec::new();
+    for (name, h) in &got {
+        let want = recorded.lines().find_map(|l| l.strip_prefix(&format!("{name} "))).map(str::trim);
+        if want != Some(format!("{h:016x}").as_str()) {
+            mismatches.push(format!("{name}: {h:016x}, recorded {want:?}"));
+        }
+    }
+    assert!(mismatches.is_empty(), "images changed:\n{}", mismatches.join("\n"));
+}
