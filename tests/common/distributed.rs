@@ -61,28 +61,31 @@ pub fn single_render(options: &[String], out: &Path) {
     assert!(o.status.success(), "single-process render failed: {}", String::from_utf8_lossy(&o.stderr));
 }
 
-/// Panics unless `a` and `b` hold the same pixels, every channel the same bits; the message
-/// counts the pixels that differ and shows the first.
-pub fn assert_same_bits(a: &Path, b: &Path) {
+/// The number of pixels of `a` and `b` that differ in any bit of any channel, with the
+/// first such pixel's message; panics if the two differ in size.
+pub fn differing_pixels(a: &Path, b: &Path) -> (usize, String) {
     let read = |p: &Path| image_io::read_exr(p).unwrap_or_else(|e| panic!("reading {}: {e}", p.display()));
     let (x, y) = (read(a), read(b));
     assert_eq!((x.width, x.height), (y.width, y.height), "{} and {} differ in size", a.display(), b.display());
+    assert!(x.mean() > 0.0 && y.mean() > 0.0, "{} or {} is black", a.display(), b.display());
     let bits = |p: pcbpt::math::Rgb| p.to_array().map(f32::to_bits);
     let differ: Vec<usize> = (0..x.pixels.len()).filter(|&i| bits(x.pixels[i]) != bits(y.pixels[i])).collect();
-    if let Some(&i) = differ.first() {
-        panic!(
-            "{} and {} differ in {} of {} pixels; first at ({}, {}): {:?} against {:?}",
-            a.display(),
-            b.display(),
-            differ.len(),
-            x.pixels.len(),
+    let first = differ.first().map_or(String::new(), |&i| {
+        format!(
+            "first at ({}, {}): {:?} against {:?}",
             i as u32 % x.width,
             i as u32 / x.width,
             x.pixels[i],
             y.pixels[i]
-        );
-    }
-    assert!(x.mean() > 0.0, "{} is black", a.display());
+        )
+    });
+    (differ.len(), first)
+}
+
+/// Panics unless `a` and `b` hold the same pixels, every channel the same bits.
+pub fn assert_same_bits(a: &Path, b: &Path) {
+    let (n, first) = differing_pixels(a, b);
+    assert!(n == 0, "{} and {} differ in {n} pixels; {first}", a.display(), b.display());
 }
 
 /// The text of a command's output, for messages.
