@@ -40,6 +40,7 @@ fi
 [ -x "$pcbpt" ] || { echo "bench_chunks: no $pcbpt (cargo build --release, or set PCBPT)" >&2; exit 1; }
 
 work=$(mktemp -d /tmp/pcbpt-bench-chunks.XXXXXX)
+chmod 755 "$work" # munged runs as user munge, under it
 own_cluster=0
 cleanup() {
   if [ "$own_cluster" -eq 1 ]; then "$root/scripts/slurm/local_cluster.sh" stop "$work/cluster" || true; fi

@@ -115,6 +115,8 @@ rm -f "$dir/munge/munge.key"
 mungekey --create --keyfile="$dir/munge/munge.key"
 chown munge:munge "$dir/munge/munge.key"
 chmod 600 "$dir/munge/munge.key"
+setpriv --reuid=munge --regid=munge --clear-groups test -r "$dir/munge/munge.key" ||
+  fail "user munge cannot reach $dir/munge: the folders above $dir must be searchable by others (chmod o+x)"
 
 socket=$dir/munge/munge.socket
 setpriv --reuid=munge --regid=munge --clear-groups munged --foreground \
