@@ -5,9 +5,9 @@
 #   cargo build --release
 #   scripts/bench_chunks.sh [--chunks "1 2 4"] [--merge-parts "4 16"] [SCENE [render options...]]
 #
-# Renders SCENE (default: veach-ajar, 480×270, 64 spp, seed 1) once in a single process,
-# then as N chunks (each given every CPU of the node, so they run one after another)
-# through scripts/slurm/render.sh --wait, and reports for each N: the wall time from
+# Renders SCENE (default: veach-ajar, 480×270, 96 spp, seed 1: about 30 s on 2 threads)
+# once in a single process, then as N chunks (each given every CPU of the node, so they run
+# one after another) through scripts/slurm/render.sh --wait, and reports for each N: the wall time from
 # submission to the merged image, the chunks' time as their logs give it (whole task, and
 # the render's own figures: rendering, loading), the merge, and the scheduler's overhead:
 # submission to the merge's end, less the chunks' and the merge's times. Every merged image
@@ -35,9 +35,10 @@ if [ $# -gt 0 ]; then
   opts=("$@")
 else
   scene=$root/scenes/veach-ajar/scene.xml
-  opts=(-D resx=480 -D resy=270 --spp 64 --seed 1)
+  opts=(-D resx=480 -D resy=270 --spp 96 --seed 1)
 fi
 [ -x "$pcbpt" ] || { echo "bench_chunks: no $pcbpt (cargo build --release, or set PCBPT)" >&2; exit 1; }
+export PCBPT=$pcbpt # for render.sh
 
 work=$(mktemp -d /tmp/pcbpt-bench-chunks.XXXXXX)
 chmod 755 "$work" # munged runs as user munge, under it
