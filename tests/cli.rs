@@ -293,17 +293,23 @@ fn bdpt_writes_strategy_images_and_bidirectional_statistics() {
 }
 
 #[test]
-fn bidirectional_integrators_refuse_lights_at_infinity_clearly() {
+fn bidirectional_integrators_render_lights_at_infinity_and_refuse_a_scene_without_light() {
     let d = tempfile::tempdir().unwrap();
     let s = scene(d.path(), "sky.xml", r#"    <emitter type="constant"><rgb name="radiance" value="1"/></emitter>"#);
     let out = d.path().join("sky.exr");
-    for integrator in ["bdpt", "lighttrace", "eorr", "lvc", "pcbpt"] {
+    for integrator in ["bdpt", "lighttrace", "eorr", "lvc", "pcbpt", "pssmlt"] {
         let o = pcbpt(&["render", s.to_str().unwrap(), "--integrator", integrator, "-o", out.to_str().unwrap(), "-q"]);
         let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(1), "{err}");
-        assert!(err.contains("sky.xml") && err.contains("constant emitter"), "{err}");
-        assert!(!out.exists());
+        assert!(o.status.success(), "{integrator}: {err}");
+        assert!(out.exists());
+        std::fs::remove_file(&out).unwrap();
     }
+    let dark = scene(d.path(), "dark.xml", "");
+    let o = pcbpt(&["render", dark.to_str().unwrap(), "--integrator", "bdpt", "-o", out.to_str().unwrap(), "-q"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("dark.xml") && err.contains("no emitter"), "{err}");
+    assert!(!out.exists());
 }
 
 #[test]
