@@ -125,7 +125,7 @@ fn scene(variant: Variant) -> Scene {
 fn as_surface(scene: &Scene, v: &Vertex) -> Option<Vertex> {
     let VertexKind::Light(l) = v.kind else { return Some(*v) };
     if scene.lights[l as usize].at_infinity() {
-        return (!scene.lights[l as usize].is_unreachable()).then(|| Vertex {
+        return (!scene.lights[l as usize].is_unreachable()).then_some(Vertex {
             kind: VertexKind::Sky,
             connectible: false,
             ..*v
