@@ -293,17 +293,23 @@ fn bdpt_writes_strategy_images_and_bidirectional_statistics() {
 }
 
 #[test]
-fn bidirectional_integrators_refuse_lights_at_infinity_clearly() {
+fn bidirectional_integrators_render_lights_at_infinity_and_refuse_a_scene_without_light() {
     let d = tempfile::tempdir().unwrap();
     let s = scene(d.path(), "sky.xml", r#"    <emitter type="constant"><rgb name="radiance" value="1"/></emitter>"#);
     let out = d.path().join("sky.exr");
-    for integrator in ["bdpt", "lighttrace", "eorr", "lvc", "pcbpt"] {
+    for integrator in ["bdpt", "lighttrace", "eorr", "lvc", "pcbpt", "pssmlt"] {
         let o = pcbpt(&["render", s.to_str().unwrap(), "--integrator", integrator, "-o", out.to_str().unwrap(), "-q"]);
         let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(1), "{err}");
-        assert!(err.contains("sky.xml") && err.contains("constant emitter"), "{err}");
-        assert!(!out.exists());
+        assert!(o.status.success(), "{integrator}: {err}");
+        assert!(out.exists());
+        std::fs::remove_file(&out).unwrap();
     }
+    let dark = scene(d.path(), "dark.xml", "");
+    let o = pcbpt(&["render", dark.to_str().unwrap(), "--integrator", "bdpt", "-o", out.to_str().unwrap(), "-q"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("dark.xml") && err.contains("no emitter"), "{err}");
+    assert!(!out.exists());
 }
 
 #[test]
@@ -504,4 +510,44 @@ fn embree_configuration_is_passed_through_and_checked() {
         assert_eq!(o.status.code(), Some(1), "{err}");
         assert!(err.contains(expect) && !err.contains("panicked"), "expected {expect:?} in: {err}");
     }
+}
+
+#[test]
+fn chunks_render_and_merge_from_the_command_line_and_bad_parts_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path(), "s.xml", LIGHT);
+    let sp = s.to_str().unwrap();
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let run = |args: &[&str]| {
+        let o = pcbpt(args);
+        (o.status.success(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let base = ["render", sp, "--integrator", "bdpt", "--spp", "5", "--seed", "4", "--quiet"];
+    let whole = out("whole.exr");
+    assert!(run(&[&base[..], &["-o", &whole]].concat()).0);
+    for i in 0..2 {
+        let part = out(&format!("p{i}.exr"));
+        let (ok, err) = run(&[&base[..], &["--chunk", &format!("{i}/2"), "-o", &part]].concat());
+        assert!(ok, "{err}");
+    }
+    let merged = out("merged.exr");
+    let (ok, err) = run(&["merge", &out("p1.exr"), &out("p0.exr"), "-o", &merged, "--quiet"]);
+    assert!(ok, "{err}");
+    assert!(std::fs::read(&whole).unwrap() == std::fs::read(&merged).unwrap(), "the merge is the one-process file");
+    // A missing chunk, a plain image, an empty or out-of-range chunk, a chunk with a time
+    // budget: errors that say what is wrong, and no output.
+    let x = out("x.exr");
+    let (ok, err) = run(&["merge", &out("p0.exr"), "-o", &x]);
+    assert!(!ok && err.contains("missing 2..5") && err.contains("--partial"), "{err}");
+    let (ok, err) = run(&["merge", &out("p0.exr"), &whole, "-o", &x]);
+    assert!(!ok && err.contains("whole.exr") && err.contains("not a partial render"), "{err}");
+    let (ok, err) = run(&[&base[..], &["--chunk", "2/2", "-o", &x]].concat());
+    assert!(!ok && err.contains("--chunk 2/2"), "{err}");
+    let (ok, err) = run(&[&base[..], &["--chunk", "0/9", "-o", &x]].concat());
+    assert!(!ok && err.contains("empty"), "{err}");
+    let (ok, err) = run(&["render", sp, "--time", "1", "--chunk", "0/2", "-o", &x, "--quiet"]);
+    assert!(!ok && err.contains("--time"), "{err}");
+    let (ok, err) = run(&[&base[..], &["--chunk", "0/2", "-o", &out("x.png")]].concat());
+    assert!(!ok && err.contains("EXR"), "{err}");
+    assert!(!dir.path().join("x.exr").exists() && !dir.path().join("x.png").exists());
 }

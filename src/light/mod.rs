@@ -290,6 +290,34 @@ impl Light {
         matches!(self, Light::Point { .. } | Light::Spot { .. })
     }
 
+    /// `true` when no ray can hit the light: a delta position or a delta direction.
+    pub fn is_unreachable(&self) -> bool {
+        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. })
+    }
+
+    /// `true` for lights at infinity: `directional`, `constant`, `envmap`.
+    pub fn at_infinity(&self) -> bool {
+        matches!(self, Light::Directional { .. } | Light::Constant { .. } | Light::Envmap(_))
+    }
+
+    /// Samples light arriving from infinity, for a light subpath: the unit direction `wi`
+    /// *towards* the light (the light travels along `-wi`) and its solid-angle density (1 for a
+    /// directional light's delta), and the radiance (irradiance for directional lights)
+    /// carried along it. The ray then starts on the disk of radius `bounds.radius` facing
+    /// `-wi` ([`disk_point`]).
+    pub fn sample_infinite_direction(&self, u: Vec2) -> Option<(Vec3, f32, Rgb)> {
+        match self {
+            Light::Directional { direction, irradiance } => Some((-*direction, 1.0, *irradiance)),
+            Light::Constant { radiance } => Some((square_to_uniform_sphere(u), UNIFORM_SPHERE_PDF, *radiance)),
+            Light::Envmap(e) => {
+                let (wi, pdf) = e.sample(u)?;
+                let li = e.eval(wi);
+                (li != Rgb::ZERO && pdf > 0.0).then_some((wi, pdf, li))
+            }
+            _ => None,
+        }
+    }
+
     /// Samples a point on the light (area lights uniformly by area) and a direction of
     /// emission (area lights: cosine-weighted about the normal; point lights: uniform;
     /// spot lights: uniform within the cutoff cone).
@@ -368,6 +396,16 @@ impl Light {
     }
 }
 
+/// A point of the disk of radius `bounds.radius` that faces direction `wi` across the
+/// bounding sphere (centred at `center + radius · wi`, perpendicular to `wi`), uniform in
+/// area: where a light path from infinity arriving along `-wi` starts. Its density is
+/// `1 / (π radius²)`.
+pub fn disk_point(bounds: &Bounds, wi: Vec3, u: Vec2) -> Vec3 {
+    let d = crate::sampling::square_to_uniform_disk_concentric(u) * bounds.radius;
+    let f = Frame::from_normal(wi);
+    bounds.center + wi * bounds.radius + f.s * d.x + f.t * d.y
+}
+
 /// Mitsuba 3's spot falloff: 1 inside the beam, linear in angle to 0 at the cutoff.
 #[inline]
 pub fn spot_falloff(cos_theta: f32, cutoff: f32, beam_width: f32) -> f32 {
@@ -393,7 +431,7 @@ impl LightSampler {
         let sphere_lights = lights.iter().any(|l| {
             matches!(l, Light::Area { shape, .. } if matches!(shapes[*shape].geometry, ShapeGeometry::Sphere { .. }))
         });
-        let delta_position_lights = lights.iter().any(Light::is_delta_position);
+        let delta_position_lights = lights.iter().any(Light::is_unreachable);
         let distribution = (!lights.is_empty()).then(|| {
             let powers: Vec<f32> = lights.iter().map(|l| l.power(shapes, bounds)).collect();
             Distribution1D::new(&powers)
@@ -408,7 +446,8 @@ impl LightSampler {
         self.sphere_lights
     }
 
-    /// Whether some light has a delta position (point and spot lights).
+    /// Whether some light cannot be reached by a ray: a delta position (point and spot
+    /// lights) or a delta direction (directional lights).
     #[inline]
     pub fn any_delta_position(&self) -> bool {
         self.delta_position_lights
@@ -592,5 +631,62 @@ mod tests {
             },
         );
         assert!(!r.passed(), "{r}");
+    }
+
+    /// Counts of disk points (from `point(u)`) in 8 rings of equal area × 16 sectors of
+    /// the disk facing `wi`, against the uniform density's equal counts.
+    fn disk_cells(wi: Vec3, point: impl Fn(Vec2) -> Vec3) -> crate::sampling::chi2::Chi2Result {
+        let bounds = Bounds { center: Vec3::new(0.3, -0.2, 0.5), radius: 2.5 };
+        let f = Frame::from_normal(wi);
+        let (rings, sectors, n) = (8usize, 16usize, 200_000usize);
+        let mut counts = vec![0u64; rings * sectors];
+        let mut rng = crate::sampling::Sampler::new(&[17]);
+        for _ in 0..n {
+            let q = point(rng.next_2d()) - (bounds.center + wi * bounds.radius);
+            assert!(q.dot(wi).abs() < 1e-4, "the point leaves the disk's plane");
+            let (x, y) = (q.dot(f.s) / bounds.radius, q.dot(f.t) / bounds.radius);
+            let r2 = x * x + y * y;
+            assert!(r2 <= 1.0 + 1e-4, "outside the disk: r² = {r2}");
+            let ring = ((r2 * rings as f32) as usize).min(rings - 1);
+            let phi = y.atan2(x).rem_euclid(2.0 * PI);
+            let sector = ((phi / (2.0 * PI) * sectors as f32) as usize).min(sectors - 1);
+            counts[ring * sectors + sector] += 1;
+        }
+        let expected = vec![n as f64 / (rings * sectors) as f64; rings * sectors];
+        crate::sampling::chi2::discrete_chi2(&counts, &expected)
+    }
+
+    #[test]
+    fn disk_points_of_lights_at_infinity_are_uniform_chi2() {
+        let bounds = Bounds { center: Vec3::new(0.3, -0.2, 0.5), radius: 2.5 };
+        for wi in [Vec3::Z, Vec3::new(0.3, -0.8, 0.2).normalize(), -Vec3::X] {
+            disk_cells(wi, |u| disk_point(&bounds, wi, u)).assert_pass();
+        }
+        // Negative control: points uniform in radius, not in area.
+        let wi = Vec3::new(0.3, -0.8, 0.2).normalize();
+        let r = disk_cells(wi, |u| {
+            let f = Frame::from_normal(wi);
+            let (r, phi) = (u.x * bounds.radius, 2.0 * PI * u.y);
+            bounds.center + wi * bounds.radius + f.s * (r * phi.cos()) + f.t * (r * phi.sin())
+        });
+        assert!(!r.passed(), "{r}");
+    }
+
+    #[test]
+    fn directions_of_lights_at_infinity_follow_their_densities_chi2() {
+        // Light subpaths draw their direction as next-event estimation does.
+        let env = Light::Envmap(Arc::new(gradient_envmap()));
+        let constant = Light::Constant { radiance: Vec3::ONE };
+        for light in [&env, &constant] {
+            let t = Chi2Test::new(SphereDomain::default());
+            t.run(|u| light.sample_infinite_direction(u).map(|(wi, _, _)| wi), |w| light.pdf_infinite(w)).assert_pass();
+        }
+        // Negative control: the constant light's density claimed for the envmap's draws.
+        let t = Chi2Test::new(SphereDomain::default());
+        let r = t.run(|u| env.sample_infinite_direction(u).map(|(wi, _, _)| wi), |_| UNIFORM_SPHERE_PDF);
+        assert!(!r.passed(), "{r}");
+        // A directional light's direction is a delta: always the same.
+        let d = Light::Directional { direction: Vec3::new(0.0, -1.0, 0.0), irradiance: Vec3::ONE };
+        assert_eq!(d.sample_infinite_direction(Vec2::new(0.3, 0.9)).map(|s| s.0), Some(Vec3::Y));
     }
 }

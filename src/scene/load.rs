@@ -926,7 +926,9 @@ fn scene_bounds(shapes: &[Shape], camera: Vec3) -> Bounds {
         }
     }
     let center = (lo + hi) * 0.5;
-    Bounds { center, radius: ((hi - lo).length() * 0.5).max(1e-3) }
+    // A scene of nothing but the camera still gets a sphere (lights at infinity start their
+    // paths on a disk of its radius), large enough for the coordinates around it.
+    Bounds { center, radius: ((hi - lo).length() * 0.5).max(1e-3 * (1.0 + center.abs().max_element())) }
 }
 
 /// `n` with a space between groups of three digits (`10 000 000`).

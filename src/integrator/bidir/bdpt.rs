@@ -80,11 +80,14 @@ impl<C: StrategyCounts> Connector<'_, C> {
     pub fn emission(&self, camera: &[Vertex], sink: &mut impl Sink) {
         let t = camera.len();
         let pt = &camera[t - 1];
-        if pt.kind != VertexKind::Surface {
-            return;
-        }
-        let Some(l) = self.scene.shapes[pt.shape as usize].light else { return };
-        let le = self.scene.lights[l].radiance(pt.ng, pt.uv, pt.wo);
+        let le = match pt.kind {
+            VertexKind::Surface => {
+                let Some(l) = self.scene.shapes[pt.shape as usize].light else { return };
+                self.scene.lights[l].radiance(pt.ng, pt.uv, pt.wo)
+            }
+            VertexKind::Sky => pt.infinite_emission(self.scene),
+            _ => return,
+        };
         if le == Rgb::ZERO {
             return;
         }
@@ -117,20 +120,24 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return;
         }
         let c = pt.beta * camera_end.f * ls.li / (pmf * ls.pdf);
-        let y0 = Vertex::light(l, ls.p, ls.n, Vec2::ZERO, Rgb::ONE, light_origin_pdf(scene, l));
-        let dist2 = (ls.p - pt.p).length_squared();
-        let conn = Connection {
-            w: -ls.wi,
-            dist2,
-            inv_dist2: 1.0 / dist2,
+        let light = &scene.lights[l];
+        let conn = if light.at_infinity() {
+            // A light at infinity: `y_0` is the direction, and `z_{t-1}`'s density from it
+            // that of a point on the disk facing it (no distance term either way).
+            let mut y0 = Vertex::light(l, ls.p, ls.wi, Vec2::ZERO, Rgb::ONE, 0.0);
+            y0.infinite = true;
+            y0.connectible = false;
+            y0.pdf_fwd = y0.pdf_light_origin(scene);
+            let light_end = End { f: Rgb::ZERO, pdf_fwd: super::disk_pdf(scene), pdf_rev: 0.0 };
+            (y0, Connection { w: -ls.wi, dist2: 1.0, inv_dist2: 1.0, light_end, camera_end })
+        } else {
+            let y0 = Vertex::light(l, ls.p, ls.n, Vec2::ZERO, Rgb::ONE, light_origin_pdf(scene, l));
+            let dist2 = (ls.p - pt.p).length_squared();
             // Only the emission density matters at a sampled light point.
-            light_end: End {
-                f: Rgb::ZERO,
-                pdf_fwd: scene.lights[l].pdf_emission_direction(ls.n, -ls.wi),
-                pdf_rev: 0.0,
-            },
-            camera_end,
+            let light_end = End { f: Rgb::ZERO, pdf_fwd: light.pdf_emission_direction(ls.n, -ls.wi), pdf_rev: 0.0 };
+            (y0, Connection { w: -ls.wi, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
         };
+        let (y0, conn) = conn;
         self.finish(from_ref(&y0), camera, &conn, c, pos, rng, sink, counters, |s, w| s.add(1, t, w));
     }
 
@@ -283,6 +290,19 @@ impl Bdpt {
         if self.light_only {
             scratch.camera.clear();
             scratch.camera.push(Vertex::camera(scene.camera.position));
+            if !scene.infinite_lights.is_empty() && self.allowed(0, 2) {
+                // No light path reaches the pinhole from infinity: the camera ray finds the
+                // sky seen directly.
+                let ray = scene.camera.generate_ray(pos);
+                counters.camera_rays += 1;
+                if scene.intersect(&ray).is_none() {
+                    let mut sky = Vertex::sky(scene, ray.o, ray.d, Rgb::ONE);
+                    sky.pdf_fwd = scene.camera.pdf_direction(ray.d);
+                    scratch.camera.push(sky);
+                    conn.emission(&scratch.camera, sink);
+                    scratch.camera.truncate(1);
+                }
+            }
         } else {
             camera_subpath(scene, pos, &self.limits, rng, &mut scratch.camera, counters);
         }
@@ -306,24 +326,13 @@ impl Bdpt {
     }
 }
 
-/// Checks that the scene's lights are ones the bidirectional integrators can start light
-/// paths from.
+/// Checks that the scene has a light to start light paths from.
 pub fn check_lights(scene: &Scene, integrator: &str) -> Result<(), String> {
-    if let Some(l) = scene.lights.iter().find(|l| !l.is_finite()) {
-        let kind = match l {
-            crate::light::Light::Directional { .. } => "directional",
-            crate::light::Light::Constant { .. } => "constant",
-            crate::light::Light::Envmap(_) => "envmap",
-            _ => "this",
-        };
+    if scene.lights.is_empty() {
         return Err(format!(
-            "{}: the {integrator} integrator supports area, point and spot emitters; the scene has a {kind} emitter \
-             (render it with --integrator path)",
+            "{}: the scene has no emitter (the {integrator} integrator needs one)",
             scene.path.display()
         ));
-    }
-    if scene.lights.is_empty() {
-        return Err(format!("{}: the scene has no emitter", scene.path.display()));
     }
     Ok(())
 }
@@ -345,9 +354,11 @@ impl Iterative for BdptRender {
         let counts = if self.bdpt.light_only { Counts::LightTrace } else { Counts::Bdpt };
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
         let mut scratch = Scratch::default();
+        // Light tracing only splats, but for the sky seen directly.
+        let camera_samples = !self.bdpt.light_only || !ctx.scene.infinite_lights.is_empty();
         sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
             self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);
-            !self.bdpt.light_only
+            camera_samples
         })
     }
 

@@ -38,8 +38,10 @@ pub struct PathPdfs<const N: usize = CAP> {
     pub pe: [f32; N],
     /// `x_i` scatters through a Dirac delta (no connection can end there).
     pub delta: [bool; N],
-    /// `x_0` is a light with a delta position (no camera path can hit it).
+    /// `x_0` is a light with a delta position or direction (no camera path can hit it).
     pub delta_light: bool,
+    /// `x_0` lies at infinity: the pinhole cannot be connected to it (`s = 1, t = 1`).
+    pub x0_at_infinity: bool,
     /// Density of next-event estimation producing `x_0` from `x_1`, over `pL(x_0)`.
     pub nee_ratio: f32,
 }
@@ -47,14 +49,23 @@ pub struct PathPdfs<const N: usize = CAP> {
 impl<const N: usize> PathPdfs<N> {
     pub fn new(n: usize) -> PathPdfs<N> {
         assert!(n <= N, "a path of {n} vertices does not fit in {N}");
-        PathPdfs { n, pl: [0.0; N], pe: [0.0; N], delta: [false; N], delta_light: false, nee_ratio: 1.0 }
+        PathPdfs {
+            n,
+            pl: [0.0; N],
+            pe: [0.0; N],
+            delta: [false; N],
+            delta_light: false,
+            x0_at_infinity: false,
+            nee_ratio: 1.0,
+        }
     }
 
     /// Whether strategy `s` can produce this path: the camera is a pinhole (so `t >= 1`),
-    /// a point light cannot be hit, and neither end of the connecting edge is specular.
+    /// a point or directional light cannot be hit, the pinhole cannot be joined to a light at
+    /// infinity, and neither end of the connecting edge is specular.
     #[inline]
     pub fn valid(&self, s: usize) -> bool {
-        if s >= self.n {
+        if s >= self.n || (s == 1 && self.n == 2 && self.x0_at_infinity) {
             return false;
         }
         if s == 0 { !self.delta_light } else { !(self.delta[s - 1] | self.delta[s]) }
@@ -197,7 +208,7 @@ pub trait StrategyCounts {
 pub enum Counts {
     /// BDPT: every strategy once.
     Bdpt,
-    /// Light tracing alone: only `t = 1`.
+    /// Light tracing alone: only `t = 1` (and the camera ray to the sky).
     LightTrace,
     /// A light pool shared by all pixels: light tracing from `M` paths over `W·H` pixels
     /// (`light_trace = M / (W·H)`) and `N` uniform pool connections per camera vertex
@@ -211,11 +222,13 @@ impl StrategyCounts for Counts {
     }
 
     #[inline]
-    fn count(&self, _path: &FullPath, s: usize, t: usize) -> f32 {
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
         match *self {
             Counts::Bdpt => 1.0,
+            // Light tracing cannot reach the pinhole from infinity: the sky seen directly is
+            // the camera ray's (`s = 0, t = 2`).
             Counts::LightTrace => {
-                if t == 1 {
+                if t == 1 || s == 0 && t == 2 && path.get(0).infinite {
                     1.0
                 } else {
                     0.0
@@ -285,9 +298,10 @@ pub fn path_pdfs<const N: usize>(
     let x0 = if s > 0 { &light[0] } else { pt };
     p.delta_light = scene.light_sampler.any_delta_position()
         && match x0.kind {
-            VertexKind::Light(l) => scene.lights[l as usize].is_delta_position(),
+            VertexKind::Light(l) => scene.lights[l as usize].is_unreachable(),
             _ => false,
         };
+    p.x0_at_infinity = n == 2 && x0.at_infinity();
     let x1 = FullPath { light, camera }.get(1).p;
     p.nee_ratio = nee_ratio(scene, x0, x1);
     p
@@ -385,10 +399,11 @@ pub fn brute_force_weights(
         })
         .collect();
     let nee = nee_ratio(scene, &path[0], path[1].p) as f64;
-    let delta_light = matches!(path[0].kind, VertexKind::Light(l) if scene.lights[l as usize].is_delta_position());
+    let delta_light = matches!(path[0].kind, VertexKind::Light(l) if scene.lights[l as usize].is_unreachable());
+    let at_infinity = path[0].at_infinity();
     let dens: Vec<f64> = (0..n)
         .map(|s| {
-            if s == 0 && delta_light {
+            if s == 0 && delta_light || s == 1 && n == 2 && at_infinity {
                 return 0.0;
             }
             // Strategy s: the light subpath is path[0..s], the camera subpath the rest.

@@ -36,9 +36,20 @@ pub enum VertexKind {
     Light(u32),
     /// A surface point reached by a walk.
     Surface,
+    /// Where a camera walk leaves the scene: every light at infinity (`constant`, `envmap`)
+    /// seen in one direction.
+    Sky,
 }
 
 /// A path vertex.
+///
+/// Vertices at infinity (a light subpath's start on a `directional`, `constant` or `envmap`
+/// light, a light sampled at infinity by next-event estimation, and [`VertexKind::Sky`]) keep
+/// in `ng` the unit direction from the scene towards the light, and in `p` a point outside
+/// the scene in that direction (the start of a light subpath's ray on the disk facing it).
+/// Densities of generating a vertex at infinity are solid-angle densities, and the density of
+/// the vertex a light at infinity generates is `|cos| / (π R²)` (a point on the disk of the
+/// bounding sphere's radius `R`, then along the direction): pbrt-v4's measures.
 #[derive(Clone, Copy, Debug)]
 pub struct Vertex {
     pub kind: VertexKind,
@@ -68,6 +79,8 @@ pub struct Vertex {
     pub connectible: bool,
     /// The shading normal is the geometric normal (no shading-normal correction).
     pub flat: bool,
+    /// The vertex lies at infinity (see above).
+    pub infinite: bool,
 }
 
 impl Vertex {
@@ -88,6 +101,7 @@ impl Vertex {
             delta: false,
             connectible: true,
             flat: true,
+            infinite: false,
         }
     }
 
@@ -108,6 +122,41 @@ impl Vertex {
             delta: false,
             connectible: true,
             flat: true,
+            infinite: false,
+        }
+    }
+
+    /// The vertex where a camera walk leaves the scene at `p` in the unit direction `d`.
+    pub fn sky(scene: &Scene, p: Vec3, d: Vec3, beta: Rgb) -> Vertex {
+        let far = p + d * (2.0 * (scene.bounds.radius + (p - scene.bounds.center).length()) + 1.0);
+        Vertex {
+            kind: VertexKind::Sky,
+            connectible: false,
+            infinite: true,
+            ..Vertex::light(0, far, d, Vec2::ZERO, beta, 0.0)
+        }
+    }
+
+    /// Whether the vertex lies at infinity (see [`Vertex`]).
+    #[inline]
+    pub fn at_infinity(&self) -> bool {
+        self.infinite
+    }
+
+    /// Radiance (irradiance for a directional light) arriving from a vertex at infinity.
+    pub fn infinite_emission(&self, scene: &Scene) -> Rgb {
+        match self.kind {
+            VertexKind::Sky => scene.infinite_lights.iter().map(|&l| scene.lights[l].eval_infinite(self.ng)).sum(),
+            // Every light at infinity that rays can hit, as for the sky: the strategies of
+            // one path must see one emitter.
+            VertexKind::Light(l) => match &scene.lights[l as usize] {
+                crate::light::Light::Directional { irradiance, .. } => *irradiance,
+                light if light.at_infinity() => {
+                    scene.infinite_lights.iter().map(|&l| scene.lights[l].eval_infinite(self.ng)).sum()
+                }
+                _ => Rgb::ZERO,
+            },
+            _ => Rgb::ZERO,
         }
     }
 
@@ -130,6 +179,7 @@ impl Vertex {
             delta: false,
             connectible,
             flat: si.shading.n == si.ng,
+            infinite: false,
         }
     }
 
@@ -145,7 +195,7 @@ impl Vertex {
         match self.kind {
             VertexKind::Light(l) => Some(l as usize),
             VertexKind::Surface => scene.shapes[self.shape as usize].light,
-            VertexKind::Camera => None,
+            VertexKind::Camera | VertexKind::Sky => None,
         }
     }
 
@@ -192,6 +242,7 @@ impl Vertex {
                 }
             }
             VertexKind::Camera => End { f: Rgb::ZERO, pdf_fwd: scene.camera.pdf_direction(w), pdf_rev: 0.0 },
+            VertexKind::Sky => End { f: self.infinite_emission(scene), pdf_fwd: 0.0, pdf_rev: 0.0 },
         }
     }
 
@@ -226,23 +277,27 @@ impl Vertex {
     /// Area density at `next` of this vertex generating it, given the vertex `prev` before
     /// this one (surfaces need it for their BSDF; endpoints ignore it).
     pub fn pdf(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+        if self.at_infinity() {
+            return self.pdf_light(scene, next);
+        }
         let d = next.p - self.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {
             return 0.0;
         }
-        let w = d / dist2.sqrt();
+        let w = if next.at_infinity() { next.ng } else { d / dist2.sqrt() };
         let solid = match self.kind {
             VertexKind::Camera => scene.camera.pdf_direction(w),
             VertexKind::Light(l) => scene.lights[l as usize].pdf_emission_direction(self.ng, w),
+            VertexKind::Sky => 0.0,
             VertexKind::Surface => {
                 let Some(prev) = prev else { return 0.0 };
-                let wo = (prev.p - self.p).normalize_or_zero();
+                let wo = if prev.at_infinity() { prev.ng } else { (prev.p - self.p).normalize_or_zero() };
                 let bsdf = self.bsdf(scene);
                 bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.uv, TransportMode::Radiance)
             }
         };
-        solid * next.cos_area(-w) / dist2
+        if next.at_infinity() { solid } else { solid * next.cos_area(-w) / dist2 }
     }
 
     /// The densities of this vertex scattering between its predecessor and `next` (unit
@@ -251,10 +306,12 @@ impl Vertex {
     /// predecessor). One BSDF lookup for both; the values of two calls of [`Vertex::pdf`].
     #[inline(always)]
     pub fn densities(&self, scene: &Scene, next: &Vertex, w: Vec3, dist: f32) -> (f32, f32) {
-        let to_next = next.cos_area(-w) / (dist * dist);
+        let to_next = if next.kind == VertexKind::Sky { 1.0 } else { next.cos_area(-w) / (dist * dist) };
         match self.kind {
             VertexKind::Camera => (scene.camera.pdf_direction(w) * to_next, 0.0),
+            VertexKind::Light(l) if scene.lights[l as usize].at_infinity() => (self.pdf_light(scene, next), 0.0),
             VertexKind::Light(l) => (scene.lights[l as usize].pdf_emission_direction(self.ng, w) * to_next, 0.0),
+            VertexKind::Sky => (0.0, 0.0),
             VertexKind::Surface => {
                 let bsdf = self.bsdf(scene);
                 let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
@@ -266,6 +323,10 @@ impl Vertex {
 
     /// Area density at `next` of this vertex, taken as a light, emitting towards it.
     pub fn pdf_light(&self, scene: &Scene, next: &Vertex) -> f32 {
+        if self.at_infinity() {
+            // A point on the disk facing the light, then along the light's direction.
+            return next.cos_area(-self.ng) * disk_pdf(scene);
+        }
         let Some(l) = self.light_index(scene) else { return 0.0 };
         let d = next.p - self.p;
         let dist2 = d.length_squared();
@@ -276,10 +337,24 @@ impl Vertex {
         scene.lights[l].pdf_emission_direction(self.ng, w) * next.cos_area(-w) / dist2
     }
 
-    /// Density of a light subpath starting at this point: light choice times position.
+    /// Density of a light subpath starting at this point: light choice times position. For
+    /// a vertex at infinity, the density of its direction over every light at infinity
+    /// ([`infinite_light_density`]; a directional light's, a delta, counts as its choice).
     pub fn pdf_light_origin(&self, scene: &Scene) -> f32 {
-        let Some(l) = self.light_index(scene) else { return 0.0 };
-        light_origin_pdf(scene, l)
+        match self.kind {
+            VertexKind::Sky => infinite_light_density(scene, self.ng),
+            VertexKind::Light(l) if scene.lights[l as usize].at_infinity() => {
+                if scene.lights[l as usize].is_unreachable() {
+                    scene.light_sampler.pmf(l as usize)
+                } else {
+                    infinite_light_density(scene, self.ng)
+                }
+            }
+            _ => {
+                let Some(l) = self.light_index(scene) else { return 0.0 };
+                light_origin_pdf(scene, l)
+            }
+        }
     }
 }
 
@@ -319,6 +394,17 @@ impl Connection {
 
     #[inline(always)]
     fn evaluate(scene: &Scene, qs: &Vertex, pt: &Vertex, nonzero: bool) -> Option<Connection> {
+        if qs.kind != VertexKind::Surface && qs.at_infinity() {
+            // From a light at infinity, along its direction, with no distance term: the
+            // density of `pt` is that of a point on the disk facing the light.
+            let w = -qs.ng;
+            let light_end = End { f: qs.infinite_emission(scene), pdf_fwd: disk_pdf(scene), pdf_rev: 0.0 };
+            if nonzero && light_end.f == Rgb::ZERO {
+                return None;
+            }
+            let camera_end = pt.end(scene, -w, TransportMode::Radiance);
+            return Some(Connection { w, dist2: 1.0, inv_dist2: 1.0, light_end, camera_end });
+        }
         let d = pt.p - qs.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 || !dist2.is_finite() {
@@ -332,6 +418,20 @@ impl Connection {
         let camera_end = pt.end(scene, -w, TransportMode::Radiance);
         Some(Connection { w, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
     }
+}
+
+/// Density of the direction `wi` (towards the light) over the lights at infinity that rays
+/// can hit, each chosen with its light-selection probability: how a light subpath, next-event
+/// estimation, or (as the density of its far end) an escaped camera ray sees the sky.
+pub fn infinite_light_density(scene: &Scene, wi: Vec3) -> f32 {
+    scene.infinite_lights.iter().map(|&l| scene.light_sampler.pmf(l) * scene.lights[l].pdf_infinite(wi)).sum()
+}
+
+/// `1 / (π R²)`: the density of a point on the disk a light at infinity starts its paths on.
+#[inline]
+pub fn disk_pdf(scene: &Scene) -> f32 {
+    let r = scene.bounds.radius;
+    1.0 / (std::f32::consts::PI * r * r)
 }
 
 /// Light-selection probability times the area density of the start point.
@@ -433,7 +533,23 @@ fn random_walk<R: Random>(
     let mut bounces = 0u32;
     while path.len() < max_vertices {
         counters.extension_rays += 1;
-        let Some(mut si) = scene.intersect(&ray) else { break };
+        let Some(mut si) = scene.intersect(&ray) else {
+            // A camera walk that leaves the scene ends on the lights at infinity.
+            if mode == TransportMode::Radiance && !scene.infinite_lights.is_empty() {
+                let n = path.len();
+                let prev = &path[n - 1];
+                let mut v = Vertex::sky(scene, prev.p, ray.d, beta);
+                if !prev.delta {
+                    let (fwd, rev) = prev.densities(scene, &v, ray.d, 1.0);
+                    v.pdf_fwd = fwd;
+                    if n >= 2 {
+                        path[n - 2].pdf_rev = rev;
+                    }
+                }
+                path.push(v);
+            }
+            break;
+        };
         let n = path.len();
         let prev = &path[n - 1];
         let back = prev.p - si.p;
@@ -441,11 +557,13 @@ fn random_walk<R: Random>(
         if dist == 0.0 || !dist.is_finite() {
             break;
         }
-        si.wo = back / dist;
+        // Towards a light at infinity the direction is the light's, exactly.
+        si.wo = if n == 1 && prev.at_infinity() { prev.ng } else { back / dist };
         let bsdf_index = scene.bsdf_index(&si);
         let bsdf = &scene.bsdfs[bsdf_index];
         let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
-        v.to_prev = prev.cos_area(si.wo) / (dist * dist);
+        // After a light at infinity the density towards it stays a solid-angle density.
+        v.to_prev = if n == 1 && prev.at_infinity() { 1.0 } else { prev.cos_area(si.wo) / (dist * dist) };
         // A vertex left through a delta lobe has no density (zero marks the delta).
         if !prev.delta {
             let (fwd, rev) = prev.densities(scene, &v, -si.wo, dist);
@@ -542,6 +660,9 @@ pub fn light_subpath<R: Random>(
     }
     let Some((l, pmf, _)) = scene.light_sampler.sample(u_light) else { return };
     let light = &scene.lights[l];
+    if light.at_infinity() {
+        return infinite_light_subpath(scene, limits, l, pmf, u_pos, u_dir, rng, path, counters);
+    }
     let Some(es) = light.sample_emission(&scene.shapes, u1, u_pos, u_dir) else { return };
     let origin = pmf * es.pdf_pos;
     if origin <= 0.0 || es.pdf_dir <= 0.0 {
@@ -559,6 +680,46 @@ pub fn light_subpath<R: Random>(
     random_walk(
         scene,
         Ray::new(o, es.d),
+        beta,
+        TransportMode::Importance,
+        limits.light_vertices,
+        limits.rr_depth,
+        rng,
+        path,
+        counters,
+    );
+}
+
+/// A light subpath from light `l` at infinity (chosen with probability `pmf`): a direction
+/// from the light's distribution, a point on the disk of the bounding sphere facing it, then
+/// the walk; the first vertices' densities in the measures of [`Vertex`].
+#[allow(clippy::too_many_arguments)]
+fn infinite_light_subpath<R: Random>(
+    scene: &Scene,
+    limits: &WalkLimits,
+    l: usize,
+    pmf: f32,
+    u_pos: Vec2,
+    u_dir: Vec2,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    let Some((wi, pdf_dir, li)) = scene.lights[l].sample_infinite_direction(u_dir) else { return };
+    let p = crate::light::disk_point(&scene.bounds, wi, u_pos);
+    let pdf_pos = disk_pdf(scene);
+    let beta = li / (pmf * pdf_dir * pdf_pos);
+    let mut y0 = Vertex::light(l, p, wi, Vec2::ZERO, beta, 0.0);
+    y0.infinite = true;
+    y0.connectible = false;
+    y0.pdf_fwd = y0.pdf_light_origin(scene);
+    path.push(y0);
+    if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
+        return;
+    }
+    random_walk(
+        scene,
+        Ray::new(p, -wi),
         beta,
         TransportMode::Importance,
         limits.light_vertices,

@@ -172,18 +172,27 @@ pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
         return;
     }
     let x0 = path.get(0);
-    let Some(l) = x0.light_index(scene) else { return };
-    let light = &scene.lights[l];
-    let w = (path.get(1).p - x0.p).normalize_or_zero();
-    let pdf = x0.pdf_light_origin(scene) * light.pdf_emission_direction(x0.ng, w);
-    if pdf <= 0.0 {
-        return;
-    }
-    let mut alpha = light.emitted(x0.ng, x0.uv, w) * x0.cos_area(w) / pdf;
+    let mut alpha = if x0.at_infinity() {
+        // The radiance from infinity over the densities of its direction and of the disk.
+        let pdf = x0.pdf_light_origin(scene) * super::disk_pdf(scene);
+        if pdf <= 0.0 {
+            return;
+        }
+        x0.infinite_emission(scene) / pdf
+    } else {
+        let Some(l) = x0.light_index(scene) else { return };
+        let light = &scene.lights[l];
+        let w = (path.get(1).p - x0.p).normalize_or_zero();
+        let pdf = x0.pdf_light_origin(scene) * light.pdf_emission_direction(x0.ng, w);
+        if pdf <= 0.0 {
+            return;
+        }
+        light.emitted(x0.ng, x0.uv, w) * x0.cos_area(w) / pdf
+    };
     out[1] = alpha;
     for i in 1..out.len() - 1 {
         let x = path.get(i);
-        let wo = (path.get(i - 1).p - x.p).normalize_or_zero();
+        let wo = if i == 1 && x0.at_infinity() { x0.ng } else { (path.get(i - 1).p - x.p).normalize_or_zero() };
         let wi = (path.get(i + 1).p - x.p).normalize_or_zero();
         let bsdf = x.bsdf(scene);
         let (lo, li) = (x.frame.to_local(wo), x.frame.to_local(wi));

@@ -27,6 +27,10 @@ enum Variant {
     /// `veach-ajar` itself: textures, rough conductors, glass, two-sided BSDFs, a light
     /// seen through a gap (where PCBPT's resampling counts vary most).
     VeachAjar,
+    /// An importance-sampled environment map and a constant one, beside the area light.
+    Envmap,
+    /// A directional light (a delta direction) beside the area light.
+    Directional,
 }
 
 fn scene(variant: Variant) -> Scene {
@@ -65,6 +69,33 @@ fn scene(variant: Variant) -> Scene {
             );
             set(&mut scene, "LeftWall", rough(0.2, MicrofacetType::Ggx));
         }
+        Variant::Envmap | Variant::Directional => {
+            if variant == Variant::Envmap {
+                let (w, h) = (32, 16);
+                let texels = (0..w * h)
+                    .map(|i| {
+                        let (x, y) = ((i % w) as f32, (i / w) as f32);
+                        let hot = if (10.0..12.0).contains(&x) && (4.0..6.0).contains(&y) { 20.0 } else { 0.0 };
+                        Vec3::new(1.0 + hot + x / 8.0, 2.0 - y / 8.0 + hot, 0.5 + hot)
+                    })
+                    .collect();
+                let bm = std::sync::Arc::new(crate::texture::Bitmap::new(
+                    w as u32,
+                    h as u32,
+                    texels,
+                    crate::texture::FilterType::Bilinear,
+                    crate::texture::WrapMode::Repeat,
+                ));
+                let env = crate::light::EnvMap::new(bm, glam::Mat3::from_rotation_x(0.4), 0.05);
+                scene.lights.push(Light::Envmap(std::sync::Arc::new(env)));
+                scene.lights.push(Light::Constant { radiance: Rgb::new(0.02, 0.03, 0.04) });
+            } else {
+                let direction = Vec3::new(0.3, -0.5, -1.0).normalize();
+                scene.lights.push(Light::Directional { direction, irradiance: Rgb::splat(0.5) });
+            }
+            scene.infinite_lights = (0..scene.lights.len()).filter(|&i| scene.lights[i].is_infinite()).collect();
+            scene.light_sampler = LightSampler::new(&scene.lights, &scene.shapes, &scene.bounds);
+        }
         Variant::PointLight => {
             scene.lights.push(Light::Point { position: Vec3::new(0.3, 1.5, 0.2), intensity: Rgb::splat(2.0) });
             scene.light_sampler = LightSampler::new(&scene.lights, &scene.shapes, &scene.bounds);
@@ -89,9 +120,17 @@ fn scene(variant: Variant) -> Scene {
     scene
 }
 
-/// `x_0` as the end of a camera subpath: a surface point of an area light.
+/// `x_0` as the end of a camera subpath: a surface point of an area light, or the sky
+/// where the camera walk leaves the scene towards a light at infinity.
 fn as_surface(scene: &Scene, v: &Vertex) -> Option<Vertex> {
     let VertexKind::Light(l) = v.kind else { return Some(*v) };
+    if scene.lights[l as usize].at_infinity() {
+        return (!scene.lights[l as usize].is_unreachable()).then_some(Vertex {
+            kind: VertexKind::Sky,
+            connectible: false,
+            ..*v
+        });
+    }
     let Light::Area { shape, .. } = &scene.lights[l as usize] else { return None };
     let mut s = *v;
     s.kind = VertexKind::Surface;
@@ -130,7 +169,10 @@ fn subpaths(scene: &Scene, x: &[Vertex], s: usize) -> Option<(Vec<Vertex>, Vec<V
             _ => x[i - 1].pdf(scene, Some(&x[i - 2]), &x[i]),
         };
         v.pdf_rev = if i + 3 <= s { x[i + 1].pdf(scene, Some(&x[i + 2]), &x[i]) } else { f32::NAN };
-        if i > 0 {
+        if i == 1 && x[0].at_infinity() {
+            v.wo = x[0].ng;
+            v.to_prev = 1.0;
+        } else if i > 0 {
             v.wo = (x[i - 1].p - x[i].p).normalize();
             v.to_prev = x[i - 1].cos_area(v.wo) / x[i - 1].p.distance_squared(x[i].p);
         }
@@ -230,7 +272,9 @@ fn pc_cache(scene: &Scene, m: usize, term: DistanceTerm) -> Cache {
 fn check_variant(variant: Variant, seed: u64) {
     let scene = scene(variant);
     let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
-    let caches = [pc_cache(&scene, 120, DistanceTerm::Falloff), pc_cache(&scene, 40, DistanceTerm::Printed)];
+    // Light paths from infinity mostly meet the box's outside: more of them fill the pool.
+    let k = if matches!(variant, Variant::Envmap | Variant::Directional) { 6 } else { 1 };
+    let caches = [pc_cache(&scene, 120 * k, DistanceTerm::Falloff), pc_cache(&scene, 40 * k, DistanceTerm::Printed)];
     // Each `--pc-mis` option as the renderer sets it up, with V̄ = 3.1 and κ = 7.3 measured
     // by a previous iteration.
     let pc = |mis, previous, n: u32, m: usize| {
@@ -264,8 +308,10 @@ fn check_variant(variant: Variant, seed: u64) {
                 let mut sum = 0.0f64;
                 let mut ws = Vec::new();
                 for s in 0..n {
-                    // Strategies that would connect at a specular vertex are never evaluated.
-                    let usable = (s == 0 || x[s - 1].is_connectible()) && x[s].is_connectible();
+                    // Strategies that would connect at a specular vertex are never evaluated;
+                    // next-event estimation (`s = 1`, `t >= 2`) reaches lights at infinity,
+                    // which nothing else connects to.
+                    let usable = s == 0 || (x[s - 1].is_connectible() || s == 1 && n > 2) && x[s].is_connectible();
                     let Some((l, c)) = subpaths(&scene, &x, s).filter(|_| usable) else {
                         ws.push(0.0);
                         continue;
@@ -277,7 +323,8 @@ fn check_variant(variant: Variant, seed: u64) {
                 }
                 assert!(
                     (sum - 1.0).abs() < 1e-4,
-                    "{variant:?} {what} {heuristic:?} n={n}: weights {ws:?} sum to {sum}"
+                    "{variant:?} {what} {heuristic:?} n={n}: weights {ws:?} sum to {sum}; brute force {reference:?}; x0 {:?}",
+                    x[0].kind
                 );
                 if let Some(r) = reference {
                     for (s, (a, b)) in ws.iter().zip(&r).enumerate() {
@@ -311,6 +358,10 @@ fn check_variant(variant: Variant, seed: u64) {
         checked += 1;
     }
     assert_eq!(checked, 300);
+    if matches!(variant, Variant::Envmap | Variant::Directional) {
+        let far = paths(&scene, seed, 300).iter().filter(|x| x[0].at_infinity()).count();
+        assert!(far > 30, "{variant:?}: only {far} paths from a light at infinity");
+    }
     // The resampling counts follow the cached PMFs: far from constant.
     let (lo, hi) = resampled.iter().fold((f32::MAX, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
     assert!(resampled.len() > 20 && lo > 0.0 && hi > 20.0 * lo, "{variant:?}: resampling counts {lo}..{hi}");
@@ -342,6 +393,16 @@ fn weights_sum_to_one_with_a_point_light() {
 #[test]
 fn weights_sum_to_one_with_a_sphere_light_sampled_by_cone() {
     check_variant(Variant::SphereLight, 5);
+}
+
+#[test]
+fn weights_sum_to_one_with_lights_at_infinity() {
+    check_variant(Variant::Envmap, 7);
+}
+
+#[test]
+fn weights_sum_to_one_with_a_directional_light() {
+    check_variant(Variant::Directional, 8);
 }
 
 #[test]
