@@ -10,13 +10,15 @@ the single-process render with the same options bit for bit.
 Without --scheduler the chunks run on a local cluster of K workers (default: one per chunk,
 at most one per CPU; give the render a `--threads` so that they do not all use every
 CPU). With --scheduler they run on the workers of a running `dask scheduler`: OUTDIR, SCENE
-and the pcbpt binary must then be at the same paths on every worker (a shared filesystem).
+and the pcbpt binary must then be at the same paths on every worker (a shared filesystem);
+when a chunk fails, chunks already running on other machines are left to finish.
 The render options must include what fixes the image, --spp and --seed. The merge runs
 here. Exits non-zero if a chunk or the merge fails, printing its command and stderr.
 Needs `dask[distributed]` (`scripts/setup.sh --with-dask`).
 """
 
 import argparse
+import logging
 import os
 import shutil
 import socket
@@ -28,7 +30,7 @@ import time
 def render_chunk(cmd):
     """Runs one chunk's command on a worker; returns what the client reports."""
     start = time.time()
-    p = subprocess.run(cmd, capture_output=True, text=True)
+    p = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     return {
         "cmd": cmd,
         "returncode": p.returncode,
@@ -41,6 +43,12 @@ def render_chunk(cmd):
 def fail(what, cmd, returncode, stderr):
     print(f"dask_render: {what} failed (exit status {returncode}): {' '.join(cmd)}", file=sys.stderr)
     sys.stderr.write(stderr)
+    # The render cannot be merged any more: end the chunks still rendering here (the local
+    # cluster's workers are threads of this process, the chunks its child processes).
+    import psutil  # a dependency of distributed
+
+    for child in psutil.Process().children(recursive=True):
+        child.kill()
     sys.exit(1)
 
 
@@ -90,7 +98,9 @@ def main():
     else:
         # The tasks only wait for a child process: worker threads in this process suffice.
         k = a.workers or min(a.n, os.cpu_count() or 1)
-        cluster = LocalCluster(n_workers=k, threads_per_worker=1, processes=False, dashboard_address=None)
+        cluster = LocalCluster(
+            n_workers=k, threads_per_worker=1, processes=False, dashboard_address=None, silence_logs=logging.ERROR
+        )
         client = Client(cluster)
     start = time.time()
     try:
@@ -99,8 +109,7 @@ def main():
             try:
                 r = future.result()
             except Exception as e:  # the worker died or the task could not run
-                print(f"dask_render: a chunk's task failed on its worker: {e!r}", file=sys.stderr)
-                sys.exit(1)
+                fail("a chunk's task", ["(on a Dask worker)"], "none", f"{e!r}\n")
             chunk = r["cmd"][r["cmd"].index("--chunk") + 1]
             if r["returncode"] != 0:
                 fail(f"chunk {chunk} on {r['host']}", r["cmd"], r["returncode"], r["stderr"])
