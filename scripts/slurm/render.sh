@@ -2,7 +2,8 @@
 # Renders SCENE across a Slurm cluster: a job array of N tasks, task I rendering chunk I of
 # N of the render's iterations (chunk.sbatch), then a merge job that waits for the whole
 # array to succeed (--dependency=afterok) and writes the image (merge.sbatch). The image is
-# the one `pcbpt render SCENE [render options...]` would write, bit for bit.
+# the one `pcbpt render SCENE [render options...]` would write, bit for bit (PSSMLT's
+# converges to it).
 #
 #   scripts/slurm/render.sh [--wait] [--cpus C] [--max-running K] [--output FILE]
 #                           SCENE OUTDIR N [render options...]
@@ -10,7 +11,7 @@
 # OUTDIR (created) must be on a filesystem every node sees: it receives the parts
 # part_I.exr, the logs logs/chunk_<job>_<I>.log and logs/merge_<job>.log, and the image
 # (OUTDIR/image.exr unless --output; .png works too). Render options are the same as a
-# single render's and must include what fixes the image: --spp and --seed.
+# single render's, with a sample budget (--spp; --time cannot be cut into chunks).
 #   --cpus C         CPUs per chunk task (default 1); the render uses them all (--threads C)
 #   --max-running K  at most K chunk tasks at a time (the array's %K)
 #   --wait           wait for the merge; exit non-zero (with the failed tasks' logs) if a
