@@ -142,7 +142,9 @@ impl Scene {
             return Err(Error::input(&root.loc, "the scene has no emitters: the image would be black"));
         }
         for (o, _) in &options.overrides {
-            if !doc.params.contains_key(o) && !doc.params.contains_key(&xml::camel_to_snake(o)) {
+            // A version 0.x file's parameter names are upgraded (either spelling matches).
+            let legacy = root.legacy && doc.params.contains_key(&xml::camel_to_snake(o));
+            if !doc.params.contains_key(o) && !legacy {
                 b.stats.warnings.push(format!(
                     "parameter -D {o}=… is not declared by a <default> in the scene and was used only where referenced"
                 ));
@@ -1021,7 +1023,11 @@ impl<'d> Builder<'d> {
                     node.loc,
                     node.plugin,
                     if known { "" } else { ", which this renderer lacks," },
-                    if applied.is_empty() { String::new() } else { format!(" (its {} apply)", applied.join(", ")) },
+                    match applied.as_slice() {
+                        [] => String::new(),
+                        [one] => format!("; its {one} applies"),
+                        more => format!("; its {} apply", more.join(", ")),
+                    },
                     if rest.is_empty() { "its type".to_string() } else { rest.join(", ") }
                 ));
             }
