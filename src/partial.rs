@@ -33,6 +33,9 @@ use std::io::Read;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+/// A half of an exact sum, by name (`hi`, `lo`).
+type SumPart = (&'static str, fn(&ExactSum) -> f64);
+
 /// Version of the part format.
 const FORMAT: u32 = 1;
 /// The EXR attribute that holds a part's [`PartInfo`].
@@ -111,8 +114,8 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         Budget::Spp(s) => Some(s),
         Budget::Time(_) => None,
     };
-    let bidirectional = !matches!(opts.integrator, IntegratorKind::Path)
-        && !(opts.integrator == IntegratorKind::Pssmlt && opts.mlt.base == crate::integrator::mlt::MltBase::Path);
+    let bidirectional = !(opts.integrator == IntegratorKind::Path
+        || (opts.integrator == IntegratorKind::Pssmlt && opts.mlt.base == crate::integrator::mlt::MltBase::Path));
     serde_json::json!({
         "scene": scene_hash,
         "integrator": opts.integrator,
@@ -123,8 +126,8 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         "hide_emitters": scene.integrator.hide_emitters,
         "film": [scene.film.width, scene.film.height],
         "backend": scene.accel.backend().to_string(),
-        "bidir": bidirectional.then(|| &opts.bidir),
-        "mlt": (opts.integrator == IntegratorKind::Pssmlt).then(|| &opts.mlt),
+        "bidir": bidirectional.then_some(&opts.bidir),
+        "mlt": (opts.integrator == IntegratorKind::Pssmlt).then_some(&opts.mlt),
     })
 }
 
@@ -201,7 +204,7 @@ pub fn write_part(path: &Path, image: &[Rgb], film: &Film, info: &PartInfo) -> R
         list.push(AnyChannel::new(name, FlatSamples::F32(image.iter().map(|p| p[c]).collect())));
     }
     for (k, name) in SUMS.iter().enumerate() {
-        let parts: [(&str, fn(&ExactSum) -> f64); 2] = [("hi", |s| s.hi), ("lo", |s| s.lo)];
+        let parts: [SumPart; 2] = [("hi", |s| s.hi), ("lo", |s| s.lo)];
         for (part, get) in parts {
             let bits: Vec<u64> = sums.iter().map(|s| get(&s[k]).to_bits()).collect();
             list.push(AnyChannel::new(
@@ -249,7 +252,7 @@ pub fn read_part(path: &Path) -> Result<Part> {
         return Err(bad(format!("{}×{} pixels, its metadata says {w}×{h}", layer.size.width(), layer.size.height())));
     }
     let channel = |name: &str| -> Result<&Vec<u32>> {
-        match layer.channel_data.list.iter().find(|c| c.name == Text::from(name)).map(|c| &c.sample_data) {
+        match layer.channel_data.list.iter().find(|c| c.name == *name).map(|c| &c.sample_data) {
             Some(FlatSamples::U32(v)) if v.len() == w * h => Ok(v),
             _ => Err(bad(format!("channel {name} is missing or not 32-bit integers"))),
         }
