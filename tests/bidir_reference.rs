@@ -152,7 +152,7 @@ fn region_mean(img: &Image, (x0, x1): (u32, u32), (y0, y1): (u32, u32)) -> f64 {
 }
 
 /// Known discrepancy, kept as a study: at the left edge of staircase2's glass pane (320×180,
-/// columns 110–120, rows 90–160) BDPT, LVC and PCBPT all render about 14% darker than the
+/// columns 110–120, rows 90–160) BDPT, LVC and PCBPT all render 12–14% darker than the
 /// reference and the path tracer (which agree within 0.2% there), and columns 150–160 about
 /// 5% brighter; the image mean hides it (−0.27% for BDPT, of which −0.12% is the 48-vertex
 /// cap on subpaths: the path tracer capped at 47 segments loses as much, in long chains of
@@ -160,7 +160,7 @@ fn region_mean(img: &Image, (x0, x1): (u32, u32), (y0, y1): (u32, u32)) -> f64 {
 /// segments through the pane's edge already carry 40% too little light there. Run with
 /// `-- --ignored`.
 #[test]
-#[ignore = "known: the bidirectional integrators are 14% dark at the edge of staircase2's glass pane (see the comment); run with --ignored"]
+#[ignore = "known: the bidirectional integrators are 12–14% dark at the edge of staircase2's glass pane (see the comment); run with --ignored"]
 fn bdpt_staircase2_glass_pane_edge() {
     let scene = STAIRCASE2.scene();
     let reference = reference(STAIRCASE2.reference);
