@@ -5,7 +5,12 @@ Each reference is the average of chunks of 256 spp with seeds 0, 1, 2, ... (Mits
 advice for large sample counts), written as tests/data/<name>.exr with a JSON file beside it
 holding every setting that made it. Needs `pip install mitsuba`.
 
+Scenes whose film size is fixed in the XML (Bitterli's Mitsuba 0.5 exports) are resized in
+memory, and the properties Mitsuba 3 refuses (`high_quality_edges`) are stripped there too;
+the scene file is never changed (scripts/mitsuba_scene.py).
+
     python3 scripts/make_references.py cornell-box            # one reference
+    python3 scripts/make_references.py staircase2 --out-dir /tmp/refs   # elsewhere
     python3 scripts/make_references.py --list                 # what can be made
 """
 import argparse
@@ -14,34 +19,41 @@ import os
 import sys
 import time
 
-# name -> (scene file relative to the repository root, parameter overrides, total spp)
+import mitsuba_scene
+
+# name -> (scene file relative to the repository root, parameter overrides, total spp,
+#          film size (width, height) replacing the file's, or None)
 REFERENCES = {
-    "cornell-box": ("scenes/cornell-box/scene.xml", {"resx": 128, "resy": 128, "max_depth": 30}, 8192),
-    "veach-mis": ("scenes/veach-mis/scene.xml", {"resx": 192, "resy": 108}, 8192),
-    "veach-ajar": ("scenes/veach-ajar/scene.xml", {"resx": 160, "resy": 90, "max_depth": -1}, 16384),
-    "materials": ("scenes/materials/scene.xml", {"resx": 160, "resy": 120}, 4096),
+    "cornell-box": ("scenes/cornell-box/scene.xml", {"resx": 128, "resy": 128, "max_depth": 30}, 8192, None),
+    "veach-mis": ("scenes/veach-mis/scene.xml", {"resx": 192, "resy": 108}, 8192, None),
+    "veach-ajar": ("scenes/veach-ajar/scene.xml", {"resx": 160, "resy": 90, "max_depth": -1}, 16384, None),
+    "materials": ("scenes/materials/scene.xml", {"resx": 160, "resy": 120}, 4096, None),
+    # Bitterli's Mitsuba 0.5 export as published: its own maxDepth (65) and tent filter.
+    "staircase2": ("scenes/staircase2/scene.xml", {}, 1024, (320, 180)),
 }
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def render(name, variant, chunk):
+def render(name, variant, chunk, out_dir):
     import mitsuba as mi
     import numpy as np
 
     mi.set_variant(variant)
-    scene_rel, params, spp = REFERENCES[name]
+    scene_rel, params, spp, resolution = REFERENCES[name]
     scene_path = os.path.join(ROOT, scene_rel)
     chunks = max(1, spp // chunk)
     acc = None
     t0 = time.time()
+    # The film resized and `high_quality_edges` stripped in memory; the file stays as it is.
+    scene = mitsuba_scene.load(mi, scene_path, resolution, **params)
     for seed in range(chunks):
-        scene = mi.load_file(scene_path, spp=chunk, **params)
         img = np.array(mi.render(scene, seed=seed, spp=chunk), dtype=np.float64)
         acc = img if acc is None else acc + img
         print(f"{name}: chunk {seed + 1}/{chunks} ({time.time() - t0:.0f} s)", file=sys.stderr)
     img = (acc / chunks).astype(np.float32)[:, :, :3]
-    out = os.path.join(ROOT, "tests", "data", f"{name}.exr")
+    os.makedirs(out_dir, exist_ok=True)
+    out = os.path.join(out_dir, f"{name}.exr")
     tmp = out + ".tmp.exr"
     mi.Bitmap(img).write(tmp)
     os.replace(tmp, out)
@@ -51,11 +63,16 @@ def render(name, variant, chunk):
         "integrator": "path",
         "scene": scene_rel,
         "parameters": params,
+    }
+    if resolution is not None:
+        settings["film"] = {"width": resolution[0], "height": resolution[1]}
+        settings["stripped"] = list(mitsuba_scene.STRIP[:1])
+    settings.update({
         "spp": chunks * chunk,
         "chunks": {"count": chunks, "spp": chunk, "seeds": f"0..{chunks - 1}"},
         "image_mean": float(img.mean()),
         "seconds": round(time.time() - t0, 1),
-    }
+    })
     with open(out[:-4] + ".json", "w") as f:
         json.dump(settings, f, indent=2)
         f.write("\n")
@@ -67,16 +84,18 @@ def main():
     ap.add_argument("names", nargs="*", help="references to render (default: all)")
     ap.add_argument("--variant", default="scalar_rgb")
     ap.add_argument("--chunk", type=int, default=256, help="spp per chunk")
+    ap.add_argument("--out-dir", default=os.path.join(ROOT, "tests", "data"), help="where to write (default tests/data)")
     ap.add_argument("--list", action="store_true")
     a = ap.parse_args()
     if a.list:
-        for k, (scene, params, spp) in REFERENCES.items():
-            print(f"{k}: {scene} {params} {spp} spp")
+        for k, (scene, params, spp, resolution) in REFERENCES.items():
+            film = f" film {resolution[0]}x{resolution[1]}" if resolution else ""
+            print(f"{k}: {scene} {params}{film} {spp} spp")
         return
     for name in a.names or REFERENCES:
         if name not in REFERENCES:
             sys.exit(f"unknown reference {name!r}; --list shows them")
-        render(name, a.variant, a.chunk)
+        render(name, a.variant, a.chunk, a.out_dir)
 
 
 if __name__ == "__main__":

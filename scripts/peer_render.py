@@ -2,12 +2,14 @@
 """Renders a scene with a peer renderer for a fixed wall time; used by `pcbpt experiment`.
 
     peer_render.py --renderer mitsuba --scene scene.xml --time 20 --threads 2 --out out.pfm
-                   [--define resx=320 ...] [--max-depth -1] [--seed 0]
+                   [--define resx=320 ...] [--max-depth -1] [--seed 0] [--width W --height H --resize-film]
     peer_render.py --renderer luxcore-bidir --scene cornell.scn --width 256 --height 256 ...
 
 Mitsuba 3 (`pip install mitsuba`): the `path` integrator of the XML scene (variant
 scalar_rgb), rendered in chunks of spp with different seeds until the time is spent; the
-chunks are averaged. The image is written as PFM (float RGB). LuxCore (`pip install pyluxcore`): a LuxCore scene (.scn) rendered with
+chunks are averaged. The scene text is handed to Mitsuba without the properties it refuses
+(`high_quality_edges`) and, with `--resize-film`, with the film resized to --width x --height
+(scripts/mitsuba_scene.py); the file is never changed. The image is written as PFM (float RGB). LuxCore (`pip install pyluxcore`): a LuxCore scene (.scn) rendered with
 PATHCPU or BIDIRCPU, with the RANDOM or the METROPOLIS sampler, for the wall time. Prints one JSON line: spp, seconds, samples per second.
 Exit status 3 when the renderer is not installed.
 """
@@ -46,7 +48,10 @@ def mitsuba(a):
     params = dict(d.split("=", 1) for d in a.define)
     if a.max_depth is not None:
         params["max_depth"] = str(a.max_depth)
-    scene = mi.load_file(a.scene, **params)
+    import mitsuba_scene
+
+    resolution = (a.width, a.height) if a.resize_film else None
+    scene = mitsuba_scene.load(mi, a.scene, resolution, **params)
     acc, n, chunk, spp = None, 0, 1, 0
     t0 = time.perf_counter()
     while True:
@@ -130,6 +135,8 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--width", type=int, default=256)
     ap.add_argument("--height", type=int, default=256)
+    ap.add_argument("--resize-film", action="store_true",
+                    help="mitsuba: render at --width x --height instead of the scene's film size")
     a = ap.parse_args()
     if a.renderer == "mitsuba":
         spp, secs, rate = mitsuba(a)

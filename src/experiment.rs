@@ -58,6 +58,10 @@ pub struct SceneEntry {
     #[serde(default)]
     pub defines: BTreeMap<String, String>,
     pub max_depth: Option<i32>,
+    /// The film size `"WxH"` instead of the scene's (as `render --resolution`), for scenes
+    /// that fix it in the XML.
+    #[serde(default, deserialize_with = "resolution")]
+    pub resolution: Option<(u32, u32)>,
     /// A reference EXR, or:
     pub reference: Option<PathBuf>,
     /// a method (by name) to render the reference with, for `reference_time` seconds.
@@ -68,6 +72,11 @@ pub struct SceneEntry {
     pub crops: Vec<[u32; 4]>,
     /// The same scene in LuxCore's format, for the LuxCore peer methods.
     pub luxcore_scene: Option<PathBuf>,
+}
+
+fn resolution<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Option<(u32, u32)>, D::Error> {
+    let s = String::deserialize(d)?;
+    crate::scene::parse_resolution(&s).map(Some).map_err(serde::de::Error::custom)
 }
 
 /// Peer renderers an experiment can run as methods (through `scripts/peer_render.py`).
@@ -271,7 +280,13 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
         let load = |backend: Backend| -> Result<Scene> {
             let mut scene = Scene::load(
                 &base.join(&s.file),
-                &LoadOptions { overrides: defines.clone(), backend, ..Default::default() },
+                &LoadOptions {
+                    overrides: defines.clone(),
+                    backend,
+                    integrator_override: Some("the experiment's methods".into()),
+                    resolution: s.resolution,
+                    ..Default::default()
+                },
             )?;
             if let Some(d) = s.max_depth {
                 scene.integrator.max_depth = d;
@@ -283,7 +298,13 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
         for m in f.method.iter().filter(|m| !PEERS.contains(&m.integrator.as_str())) {
             if !scenes.contains_key(&m.backend) {
                 let b = value_enum::<Backend>(path, "backend", &m.backend)?;
-                scenes.insert(m.backend.clone(), load(b)?);
+                let scene = load(b)?;
+                if scenes.is_empty() && !quiet {
+                    for w in &scene.stats.warnings {
+                        eprintln!("{}: warning: {w}", s.name);
+                    }
+                }
+                scenes.insert(m.backend.clone(), scene);
             }
         }
         // The reference.
@@ -423,6 +444,10 @@ fn run_peer(
     }
     if let Some(d) = s.max_depth {
         cmd.arg("--max-depth").arg(d.to_string());
+    }
+    if s.resolution.is_some() {
+        // The film size is the reference's, which the scene's own film does not give.
+        cmd.arg("--resize-film");
     }
     let out = cmd.output().map_err(|e| Error::Usage(format!("cannot run python3 {}: {e}", script.display())))?;
     if out.status.code() == Some(3) {

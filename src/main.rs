@@ -1,6 +1,6 @@
 //! The `pcbpt` command line: `render` a Mitsuba scene, `compare` two images.
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use pcbpt::accel::{Backend, BuildOptions, BuildQuality, BvhLayout};
 use pcbpt::compare;
 use pcbpt::error::{Error, Result};
@@ -27,6 +27,8 @@ struct Cli {
     command: Command,
 }
 
+// Parsed once per process: the size of the render's arguments does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// Render a Mitsuba XML scene.
@@ -100,6 +102,9 @@ struct RenderArgs {
     /// Scene parameter overrides, `-D name=value` (e.g. `-D spp=64 -D resx=320`).
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     define: Vec<(String, String)>,
+    /// Film size, replacing the scene's (e.g. `320x180`), for scenes that fix it in the XML.
+    #[arg(long, value_name = "WxH", value_parser = pcbpt::scene::parse_resolution)]
+    resolution: Option<(u32, u32)>,
     /// Override the integrator's max_depth (path segments from the camera; -1 = unlimited).
     #[arg(long, allow_negative_numbers = true)]
     max_depth: Option<i32>,
@@ -298,7 +303,17 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         compact: false,
         embree_config: a.embree_config.clone(),
     };
-    let load = LoadOptions { overrides: a.define.clone(), backend: a.backend, build, progress: !a.quiet };
+    let load = LoadOptions {
+        overrides: a.define.clone(),
+        backend: a.backend,
+        build,
+        progress: !a.quiet,
+        integrator_override: a
+            .integrator
+            .and_then(|k| k.to_possible_value())
+            .map(|v| format!("--integrator {}", v.get_name())),
+        resolution: a.resolution,
+    };
     let mut scene = Scene::load(&a.scene, &load)?;
     if let Some(d) = a.max_depth {
         if d < -1 {

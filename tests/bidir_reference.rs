@@ -118,3 +118,58 @@ fn strategy_images_sum_to_the_image_and_a_missing_strategy_is_caught() {
     let (v, _) = Verdict::averaged(&reference, &drop(&a), &drop(&b), CORNELL_PLY.ref_noise);
     assert!(v.check("cornell-ply, BDPT without s1_t2", 0.005, 1.3).is_err(), "a missing strategy went unnoticed");
 }
+
+// staircase2 (Bitterli's Mitsuba 0.5 export, 320×180, max_depth 65), mean within 1%. Light
+// tracing alone is not checked there: the camera sees the glass pane and the chrome, and no
+// light subpath connects to the camera through a smooth (Dirac) surface (its mean is 3.4%
+// low, as Mitsuba's `ptracer` would be).
+
+#[test]
+fn bdpt_staircase2() {
+    check(&STAIRCASE2, IntegratorKind::Bdpt, 64);
+}
+
+#[test]
+fn eorr_staircase2() {
+    check(&STAIRCASE2, IntegratorKind::Eorr, 64);
+}
+
+#[test]
+fn lvc_staircase2() {
+    check(&STAIRCASE2, IntegratorKind::Lvc, 32);
+}
+
+/// Mean of `img` over the rectangle `x0..x1` × `y0..y1`.
+fn region_mean(img: &Image, (x0, x1): (u32, u32), (y0, y1): (u32, u32)) -> f64 {
+    let mut sum = 0.0;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = img.pixels[(y * img.width + x) as usize];
+            sum += (p.x + p.y + p.z) as f64;
+        }
+    }
+    sum / ((x1 - x0) * (y1 - y0)) as f64
+}
+
+/// Known discrepancy, kept as a study: at the left edge of staircase2's glass pane (320×180,
+/// columns 110–120, rows 90–160) BDPT, LVC and PCBPT all render 12–14% darker than the
+/// reference and the path tracer (which agree within 0.2% there), and columns 150–160 about
+/// 5% brighter; the image mean hides it (−0.27% for BDPT, of which −0.12% is the 48-vertex
+/// cap on subpaths: the path tracer capped at 47 segments loses as much, in long chains of
+/// total internal reflection inside the pane). With `--max-depth 4` the paths of four
+/// segments through the pane's edge already carry 40% too little light there. Run with
+/// `-- --ignored`.
+#[test]
+#[ignore = "known: the bidirectional integrators are 12–14% dark at the edge of staircase2's glass pane (see the comment); run with --ignored"]
+fn bdpt_staircase2_glass_pane_edge() {
+    let scene = STAIRCASE2.scene();
+    let reference = reference(STAIRCASE2.reference);
+    let a = image(render(&scene, IntegratorKind::Bdpt, 64, 1, 0));
+    let b = image(render(&scene, IntegratorKind::Bdpt, 64, 2, 0));
+    for (columns, rows) in [((110, 120), (90, 160)), ((150, 160), (90, 160))] {
+        let r = region_mean(&reference, columns, rows);
+        let t = (region_mean(&a, columns, rows) + region_mean(&b, columns, rows)) / 2.0;
+        eprintln!("columns {columns:?}, rows {rows:?}: BDPT / reference = {:.4}", t / r);
+        assert!((t / r - 1.0).abs() < 0.03, "columns {columns:?}, rows {rows:?}: BDPT / reference = {:.4}", t / r);
+    }
+}

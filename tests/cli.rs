@@ -551,3 +551,93 @@ fn chunks_render_and_merge_from_the_command_line_and_bad_parts_are_named() {
     assert!(!ok && err.contains("EXR"), "{err}");
     assert!(!dir.path().join("x.exr").exists() && !dir.path().join("x.png").exists());
 }
+
+#[test]
+fn a_mitsuba_05_scene_renders_unchanged_at_another_resolution() {
+    // staircase2 fixes its film at 1280×720 in the XML; --resolution replaces it.
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("staircase2.exr");
+    let scene = root().join("scenes/staircase2/scene.xml");
+    let o =
+        pcbpt(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--spp", "1", "--resolution", "32x18"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let img = pcbpt::image_io::read_exr(&out).unwrap();
+    assert_eq!((img.width, img.height), (32, 18));
+    assert!(img.mean() > 0.0);
+    // One warning names the film's Mitsuba 0.5 options it ignores.
+    let ignored: Vec<&str> = err.lines().filter(|l| l.starts_with("warning: ignored")).collect();
+    assert_eq!(ignored.len(), 1, "{err}");
+    for name in ["high_quality_edges", "file_format", "pixel_format", "banner", "scene.xml:22:"] {
+        assert!(ignored[0].contains(name), "{name}: {err}");
+    }
+    assert!(err.contains("32×18"), "{err}");
+    // A malformed or empty resolution is a usage error naming the option.
+    for bad in ["0x18", "32by18", "32x"] {
+        let o =
+            pcbpt(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--resolution", bad, "--quiet"]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("--resolution") && !err.contains("panicked"), "{bad}: {err}");
+    }
+}
+
+#[test]
+fn a_file_integrator_this_renderer_lacks_needs_one_from_the_command_line() {
+    let d = tempfile::tempdir().unwrap();
+    // A light and a box it lights, seen from in front; `INTEGRATOR` is replaced below.
+    let text = r#"<scene version="0.5.0">
+    INTEGRATOR
+    <sensor type="perspective">
+        <float name="fov" value="60"/>
+        <transform name="toWorld"><lookAt origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="12"/><integer name="height" value="12"/></film>
+    </sensor>
+    <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+    <shape type="cube"><transform name="toWorld"><scale value="0.4"/><translate x="1" z="1"/></transform></shape>
+</scene>
+"#;
+    let write = |name: &str, integrator: &str| {
+        let p = d.path().join(name);
+        std::fs::write(&p, text.replace("INTEGRATOR", integrator)).unwrap();
+        p
+    };
+    let sppm = write(
+        "sppm.xml",
+        "<integrator type=\"sppm\">\n        <integer name=\"maxDepth\" value=\"3\"/>\n        <integer name=\"photonCount\" value=\"100000\"/>\n    </integrator>",
+    );
+    fails(&sppm, &["sppm.xml:2:", "unknown integrator plugin \"sppm\"", "--integrator"]);
+    let render = |scene: &Path, out: &str| {
+        let out = d.path().join(out);
+        let o = pcbpt(&[
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--spp",
+            "2",
+            "--seed",
+            "5",
+            "--integrator",
+            "bdpt",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        (pcbpt::image_io::read_exr(&out).unwrap(), err)
+    };
+    let (image, err) = render(&sppm, "sppm.exr");
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning:")).collect();
+    assert_eq!(warnings.len(), 1, "{err}");
+    for part in
+        ["sppm.xml:2:", "\"sppm\"", "--integrator bdpt", "its max_depth applies", "\"photon_count\" (", "sppm.xml:4:"]
+    {
+        assert!(warnings[0].contains(part), "{part:?}: {err}");
+    }
+    // The file's max_depth applies to the integrator picked: the image of a file that asks
+    // for it plainly, and not that of another depth.
+    let depth = |d: u32| format!("<integrator type=\"path\"><integer name=\"maxDepth\" value=\"{d}\"/></integrator>");
+    let (same, err) = render(&write("path3.xml", &depth(3)), "path3.exr");
+    assert!(!err.contains("warning:"), "{err}");
+    assert_eq!(image, same);
+    let (other, _) = render(&write("path1.xml", &depth(1)), "path1.exr");
+    assert_ne!(image, other);
+}

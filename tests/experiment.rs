@@ -132,3 +132,45 @@ fn experiment_file_errors_name_the_file_and_line() {
     let e = experiment::run(&f, None, true).unwrap_err().to_string();
     assert!(e.contains("noref.toml") && e.contains("reference"), "{e}");
 }
+
+#[test]
+fn a_scene_with_a_fixed_film_runs_at_the_suite_resolution() {
+    let d = tempfile::tempdir().unwrap();
+    let scene = root().join("scenes/staircase2/scene.xml");
+    let f = d.path().join("fixed-film.toml");
+    std::fs::write(
+        &f,
+        format!(
+            r#"spp = 1
+
+[[scene]]
+name = "staircase2"
+file = "{}"
+resolution = "40x24"
+reference_method = "path"
+reference_time = 0.3
+
+[[method]]
+name = "path"
+integrator = "path"
+
+[[method]]
+name = "bdpt"
+integrator = "bdpt"
+"#,
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let results = experiment::run(&f, None, true).unwrap();
+    assert_eq!(results.len(), 2);
+    for name in ["staircase2_reference.exr", "staircase2_path.exr", "staircase2_bdpt.exr"] {
+        let img = pcbpt::image_io::read_exr(&d.path().join("fixed-film").join(name)).unwrap();
+        assert_eq!((img.width, img.height), (40, 24), "{name}");
+    }
+    // A malformed resolution names the file and line.
+    let text = std::fs::read_to_string(&f).unwrap().replace("\"40x24\"", "\"40 by 24\"");
+    std::fs::write(&f, text).unwrap();
+    let e = experiment::run(&f, None, true).unwrap_err().to_string();
+    assert!(e.contains("fixed-film.toml:6") && e.contains("40 by 24"), "{e}");
+}

@@ -36,6 +36,13 @@ fn pssmlt_veach_ajar() {
 }
 
 #[test]
+fn pssmlt_staircase2() {
+    // Bitterli's Mitsuba 0.5 export as published, at 320×180 (`--resolution`).
+    let scene = STAIRCASE2.scene();
+    check(&scene, STAIRCASE2.reference, STAIRCASE2.ref_noise, 16, "staircase2, PSSMLT, 2 × 16 spp");
+}
+
+#[test]
 fn pssmlt_is_deterministic_for_a_seed_and_thread_count() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     let run = |seed, threads, base| {

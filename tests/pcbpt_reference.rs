@@ -95,6 +95,7 @@ cases! {
     cornell_ply_uniform_falloff_cmf: CORNELL_PLY, 24, Uniform, Falloff, Cmf;
     veach_mis_uniform_falloff_cmf: VEACH_MIS, 32, Uniform, Falloff, Cmf;
     veach_ajar_uniform_falloff_cmf: VEACH_AJAR, 512, Uniform, Falloff, Cmf;
+    staircase2_harmonic_falloff: STAIRCASE2, 32, Harmonic, Falloff, Mixture;
 }
 
 /// Image means of same-seed pairs on `veach-ajar` (80×45, unlimited depth): option sets `a`

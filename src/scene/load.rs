@@ -15,8 +15,10 @@ use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::plastic::{PlasticParams, RoughPlasticParams};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::camera::{Camera, FovAxis};
+use crate::error::Location;
 use crate::error::{Error, Result};
 use crate::film::Filter;
+use crate::integrator::IntegratorKind;
 use crate::light::{Bounds, EnvMap, Light, LightSampler};
 use crate::math::Frame;
 use crate::math::Transform;
@@ -40,8 +42,22 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughplastic",
 ];
 
-/// Integrator plugins a scene file may name.
-pub const INTEGRATOR_PLUGINS: &[&str] = &["path"];
+/// Integrator plugins a scene file may name (those [`IntegratorKind::from_plugin`] knows).
+pub const INTEGRATOR_PLUGINS: &[&str] = &["path", "ptracer", "bdpt", "pssmlt"];
+
+/// Film properties of Mitsuba 0.5/0.6 (and of other films) that mean nothing to this
+/// renderer: accepted, and named in one warning.
+const IGNORED_FILM_PROPERTIES: &[&str] = &["high_quality_edges", "banner", "attach_log", "gamma"];
+
+/// The film's output-format properties and the values that agree with what this renderer
+/// writes (the format follows the output file's extension). In a Mitsuba 3 file an agreeing
+/// value is accepted silently; any other value, and any value in a version 0.x file, is
+/// ignored with the warning.
+const OUTPUT_FORMAT_PROPERTIES: &[(&str, &[&str])] = &[
+    ("file_format", &["openexr", "exr"]),
+    ("pixel_format", &["rgb", "rgba"]),
+    ("component_format", &["float16", "float32"]),
+];
 
 /// The largest image this renderer accepts (pixels).
 pub const MAX_PIXELS: u64 = 1 << 28;
@@ -71,6 +87,9 @@ impl Scene {
             lights: Vec::new(),
             stats: LoadStats { files: doc.files.clone(), ..LoadStats::default() },
             progress: LoadProgress::new(options.progress),
+            options,
+            ignored: Vec::new(),
+            read_as_bilinear: Vec::new(),
         };
         let mut sensor = None;
         let mut integrator = None;
@@ -112,6 +131,7 @@ impl Scene {
         }
         doc.check_unused(doc.root)?;
         let (camera, film, sampler) = sensor.ok_or_else(|| Error::input(&root.loc, "the scene has no <sensor>"))?;
+        b.push_warnings();
         let integrator = integrator.unwrap_or(IntegratorSpec {
             plugin: "path".into(),
             max_depth: -1,
@@ -122,7 +142,9 @@ impl Scene {
             return Err(Error::input(&root.loc, "the scene has no emitters: the image would be black"));
         }
         for (o, _) in &options.overrides {
-            if !doc.params.contains_key(o) {
+            // A version 0.x file's parameter names are upgraded (either spelling matches).
+            let legacy = root.legacy && doc.params.contains_key(&xml::camel_to_snake(o));
+            if !doc.params.contains_key(o) && !legacy {
                 b.stats.warnings.push(format!(
                     "parameter -D {o}=… is not declared by a <default> in the scene and was used only where referenced"
                 ));
@@ -177,6 +199,11 @@ struct Builder<'d> {
     lights: Vec<Light>,
     stats: LoadStats,
     progress: LoadProgress,
+    options: &'d LoadOptions,
+    /// Properties accepted but ignored (they mean nothing here): name, plugin, where.
+    ignored: Vec<(String, String, Location)>,
+    /// Bitmaps whose `filter_type` (`trilinear`, `ewa`) is read as bilinear lookups.
+    read_as_bilinear: Vec<(String, Location)>,
 }
 
 fn positive(node: &Node, name: &str, v: f32) -> Result<f32> {
@@ -198,6 +225,64 @@ fn non_negative_rgb(node: &Node, name: &str, v: Vec3) -> Result<Vec3> {
 impl<'d> Builder<'d> {
     fn node(&self, id: NodeId) -> &'d Node {
         self.doc.node(id)
+    }
+
+    /// Accepts property `name` of `node`, if given, without reading it; it is named in the
+    /// warning about ignored properties.
+    fn ignore(&mut self, node: &Node, name: &str) {
+        if let Some(p) = node.prop(name) {
+            self.ignored.push((name.to_string(), format!("{} \"{}\"", node.tag, node.plugin), p.loc.clone()));
+        }
+    }
+
+    /// One warning for the ignored properties (each name once, with where it first
+    /// appears) and one for the bitmaps read as bilinear lookups.
+    fn push_warnings(&mut self) {
+        if !self.ignored.is_empty() {
+            let mut names: Vec<(&str, &str, &Location, usize)> = Vec::new();
+            for (name, plugin, loc) in &self.ignored {
+                match names.iter_mut().find(|n| n.0 == name) {
+                    Some(n) => n.3 += 1,
+                    None => names.push((name, plugin, loc, 1)),
+                }
+            }
+            names.sort_by_key(|n| (n.2.file.clone(), n.2.line, n.2.col));
+            let list: Vec<String> = names
+                .iter()
+                .map(|(name, plugin, loc, n)| {
+                    let more = if *n > 1 { format!(" and {} more", n - 1) } else { String::new() };
+                    format!("\"{name}\" of {plugin} ({loc}{more})")
+                })
+                .collect();
+            self.stats.warnings.push(format!(
+                "ignored {} that {} nothing to this renderer (Mitsuba 0.5/0.6 film options; the output format follows the output file's extension): {}",
+                if list.len() == 1 { "a property" } else { "properties" },
+                if list.len() == 1 { "means" } else { "mean" },
+                list.join(", ")
+            ));
+        }
+        if let Some((first, loc)) = self.read_as_bilinear.first() {
+            let more = match self.read_as_bilinear.len() {
+                1 => String::new(),
+                n => format!(" and {} more", n - 1),
+            };
+            self.stats.warnings.push(format!(
+                "bitmap filter_type \"{first}\" ({loc}{more}) is read as bilinear lookups: a filter footprint from camera rays alone would make light paths see other texels than camera paths"
+            ));
+        }
+    }
+
+    /// The film size, or the `--resolution` that replaces it.
+    fn film_size(&self, width: u32, height: u32) -> Result<(u32, u32)> {
+        let Some((w, h)) = self.options.resolution else {
+            return Ok((width, height));
+        };
+        if w == 0 || h == 0 || w > 65536 || h > 65536 || w as u64 * h as u64 > MAX_PIXELS {
+            return Err(Error::Usage(format!(
+                "--resolution {w}x{h}: width and height must be between 1 and 65536, at most {MAX_PIXELS} pixels"
+            )));
+        }
+        Ok((w, h))
     }
 
     /// The one nested object of `tag` in `id`, if any; two are an error (`what` names them).
@@ -250,10 +335,18 @@ impl<'d> Builder<'d> {
                 let filter = match node.string("filter_type")?.unwrap_or("bilinear") {
                     "bilinear" => FilterType::Bilinear,
                     "nearest" => FilterType::Nearest,
+                    // Mitsuba 0.6's mip-mapped filters: bilinear lookups of the full-resolution
+                    // image (README, "Mitsuba 0.5/0.6 scenes").
+                    f @ ("trilinear" | "ewa") => {
+                        self.read_as_bilinear.push((f.to_string(), node.prop_loc("filter_type")));
+                        FilterType::Bilinear
+                    }
                     f => {
                         return Err(Error::input(
                             &node.prop_loc("filter_type"),
-                            format!("unknown filter_type \"{f}\" (bilinear, nearest)"),
+                            format!(
+                                "unknown filter_type \"{f}\" (bilinear, nearest; trilinear and ewa are read as bilinear)"
+                            ),
                         ));
                     }
                 };
@@ -375,16 +468,24 @@ impl<'d> Builder<'d> {
         }
     }
 
-    /// Conductor parameters: a named `material` or `eta` and `k` (default: a perfect mirror).
+    /// Conductor parameters: a named `material` or `eta` and `k` (default: a perfect mirror),
+    /// relative to the exterior medium's index `ext_eta` (Mitsuba 0.6's `extEta`, a number
+    /// or a named index; default 1): both are divided by it, as Mitsuba 0.6 did.
     fn conductor(&self, id: NodeId) -> Result<(Vec3, Vec3)> {
         let node = self.doc.node(id);
-        match (node.string("material")?, node.rgb("eta")?, node.rgb("k")?) {
-            (Some(m), None, None) => lookup_conductor(m)
-                .ok_or_else(|| Error::input(&node.prop_loc("material"), format!("unknown conductor material \"{m}\""))),
-            (None, Some(eta), Some(k)) => Ok((non_negative_rgb(node, "eta", eta)?, non_negative_rgb(node, "k", k)?)),
-            (None, None, None) => Ok((Vec3::ZERO, Vec3::ONE)),
-            _ => Err(Error::input(&node.loc, "give either \"material\" or both \"eta\" and \"k\"")),
-        }
+        let (eta, k) = match (node.string("material")?, node.rgb("eta")?, node.rgb("k")?) {
+            (Some(m), None, None) => lookup_conductor(m).ok_or_else(|| {
+                Error::input(&node.prop_loc("material"), format!("unknown conductor material \"{m}\""))
+            })?,
+            (None, Some(eta), Some(k)) => (non_negative_rgb(node, "eta", eta)?, non_negative_rgb(node, "k", k)?),
+            (None, None, None) => (Vec3::ZERO, Vec3::ONE),
+            _ => return Err(Error::input(&node.loc, "give either \"material\" or both \"eta\" and \"k\"")),
+        };
+        let ext_eta = match node.prop("ext_eta") {
+            None => 1.0,
+            Some(_) => self.ior(id, "ext_eta", "air")?,
+        };
+        Ok((eta / ext_eta, k / ext_eta))
     }
 
     /// Instantiates a BSDF once per node (shared through `ref`).
@@ -771,7 +872,10 @@ impl<'d> Builder<'d> {
             return Err(Error::input(&node.prop_loc("far_clip"), "far_clip must exceed near_clip"));
         }
         let film = match self.single_child(id, "film", "a sensor")? {
-            None => FilmSpec { width: 768, height: 576, filter: Filter::Gaussian { stddev: 0.5 } },
+            None => {
+                let (width, height) = self.film_size(768, 576)?;
+                FilmSpec { width, height, filter: Filter::Gaussian { stddev: 0.5 } }
+            }
             Some(n) => self.film(n)?,
         };
         let sampler = match self.single_child(id, "sampler", "a sensor")? {
@@ -806,20 +910,20 @@ impl<'d> Builder<'d> {
                 format!("a {width}×{height} film exceeds the limit of {MAX_PIXELS} pixels"),
             ));
         }
+        let (width, height) = self.film_size(width, height)?;
+        for name in IGNORED_FILM_PROPERTIES {
+            self.ignore(node, name);
+        }
         // Output format options: this renderer writes float RGB (EXR) or sRGB (PNG) by the
-        // output file's extension; accept Mitsuba's values that agree with that.
-        for (name, allowed) in [
-            ("file_format", &["openexr", "exr"][..]),
-            ("pixel_format", &["rgb", "rgba"][..]),
-            ("component_format", &["float16", "float32"][..]),
-        ] {
-            if let Some(v) = node.string(name)?
-                && !allowed.contains(&v.to_ascii_lowercase().as_str())
-            {
-                return Err(Error::input(
-                    &node.prop_loc(name),
-                    format!("{name} \"{v}\" is not supported (supported: {})", allowed.join(", ")),
-                ));
+        // output file's extension.
+        for (name, agree) in OUTPUT_FORMAT_PROPERTIES {
+            let agrees = match node.prop(name).map(|p| &p.value) {
+                None => continue,
+                Some(Value::String(v)) => agree.contains(&v.to_ascii_lowercase().as_str()),
+                Some(_) => false,
+            };
+            if node.legacy || !agrees {
+                self.ignore(node, name);
             }
         }
         if node.boolean_or("sample_border", false)? {
@@ -868,10 +972,23 @@ impl<'d> Builder<'d> {
         Ok(SamplerSpec { spp: spp as u32, seed: seed as u64 })
     }
 
+    /// The file's `<integrator>`. When the command line picks the integrator
+    /// (`LoadOptions::integrator_override`), the block gives only what applies to any
+    /// integrator; its type, if this renderer lacks it, and its other properties are one
+    /// warning instead of an error.
     fn integrator(&mut self, id: NodeId) -> Result<IntegratorSpec> {
         let node = self.doc.node(id);
-        if !INTEGRATOR_PLUGINS.contains(&node.plugin.as_str()) {
-            return Err(self.unknown_plugin(id, INTEGRATOR_PLUGINS));
+        let known = IntegratorKind::from_plugin(&node.plugin).is_some();
+        if !known && self.options.integrator_override.is_none() {
+            let n = self.node(id);
+            return Err(Error::input(
+                &n.loc,
+                format!(
+                    "unknown integrator plugin \"{}\" (supported: {}); or pick one with --integrator, and the file's max_depth and rr_depth apply",
+                    n.plugin,
+                    INTEGRATOR_PLUGINS.join(", ")
+                ),
+            ));
         }
         let max_depth = node.integer("max_depth")?.unwrap_or(-1);
         if !(-1..=1 << 16).contains(&max_depth) {
@@ -885,6 +1002,36 @@ impl<'d> Builder<'d> {
             return Err(Error::input(&node.prop_loc("rr_depth"), "rr_depth must be at least 1"));
         }
         let hide_emitters = node.boolean_or("hide_emitters", false)?;
+        if let Some(chosen) = &self.options.integrator_override {
+            let mut rest: Vec<String> = Vec::new();
+            for p in node.props.iter().filter(|p| !p.used.get()) {
+                p.used.set(true);
+                rest.push(format!("\"{}\" ({})", p.name, p.loc));
+            }
+            for c in node.children.iter().filter(|c| !c.used.get()) {
+                c.used.set(true);
+                let n = self.node(c.node);
+                rest.push(format!("nested {} \"{}\" ({})", n.tag, n.plugin, c.loc));
+            }
+            if !known || !rest.is_empty() {
+                let applied: Vec<&str> = ["max_depth", "rr_depth", "hide_emitters"]
+                    .into_iter()
+                    .filter(|n| node.props.iter().any(|p| p.name == *n))
+                    .collect();
+                self.stats.warnings.push(format!(
+                    "{}: the scene's integrator \"{}\"{} is replaced by {chosen}{}; ignored: {}",
+                    node.loc,
+                    node.plugin,
+                    if known { "" } else { ", which this renderer lacks," },
+                    match applied.as_slice() {
+                        [] => String::new(),
+                        [one] => format!("; its {one} applies"),
+                        more => format!("; its {} apply", more.join(", ")),
+                    },
+                    if rest.is_empty() { "its type".to_string() } else { rest.join(", ") }
+                ));
+            }
+        }
         self.doc.check_unused(id)?;
         Ok(IntegratorSpec {
             plugin: node.plugin.clone(),

@@ -73,6 +73,26 @@ pub struct LoadOptions {
     pub build: BuildOptions,
     /// Draw per-file and BVH-build progress on stderr when it is a terminal.
     pub progress: bool,
+    /// Who picks the integrator instead of the scene file, for messages (`--integrator
+    /// bdpt`). Then the file's `<integrator>` only gives what applies to any integrator
+    /// (`max_depth`, `rr_depth`, `hide_emitters`): an unknown type or properties only
+    /// another integrator reads are one warning instead of an error.
+    pub integrator_override: Option<String>,
+    /// The film size `(width, height)` instead of the scene's (`--resolution`).
+    pub resolution: Option<(u32, u32)>,
+}
+
+/// Parses a film size `WxH` (`320x180`; `×` and `X` work too): both at least 1 and at most
+/// 65536.
+pub fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("\"{s}\" is not a resolution WxH (e.g. 320x180)");
+    let (w, h) = s.trim().split_once(['x', 'X', '×']).ok_or_else(bad)?;
+    let w: u32 = w.trim().parse().map_err(|_| bad())?;
+    let h: u32 = h.trim().parse().map_err(|_| bad())?;
+    if !(1..=65536).contains(&w) || !(1..=65536).contains(&h) {
+        return Err(format!("\"{s}\": width and height must be between 1 and 65536"));
+    }
+    Ok((w, h))
 }
 
 /// A render-ready scene.

@@ -2,9 +2,12 @@
 //!
 //! The document is parsed with `roxmltree`; `<default>` parameters and `$name` references
 //! are substituted (command-line `-D name=value` overrides win over defaults), files
-//! version < 2 are upgraded (camelCase names become snake_case, `lookAt` becomes `lookat`,
-//! `uscale`/`vscale`/`uoffset`/`voffset` become a `to_uv` transform), `<include>` is
-//! expanded, and `<ref>`s are resolved. The result is a flat arena of [`Node`]s whose
+//! version < 2 (Mitsuba 0.5 and 0.6) are upgraded (camelCase names become snake_case,
+//! `lookAt` becomes `lookat`, `uscale`/`vscale`/`uoffset`/`voffset` become a `to_uv`
+//! transform, a `diffuse` BSDF's `diffuse_reflectance` becomes `reflectance`; parameter
+//! names are upgraded alike, in `<default>`s and in `$name` references, so either spelling
+//! matches), `<include>` is expanded, and `<ref>`s are resolved (to any object with that
+//! id, nested in another or not). The result is a flat arena of [`Node`]s whose
 //! properties remember where they came from and whether anything used them, so that an
 //! unused property is an error naming its file and line (as in Mitsuba).
 
@@ -91,6 +94,9 @@ pub struct Node {
     pub loc: Location,
     pub props: Vec<Property>,
     pub children: Vec<Child>,
+    /// Declared in a version 0.x file (upgraded): properties that only Mitsuba 0.5/0.6
+    /// knew may be accepted (see `load.rs`).
+    pub legacy: bool,
 }
 
 impl Node {
@@ -261,6 +267,7 @@ pub fn parse_str(text: &str, path: &Path, overrides: &[(String, String)]) -> Res
         pending_refs: Vec::new(),
         include_depth: 0,
         files: vec![path.to_path_buf()],
+        upgrade: false,
     };
     let root = p.parse_root(path, text)?;
     p.resolve_refs()?;
@@ -282,6 +289,9 @@ struct Parser {
     pending_refs: Vec<PendingRef>,
     include_depth: usize,
     files: Vec<PathBuf>,
+    /// The file being parsed is version 0.x (its names are upgraded); substitution of
+    /// `$name` then upgrades the name as `<default>` names are.
+    upgrade: bool,
 }
 
 /// `camelCase` → `snake_case`, Mitsuba 3's rule for upgrading version 0.x names.
@@ -347,14 +357,40 @@ impl Parser {
             return Err(Error::input(&loc, format!("scene version {version} is newer than this loader (3.x)")));
         }
         let ctx = FileCtx { path: ctx0.path, upgrade: major < 2 };
+        self.upgrade = ctx.upgrade;
         let id = self.new_node("scene", String::new(), None, loc);
         self.parse_children(&doc, root, id, &ctx)?;
         Ok(id)
     }
 
     fn new_node(&mut self, tag: &str, plugin: String, id: Option<String>, loc: Location) -> NodeId {
-        self.nodes.push(Node { tag: tag.to_string(), plugin, id, loc, props: Vec::new(), children: Vec::new() });
+        let legacy = self.upgrade;
+        self.nodes.push(Node {
+            tag: tag.to_string(),
+            plugin,
+            id,
+            loc,
+            props: Vec::new(),
+            children: Vec::new(),
+            legacy,
+        });
         self.nodes.len() - 1
+    }
+
+    /// The value of parameter `name`: a command-line override, else a `<default>`. In a
+    /// version 0.x file the name is upgraded as `<default>` names are (`$photonCount` finds
+    /// `<default name="photonCount">`, stored as `photon_count`), and an override matches
+    /// in either spelling.
+    fn param(&self, name: &str) -> Option<&String> {
+        if !self.upgrade {
+            return self.overrides.get(name).or_else(|| self.params.get(name));
+        }
+        let snake = camel_to_snake(name);
+        self.overrides
+            .get(name)
+            .or_else(|| self.overrides.get(&snake))
+            .or_else(|| self.overrides.iter().find(|(k, _)| camel_to_snake(k) == snake).map(|(_, v)| v))
+            .or_else(|| self.params.get(&snake))
     }
 
     /// Substitutes `$name` parameters in an attribute value.
@@ -374,7 +410,7 @@ impl Parser {
                     return Err(Error::input(loc, format!("\"$\" without a parameter name in \"{value}\"")));
                 }
                 let name = &after[..len];
-                let v = self.overrides.get(name).or_else(|| self.params.get(name)).ok_or_else(|| Error::input(loc, format!("undefined parameter \"${name}\" (declare it with <default name=\"{name}\" …/> or pass -D {name}=…)")))?;
+                let v = self.param(name).ok_or_else(|| Error::input(loc, format!("undefined parameter \"${name}\" (declare it with <default name=\"{name}\" …/> or pass -D {name}=…)")))?;
                 out.push_str(v);
                 if out.len() > MAX_SUBSTITUTED {
                     return Err(Error::input(
@@ -435,6 +471,18 @@ impl Parser {
                 Some(n) => Some(n.to_string()),
                 None => None,
             };
+            // Mitsuba 3's upgrade renames a `diffuse` BSDF's `diffuseReflectance`.
+            let name = match name {
+                Some(n)
+                    if ctx.upgrade
+                        && n == "diffuse_reflectance"
+                        && self.nodes[parent].tag == "bsdf"
+                        && self.nodes[parent].plugin == "diffuse" =>
+                {
+                    Some("reflectance".to_string())
+                }
+                n => n,
+            };
             match tag.as_str() {
                 "default" => {
                     Self::check_attrs(child, &["name", "value"], &loc)?;
@@ -470,7 +518,9 @@ impl Parser {
                         .ok_or_else(|| Error::input(&rloc, "<scene> needs a valid \"version\" attribute"))?;
                     let ictx = FileCtx { path: Arc::new(path), upgrade: v.0 < 2 };
                     self.include_depth += 1;
+                    self.upgrade = ictx.upgrade;
                     self.parse_children(&inc, r, parent, &ictx)?;
+                    self.upgrade = ctx.upgrade;
                     self.include_depth -= 1;
                 }
                 "ref" => {
@@ -516,10 +566,6 @@ impl Parser {
                         uv[["uoffset", "voffset", "uscale", "vscale"].iter().position(|n| *n == name).unwrap_or(0)] =
                             Some(v);
                         uv_loc.get_or_insert(loc.clone());
-                        continue;
-                    }
-                    if ctx.upgrade && name == "banner" && self.nodes[parent].tag == "film" {
-                        // Mitsuba 0.6's film banner has no counterpart (there is no banner).
                         continue;
                     }
                     let value = self.parse_value(doc, child, &tag, &loc, ctx)?;
@@ -768,6 +814,8 @@ impl Parser {
         Ok(m)
     }
 
+    /// Points every `<ref>` at the object with its id (declared anywhere, nested in another
+    /// object or not), then refuses references that make an object contain itself.
     fn resolve_refs(&mut self) -> Result<()> {
         for r in std::mem::take(&mut self.pending_refs) {
             let (node, _) = self
@@ -775,6 +823,44 @@ impl Parser {
                 .get(&r.id)
                 .ok_or_else(|| Error::input(&r.loc, format!("reference to undefined id \"{}\"", r.id)))?;
             self.nodes[r.parent].children[r.slot].node = *node;
+        }
+        // Depth-first over nested objects and references: an edge back to an object still
+        // being visited closes a cycle (only a reference can).
+        let mut state = vec![0u8; self.nodes.len()]; // 0 unseen, 1 being visited, 2 done
+        for start in 0..self.nodes.len() {
+            if state[start] != 0 {
+                continue;
+            }
+            state[start] = 1;
+            let mut stack: Vec<(NodeId, usize)> = vec![(start, 0)];
+            while let Some(top) = stack.last_mut() {
+                let (node, i) = *top;
+                let Some(c) = self.nodes[node].children.get(i) else {
+                    state[node] = 2;
+                    stack.pop();
+                    continue;
+                };
+                top.1 += 1;
+                match state[c.node] {
+                    0 => {
+                        state[c.node] = 1;
+                        stack.push((c.node, 0));
+                    }
+                    1 => {
+                        let target = &self.nodes[c.node];
+                        return Err(Error::input(
+                            &c.loc,
+                            format!(
+                                "reference to id \"{}\" makes {} \"{}\" contain itself",
+                                target.id.as_deref().unwrap_or(""),
+                                target.tag,
+                                target.plugin
+                            ),
+                        ));
+                    }
+                    _ => {}
+                }
+            }
         }
         Ok(())
     }
