@@ -557,8 +557,17 @@ fn random_walk<R: Random>(
         if dist == 0.0 || !dist.is_finite() {
             break;
         }
-        // Towards a light at infinity the direction is the light's, exactly.
-        si.wo = if n == 1 && prev.at_infinity() { prev.ng } else { back / dist };
+        // Towards a light at infinity the direction is the light's, exactly. After a Dirac
+        // delta (a mirror, glass) it is the ray's: no density of that step enters a weight, and
+        // the direction between the two points can be far from the ray's on the short
+        // segments inside thin glass, where it would bend what the glass shows.
+        si.wo = if n == 1 && prev.at_infinity() {
+            prev.ng
+        } else if prev.delta {
+            -ray.d.normalize()
+        } else {
+            back / dist
+        };
         let bsdf_index = scene.bsdf_index(&si);
         let bsdf = &scene.bsdfs[bsdf_index];
         let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
