@@ -389,8 +389,14 @@ impl Film {
         }
     }
 
-    /// Adds another film's splats (the caller adds films in a fixed order).
+    /// Adds another film's splats (exactly, so the order of the films does not matter).
     pub fn add_film_splats(&mut self, other: &Film) {
+        self.combine_splats(other, |d, s| d.add_sum(s));
+    }
+
+    /// Adds each of `other`'s splat sums into this film's with `add` (creating this film's
+    /// splats when it has none).
+    fn combine_splats(&mut self, other: &Film, add: impl Fn(&mut ExactSum, ExactSum)) {
         if other.splats.is_empty() {
             return;
         }
@@ -399,7 +405,7 @@ impl Film {
         }
         for (d, s) in self.splats.iter_mut().zip(&other.splats) {
             for c in 0..3 {
-                d[c].add_sum(s[c]);
+                add(&mut d[c], s[c]);
             }
         }
     }
@@ -453,17 +459,7 @@ impl Film {
     /// Adds another film's splats times `scale` (films whose splats carry different
     /// normalisations; the result is rounded, not exact).
     pub fn add_scaled_splats(&mut self, other: &Film, scale: f64) {
-        if other.splats.is_empty() {
-            return;
-        }
-        if self.splats.is_empty() {
-            self.splats = vec![[ExactSum::default(); 3]; self.width as usize * self.height as usize];
-        }
-        for (d, s) in self.splats.iter_mut().zip(&other.splats) {
-            for c in 0..3 {
-                d[c].add(s[c].value() * scale);
-            }
-        }
+        self.combine_splats(other, |d, s| d.add(s.value() * scale));
     }
 
     /// Pixels per light path: the factor that turns summed splats into pixel values.

@@ -442,7 +442,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         }
         // An interrupted chunk writes no part: a merge would take it for a whole one.
         Some(_) => {}
-        None => image_io::write(&output, &Image::new(out.width, out.height, out.image.clone()))?,
+        None => image_io::write(&output, &Image::new(out.width, out.height, out.image))?,
     }
     if let Some(path) = &a.stats {
         let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "load": { "read_seconds": scene.stats.read_seconds, "bvh_seconds": scene.stats.bvh_seconds, "vertices": scene.stats.vertices, "mesh_bytes": scene.stats.mesh_bytes }, "degenerate_triangles": scene.stats.degenerate_triangles, "embree_version": embree_version, "render": s });

@@ -279,12 +279,6 @@ pub struct EmissionSample {
 }
 
 impl Light {
-    /// `true` for lights the bidirectional integrators can start paths from and connect
-    /// to: area, point and spot emitters.
-    pub fn is_finite(&self) -> bool {
-        matches!(self, Light::Area { .. } | Light::Point { .. } | Light::Spot { .. })
-    }
-
     /// `true` when the light's position is a delta distribution (rays cannot hit it).
     pub fn is_delta_position(&self) -> bool {
         matches!(self, Light::Point { .. } | Light::Spot { .. })
@@ -423,7 +417,7 @@ pub fn spot_falloff(cos_theta: f32, cutoff: f32, beam_width: f32) -> f32 {
 pub struct LightSampler {
     distribution: Option<Distribution1D>,
     sphere_lights: bool,
-    delta_position_lights: bool,
+    unreachable_lights: bool,
 }
 
 impl LightSampler {
@@ -431,12 +425,12 @@ impl LightSampler {
         let sphere_lights = lights.iter().any(|l| {
             matches!(l, Light::Area { shape, .. } if matches!(shapes[*shape].geometry, ShapeGeometry::Sphere { .. }))
         });
-        let delta_position_lights = lights.iter().any(Light::is_unreachable);
+        let unreachable_lights = lights.iter().any(Light::is_unreachable);
         let distribution = (!lights.is_empty()).then(|| {
             let powers: Vec<f32> = lights.iter().map(|l| l.power(shapes, bounds)).collect();
             Distribution1D::new(&powers)
         });
-        LightSampler { distribution, sphere_lights, delta_position_lights }
+        LightSampler { distribution, sphere_lights, unreachable_lights }
     }
 
     /// Whether some area light is a sphere (whose points next-event estimation samples by
@@ -449,8 +443,8 @@ impl LightSampler {
     /// Whether some light cannot be reached by a ray: a delta position (point and spot
     /// lights) or a delta direction (directional lights).
     #[inline]
-    pub fn any_delta_position(&self) -> bool {
-        self.delta_position_lights
+    pub fn any_unreachable(&self) -> bool {
+        self.unreachable_lights
     }
 
     /// Picks a light: its index, its probability, and `u` rescaled for reuse.

@@ -121,7 +121,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         }
         let c = pt.beta * camera_end.f * ls.li / (pmf * ls.pdf);
         let light = &scene.lights[l];
-        let conn = if light.at_infinity() {
+        let (y0, conn) = if light.at_infinity() {
             // A light at infinity: `y_0` is the direction, and `z_{t-1}`'s density from it
             // that of a point on the disk facing it (no distance term either way).
             let mut y0 = Vertex::light(l, ls.p, ls.wi, Vec2::ZERO, Rgb::ONE, 0.0);
@@ -137,7 +137,6 @@ impl<C: StrategyCounts> Connector<'_, C> {
             let light_end = End { f: Rgb::ZERO, pdf_fwd: light.pdf_emission_direction(ls.n, -ls.wi), pdf_rev: 0.0 };
             (y0, Connection { w: -ls.wi, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
         };
-        let (y0, conn) = conn;
         self.finish(from_ref(&y0), camera, &conn, c, pos, rng, sink, counters, |s, w| s.add(1, t, w));
     }
 

@@ -296,7 +296,7 @@ pub fn path_pdfs<const N: usize>(
     }
     p.delta[s] = false;
     let x0 = if s > 0 { &light[0] } else { pt };
-    p.delta_light = scene.light_sampler.any_delta_position()
+    p.delta_light = scene.light_sampler.any_unreachable()
         && match x0.kind {
             VertexKind::Light(l) => scene.lights[l as usize].is_unreachable(),
             _ => false,

@@ -143,20 +143,20 @@ impl Vertex {
         self.infinite
     }
 
-    /// Radiance (irradiance for a directional light) arriving from a vertex at infinity.
+    /// Radiance (irradiance for a directional light) arriving from a vertex at infinity:
+    /// for the sky and for any light at infinity that rays can hit, every such light seen in
+    /// that direction (the strategies of one path must see one emitter).
     pub fn infinite_emission(&self, scene: &Scene) -> Rgb {
+        if !self.infinite {
+            return Rgb::ZERO;
+        }
         match self.kind {
-            VertexKind::Sky => scene.infinite_lights.iter().map(|&l| scene.lights[l].eval_infinite(self.ng)).sum(),
-            // Every light at infinity that rays can hit, as for the sky: the strategies of
-            // one path must see one emitter.
-            VertexKind::Light(l) => match &scene.lights[l as usize] {
-                crate::light::Light::Directional { irradiance, .. } => *irradiance,
-                light if light.at_infinity() => {
-                    scene.infinite_lights.iter().map(|&l| scene.lights[l].eval_infinite(self.ng)).sum()
-                }
-                _ => Rgb::ZERO,
-            },
-            _ => Rgb::ZERO,
+            VertexKind::Light(l)
+                if let crate::light::Light::Directional { irradiance, .. } = &scene.lights[l as usize] =>
+            {
+                *irradiance
+            }
+            _ => scene.infinite_lights.iter().map(|&l| scene.lights[l].eval_infinite(self.ng)).sum(),
         }
     }
 
@@ -306,10 +306,10 @@ impl Vertex {
     /// predecessor). One BSDF lookup for both; the values of two calls of [`Vertex::pdf`].
     #[inline(always)]
     pub fn densities(&self, scene: &Scene, next: &Vertex, w: Vec3, dist: f32) -> (f32, f32) {
-        let to_next = if next.kind == VertexKind::Sky { 1.0 } else { next.cos_area(-w) / (dist * dist) };
+        let to_next = if next.infinite { 1.0 } else { next.cos_area(-w) / (dist * dist) };
         match self.kind {
             VertexKind::Camera => (scene.camera.pdf_direction(w) * to_next, 0.0),
-            VertexKind::Light(l) if scene.lights[l as usize].at_infinity() => (self.pdf_light(scene, next), 0.0),
+            VertexKind::Light(_) if self.infinite => (self.pdf_light(scene, next), 0.0),
             VertexKind::Light(l) => (scene.lights[l as usize].pdf_emission_direction(self.ng, w) * to_next, 0.0),
             VertexKind::Sky => (0.0, 0.0),
             VertexKind::Surface => {
@@ -342,14 +342,10 @@ impl Vertex {
     /// ([`infinite_light_density`]; a directional light's, a delta, counts as its choice).
     pub fn pdf_light_origin(&self, scene: &Scene) -> f32 {
         match self.kind {
-            VertexKind::Sky => infinite_light_density(scene, self.ng),
-            VertexKind::Light(l) if scene.lights[l as usize].at_infinity() => {
-                if scene.lights[l as usize].is_unreachable() {
-                    scene.light_sampler.pmf(l as usize)
-                } else {
-                    infinite_light_density(scene, self.ng)
-                }
+            VertexKind::Light(l) if self.infinite && scene.lights[l as usize].is_unreachable() => {
+                scene.light_sampler.pmf(l as usize)
             }
+            _ if self.infinite => infinite_light_density(scene, self.ng),
             _ => {
                 let Some(l) = self.light_index(scene) else { return 0.0 };
                 light_origin_pdf(scene, l)
@@ -394,7 +390,7 @@ impl Connection {
 
     #[inline(always)]
     fn evaluate(scene: &Scene, qs: &Vertex, pt: &Vertex, nonzero: bool) -> Option<Connection> {
-        if qs.kind != VertexKind::Surface && qs.at_infinity() {
+        if qs.infinite {
             // From a light at infinity, along its direction, with no distance term: the
             // density of `pt` is that of a point on the disk facing the light.
             let w = -qs.ng;
@@ -669,26 +665,29 @@ pub fn light_subpath<R: Random>(
     }
     let Some((l, pmf, _)) = scene.light_sampler.sample(u_light) else { return };
     let light = &scene.lights[l];
-    if light.at_infinity() {
-        return infinite_light_subpath(scene, limits, l, pmf, u_pos, u_dir, rng, path, counters);
-    }
-    let Some(es) = light.sample_emission(&scene.shapes, u1, u_pos, u_dir) else { return };
-    let origin = pmf * es.pdf_pos;
-    if origin <= 0.0 || es.pdf_dir <= 0.0 {
-        return;
-    }
-    let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::splat(1.0 / origin), origin);
+    // The first vertex, the ray the walk leaves it along, and the throughput it carries.
+    let (y0, ray, beta) = if light.at_infinity() {
+        let Some(start) = infinite_light_start(scene, l, pmf, u_pos, u_dir) else { return };
+        start
+    } else {
+        let Some(es) = light.sample_emission(&scene.shapes, u1, u_pos, u_dir) else { return };
+        let origin = pmf * es.pdf_pos;
+        if origin <= 0.0 || es.pdf_dir <= 0.0 {
+            return;
+        }
+        let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::splat(1.0 / origin), origin);
+        // What `y0.end(scene, es.d, ..).f` gives, without its direction density.
+        let le = light.emitted(es.n, es.uv, es.d) * y0.cos_area(es.d);
+        let o = if es.n == Vec3::ZERO { es.p } else { offset_origin(es.p, es.n, es.d) };
+        (y0, Ray::new(o, es.d), le / (origin * es.pdf_dir))
+    };
     path.push(y0);
-    // What `y0.end(scene, es.d, ..).f` gives, without its direction density.
-    let le = light.emitted(es.n, es.uv, es.d) * y0.cos_area(es.d);
-    let beta = le / (origin * es.pdf_dir);
-    if limits.light_vertices <= 1 || beta == Rgb::ZERO {
+    if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
         return;
     }
-    let o = if es.n == Vec3::ZERO { es.p } else { offset_origin(es.p, es.n, es.d) };
     random_walk(
         scene,
-        Ray::new(o, es.d),
+        ray,
         beta,
         TransportMode::Importance,
         limits.light_vertices,
@@ -699,44 +698,19 @@ pub fn light_subpath<R: Random>(
     );
 }
 
-/// A light subpath from light `l` at infinity (chosen with probability `pmf`): a direction
-/// from the light's distribution, a point on the disk of the bounding sphere facing it, then
-/// the walk; the first vertices' densities in the measures of [`Vertex`].
-#[allow(clippy::too_many_arguments)]
-fn infinite_light_subpath<R: Random>(
-    scene: &Scene,
-    limits: &WalkLimits,
-    l: usize,
-    pmf: f32,
-    u_pos: Vec2,
-    u_dir: Vec2,
-    rng: &mut R,
-    path: &mut Vec<Vertex>,
-    counters: &mut Counters,
-) {
-    let Some((wi, pdf_dir, li)) = scene.lights[l].sample_infinite_direction(u_dir) else { return };
+/// The start of a light subpath from light `l` at infinity (chosen with probability `pmf`):
+/// a direction from the light's distribution and a point on the disk of the bounding sphere
+/// facing it; the vertex (its density in the measures of [`Vertex`]), the ray into the
+/// scene and the throughput.
+fn infinite_light_start(scene: &Scene, l: usize, pmf: f32, u_pos: Vec2, u_dir: Vec2) -> Option<(Vertex, Ray, Rgb)> {
+    let (wi, pdf_dir, li) = scene.lights[l].sample_infinite_direction(u_dir)?;
     let p = crate::light::disk_point(&scene.bounds, wi, u_pos);
-    let pdf_pos = disk_pdf(scene);
-    let beta = li / (pmf * pdf_dir * pdf_pos);
+    let beta = li / (pmf * pdf_dir * disk_pdf(scene));
     let mut y0 = Vertex::light(l, p, wi, Vec2::ZERO, beta, 0.0);
     y0.infinite = true;
     y0.connectible = false;
     y0.pdf_fwd = y0.pdf_light_origin(scene);
-    path.push(y0);
-    if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
-        return;
-    }
-    random_walk(
-        scene,
-        Ray::new(p, -wi),
-        beta,
-        TransportMode::Importance,
-        limits.light_vertices,
-        limits.rr_depth,
-        rng,
-        path,
-        counters,
-    );
+    Some((y0, Ray::new(p, -wi), beta))
 }
 
 /// A shadow ray between two vertices, offset at both ends along their geometric normals.
