@@ -1,28 +1,42 @@
 #!/usr/bin/env python3
 """Path-tracer speed against Mitsuba 3, measured in one run on the same machine.
 
-Renders scenes/cornell-ply/cornell_mi.xml (256x256, max_depth 8, box filter, independent
-sampler) with Mitsuba 3's `path` integrator (variant scalar_rgb by default) and with
+Renders a scene with Mitsuba 3's `path` integrator (variant scalar_rgb by default) and with
 `pcbpt render --integrator path`, the same number of samples per pixel and threads, and
 prints samples per second of both and their ratio. Render time only: scene loading is
 excluded for both. Each renderer runs `--repeats` times, alternating; the best time counts.
 
+Scenes (`--scene`): `cornell-ply` (scenes/cornell-ply/cornell_mi.xml, 256x256, max_depth 8,
+box filter), and Bitterli's published `staircase2` and `living-room` at 320x180 with their own
+max_depth and filter (loaded in Mitsuba 3 through scripts/mitsuba_scene.py: the film resized
+and `high_quality_edges` stripped in memory; pcbpt reads the file as it is, with
+`--resolution`).
+
     pip install mitsuba numpy
     cargo build --release
     python3 scripts/bench_vs_mitsuba.py --spp 64 --threads 2
+    python3 scripts/bench_vs_mitsuba.py --scene staircase2 --spp 16 --threads 2
 """
 import argparse
 import os
 import sys
 import time
 
+import mitsuba_scene
 from pcbpt_stats import render_stats
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCENE = os.path.join(ROOT, "scenes", "cornell-ply", "cornell_mi.xml")
+
+# name -> (scene file relative to the repository root, film size replacing the file's or None,
+#          the film size rendered, description)
+SCENES = {
+    "cornell-ply": ("scenes/cornell-ply/cornell_mi.xml", None, (256, 256), "max_depth 8, box filter"),
+    "staircase2": ("scenes/staircase2/scene.xml", (320, 180), (320, 180), "its max_depth 65, tent filter"),
+    "living-room": ("scenes/living-room/scene.xml", (320, 180), (320, 180), "its max_depth 65, tent filter"),
+}
 
 
-def mitsuba_seconds(spp, threads, variant):
+def mitsuba_seconds(scene_path, resolution, spp, threads, variant):
     import drjit as dr
     import mitsuba as mi
 
@@ -30,20 +44,22 @@ def mitsuba_seconds(spp, threads, variant):
     mi.set_log_level(mi.LogLevel.Warn)
     if threads:
         dr.set_thread_count(threads)
-    scene = mi.load_file(SCENE)
+    scene = mitsuba_scene.load(mi, scene_path, resolution)
     t0 = time.perf_counter()
     img = mi.render(scene, spp=spp, seed=0)
     dr.eval(img)
     return time.perf_counter() - t0
 
 
-def pcbpt_seconds(binary, spp, threads, rr_depth):
-    return render_stats(binary, SCENE, "--integrator", "path", "--spp", spp, "--threads", threads,
-                        "--rr-depth", rr_depth)["seconds"]
+def pcbpt_seconds(binary, scene_path, resolution, spp, threads, rr_depth):
+    extra = ["--resolution", f"{resolution[0]}x{resolution[1]}"] if resolution else []
+    return render_stats(binary, scene_path, "--integrator", "path", "--spp", spp, "--threads", threads,
+                        "--rr-depth", rr_depth, *extra)["seconds"]
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scene", choices=sorted(SCENES), default="cornell-ply")
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
@@ -52,14 +68,16 @@ def main():
     a = ap.parse_args()
     if not os.path.exists(a.binary):
         sys.exit(f"{a.binary} not found: run `cargo build --release` first")
-    samples = 256 * 256 * a.spp
+    rel, resolution, (w, h), what = SCENES[a.scene]
+    scene_path = os.path.join(ROOT, rel)
+    samples = w * h * a.spp
     mts, ours, ours5 = [], [], []
     for _ in range(a.repeats):
-        mts.append(mitsuba_seconds(a.spp, a.threads, a.variant))
-        ours.append(pcbpt_seconds(a.binary, a.spp, a.threads, 3))
-        ours5.append(pcbpt_seconds(a.binary, a.spp, a.threads, 5))
+        mts.append(mitsuba_seconds(scene_path, resolution, a.spp, a.threads, a.variant))
+        ours.append(pcbpt_seconds(a.binary, scene_path, resolution, a.spp, a.threads, 3))
+        ours5.append(pcbpt_seconds(a.binary, scene_path, resolution, a.spp, a.threads, 5))
     m, p, p5 = min(mts), min(ours), min(ours5)
-    print(f"cornell-ply 256x256, {a.spp} spp, max_depth 8, {a.threads} threads, best of {a.repeats}")
+    print(f"{a.scene} {w}x{h}, {a.spp} spp, {what}, {a.threads} threads, best of {a.repeats}")
     print(f"Mitsuba 3 ({a.variant}) path (rr_depth 5): {m:.3f} s, {samples / m / 1e6:.3f} M samples/s")
     print(f"pcbpt path (rr_depth 3, default):      {p:.3f} s, {samples / p / 1e6:.3f} M samples/s, ratio {m / p:.2f}x")
     print(f"pcbpt path (rr_depth 5, as Mitsuba):   {p5:.3f} s, {samples / p5 / 1e6:.3f} M samples/s, ratio {m / p5:.2f}x")

@@ -38,7 +38,7 @@ impl EnvMap {
             .flat_map(|y| {
                 let sin_theta = (PI * (y as f32 + 0.5) / h as f32).sin();
                 let bm = &bitmap;
-                (0..w).map(move |x| luminance(bm.texels[y * w + x]).max(0.0) * sin_theta)
+                (0..w).map(move |x| luminance(bm.get(x as u32, y as u32)).max(0.0) * sin_theta)
             })
             .collect();
         let distribution = Distribution2D::new(&weights, w, h);

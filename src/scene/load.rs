@@ -762,7 +762,7 @@ impl<'d> Builder<'d> {
                 let bitmap = load_bitmap(&path, false, FilterType::Bilinear, WrapMode::Repeat)
                     .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
                 self.stats.files.push(path.clone());
-                if bitmap.texels.iter().any(|t| !t.is_finite() || t.min_element() < 0.0) {
+                if bitmap.texels().any(|t| !t.is_finite() || t.min_element() < 0.0) {
                     return Err(Error::input(
                         &node.prop_loc("filename"),
                         format!("{}: the environment map has negative or non-finite texels", path.display()),
