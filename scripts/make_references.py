@@ -12,6 +12,11 @@ the scene file is never changed (scripts/mitsuba_scene.py).
     python3 scripts/make_references.py cornell-box            # one reference
     python3 scripts/make_references.py staircase2 --out-dir /tmp/refs   # elsewhere
     python3 scripts/make_references.py --list                 # what can be made
+    python3 scripts/make_references.py sunlit-room --chunks-dir /tmp/chunks   # keep each chunk
+
+With two chunks or more, the JSON also holds the reference's own noise: the relMSE between
+the averages of the first and the second half of the chunks, and a quarter of it (the
+noise the average of both halves carries).
 """
 import argparse
 import json
@@ -30,12 +35,25 @@ REFERENCES = {
     "materials": ("scenes/materials/scene.xml", {"resx": 160, "resy": 120}, 4096, None),
     # Bitterli's Mitsuba 0.5 export as published: its own maxDepth (65) and tent filter.
     "staircase2": ("scenes/staircase2/scene.xml", {}, 1024, (320, 180)),
+    # The room lit by `sunsky` through a window: the file's own 320x180, max_depth (16)
+    # and tent filter.
+    "sunlit-room": ("scenes/sunlit-room/scene.xml", {}, 1024, None),
+}
+
+# Settings the scene file gives, recorded in the JSON beside the reference.
+NOTES = {
+    "sunlit-room": {
+        "film": "the scene's default 320x180",
+        "max_depth": "the scene's default, 16",
+        "filter": "the scene's tent",
+        "emitter": "sunsky: Mitsuba 3's Hosek-Wilkie sun and sky, sun 30 degrees up, default turbidity and albedo, sun_scale = sky_scale = 20",
+    },
 }
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def render(name, variant, chunk, out_dir):
+def render(name, variant, chunk, out_dir, chunks_dir=None):
     import mitsuba as mi
     import numpy as np
 
@@ -43,15 +61,18 @@ def render(name, variant, chunk, out_dir):
     scene_rel, params, spp, resolution = REFERENCES[name]
     scene_path = os.path.join(ROOT, scene_rel)
     chunks = max(1, spp // chunk)
-    acc = None
     t0 = time.time()
     # The film resized and `high_quality_edges` stripped in memory; the file stays as it is.
     scene = mitsuba_scene.load(mi, scene_path, resolution, **params)
+    images = []
     for seed in range(chunks):
-        img = np.array(mi.render(scene, seed=seed, spp=chunk), dtype=np.float64)
-        acc = img if acc is None else acc + img
+        images.append(np.array(mi.render(scene, seed=seed, spp=chunk), dtype=np.float64)[:, :, :3])
+        if chunks_dir:
+            os.makedirs(chunks_dir, exist_ok=True)
+            mi.Bitmap(images[-1].astype(np.float32)).write(os.path.join(chunks_dir, f"{name}_seed{seed}.exr"))
         print(f"{name}: chunk {seed + 1}/{chunks} ({time.time() - t0:.0f} s)", file=sys.stderr)
-    img = (acc / chunks).astype(np.float32)[:, :, :3]
+    acc = sum(images)
+    img = (acc / chunks).astype(np.float32)
     os.makedirs(out_dir, exist_ok=True)
     out = os.path.join(out_dir, f"{name}.exr")
     tmp = out + ".tmp.exr"
@@ -67,12 +88,27 @@ def render(name, variant, chunk, out_dir):
     if resolution is not None:
         settings["film"] = {"width": resolution[0], "height": resolution[1]}
         settings["stripped"] = list(mitsuba_scene.STRIP[:1])
+    settings.update(NOTES.get(name, {}))
     settings.update({
         "spp": chunks * chunk,
         "chunks": {"count": chunks, "spp": chunk, "seeds": f"0..{chunks - 1}"},
         "image_mean": float(img.mean()),
         "seconds": round(time.time() - t0, 1),
     })
+    if chunks >= 2:
+        # The reference's own noise: relMSE (as src/compare.rs defines it, relative to the
+        # reference) between the averages of the first and the second half of the chunks.
+        # Each half carries relMSE(A, B) / 2 of noise, their average a quarter.
+        half = chunks // 2
+        a = sum(images[:half]) / half
+        b = sum(images[half:2 * half]) / half
+        r = img.astype(np.float64)
+        rel = float(np.mean((a - b) ** 2 / (r * r + 0.01)))
+        settings["noise"] = {
+            "halves": f"chunks 0..{half - 1} against {half}..{2 * half - 1}",
+            "relmse_halves": rel,
+            "relmse_reference": rel / 4,
+        }
     with open(out[:-4] + ".json", "w") as f:
         json.dump(settings, f, indent=2)
         f.write("\n")
@@ -85,6 +121,7 @@ def main():
     ap.add_argument("--variant", default="scalar_rgb")
     ap.add_argument("--chunk", type=int, default=256, help="spp per chunk")
     ap.add_argument("--out-dir", default=os.path.join(ROOT, "tests", "data"), help="where to write (default tests/data)")
+    ap.add_argument("--chunks-dir", help="also write each chunk's image there")
     ap.add_argument("--list", action="store_true")
     a = ap.parse_args()
     if a.list:
@@ -95,7 +132,7 @@ def main():
     for name in a.names or REFERENCES:
         if name not in REFERENCES:
             sys.exit(f"unknown reference {name!r}; --list shows them")
-        render(name, a.variant, a.chunk, a.out_dir)
+        render(name, a.variant, a.chunk, a.out_dir, a.chunks_dir)
 
 
 if __name__ == "__main__":
