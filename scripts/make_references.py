@@ -30,6 +30,9 @@ REFERENCES = {
     "materials": ("scenes/materials/scene.xml", {"resx": 160, "resy": 120}, 4096, None),
     # Bitterli's Mitsuba 0.5 export as published: its own maxDepth (65) and tent filter.
     "staircase2": ("scenes/staircase2/scene.xml", {}, 1024, (320, 180)),
+    # Shading normals perturbed by a bump map and by a normal map, under a grazing light.
+    "bumpmap": ("scenes/bumpmap/scene.xml", {"resx": 160, "resy": 120}, 2048, None),
+    "normalmap": ("scenes/bumpmap/normalmap.xml", {"resx": 160, "resy": 120}, 2048, None),
 }
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
