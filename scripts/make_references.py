@@ -38,6 +38,9 @@ REFERENCES = {
     # The room lit by `sunsky` through a window: the file's own 320x180, max_depth (16)
     # and tent filter.
     "sunlit-room": ("scenes/sunlit-room/scene.xml", {}, 1024, None),
+    # Shading normals perturbed by a bump map and by a normal map, under a grazing light.
+    "bumpmap": ("scenes/bumpmap/scene.xml", {"resx": 160, "resy": 120}, 2048, None),
+    "normalmap": ("scenes/bumpmap/normalmap.xml", {"resx": 160, "resy": 120}, 2048, None),
 }
 
 # Settings the scene file gives, recorded in the JSON beside the reference.

@@ -6,7 +6,7 @@
 //! bitmap's first row; bilinear lookups interpolate between texel centres at
 //! `(i + 0.5) / width`.
 
-use crate::math::Rgb;
+use crate::math::{Rgb, luminance};
 use glam::{Mat3, Vec2, Vec3};
 use std::sync::Arc;
 
@@ -166,6 +166,33 @@ impl Bitmap {
             }
         }
     }
+
+    /// The gradient `(∂/∂u, ∂/∂v)` of the luminance of [`Bitmap::eval`] at `uv`, where `to_uv`
+    /// (its upper-left 2×2 block) maps the surface's `uv` to the bitmap's: the derivative
+    /// of the bilinear interpolation that `eval` computes, within the texel cell that
+    /// contains `uv` (Mitsuba 3's `eval_1_grad`, which also multiplies the transposed
+    /// transform's partials by the resolution last). Zero for nearest-neighbour lookups.
+    pub fn luminance_gradient(&self, uv: Vec2, to_uv: &Mat3) -> Vec2 {
+        if self.filter == FilterType::Nearest {
+            return Vec2::ZERO;
+        }
+        let uv = apply(to_uv, uv);
+        let q = Vec2::new(uv.x * self.width as f32, uv.y * self.height as f32) - Vec2::splat(0.5);
+        let (x0, y0) = (q.x.floor(), q.y.floor());
+        let (fx, fy) = (q.x - x0, q.y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let f00 = luminance(self.texel(x0, y0));
+        let f10 = luminance(self.texel(x0 + 1, y0));
+        let f01 = luminance(self.texel(x0, y0 + 1));
+        let f11 = luminance(self.texel(x0 + 1, y0 + 1));
+        // Partials with respect to the pixel coordinates.
+        let dx = (1.0 - fy) * (f10 - f00) + fy * (f11 - f01);
+        let dy = (1.0 - fx) * (f01 - f00) + fx * (f11 - f10);
+        let m = to_uv;
+        let du = m.x_axis.x * dx + m.x_axis.y * dy;
+        let dv = m.y_axis.x * dx + m.y_axis.y * dy;
+        Vec2::new(self.width as f32 * du, self.height as f32 * dv)
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -200,6 +227,17 @@ impl Texture {
                 let f = t - t.floor();
                 if (f.x > 0.5) == (f.y > 0.5) { *color0 } else { *color1 }
             }
+        }
+    }
+
+    /// The gradient of the texture's luminance with respect to the surface's `uv` (see
+    /// [`Bitmap::luminance_gradient`]); zero for a constant. `None` for a checkerboard, whose
+    /// gradient is zero except on its edges, where it does not exist (Mitsuba 3 has none).
+    pub fn luminance_gradient(&self, uv: Vec2) -> Option<Vec2> {
+        match self {
+            Texture::Constant(_) => Some(Vec2::ZERO),
+            Texture::Bitmap { bitmap, to_uv } => Some(bitmap.luminance_gradient(uv, to_uv)),
+            Texture::Checkerboard { .. } => None,
         }
     }
 

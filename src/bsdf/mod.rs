@@ -13,12 +13,15 @@ pub mod dielectric;
 pub mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
+pub mod perturb;
 pub mod plastic;
 
 use crate::math::{Frame, Rgb};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 use microfacet::Roughness;
+pub use perturb::At;
+use perturb::{Perturbation, same_side, shadow_terminator};
 use plastic::{PlasticParams, RoughPlasticParams};
 
 /// Which quantity a path carries: radiance (from the camera) or importance (from lights).
@@ -70,11 +73,15 @@ pub enum BsdfModel {
 }
 
 /// A BSDF as attached to a shape: a model, one-sided (the front side of the shading
-/// normal only, as in Mitsuba) unless wrapped by `twosided`.
+/// normal only, as in Mitsuba) unless wrapped by `twosided`, with the shading normal
+/// perturbed by a `bumpmap` or `normalmap` around it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bsdf {
     pub model: BsdfModel,
     pub two_sided: bool,
+    /// The perturbation of the shading frame (applied where a ray hits the surface; see
+    /// [`perturb`]), whose side test and shadowing term the BSDF's values include.
+    pub perturbation: Option<Box<Perturbation>>,
 }
 
 /// Local-frame helpers.
@@ -84,8 +91,12 @@ pub fn cos_theta(w: Vec3) -> f32 {
 }
 
 impl Bsdf {
+    pub fn new(model: BsdfModel) -> Bsdf {
+        Bsdf { model, two_sided: false, perturbation: None }
+    }
+
     pub fn diffuse(reflectance: Texture) -> Bsdf {
-        Bsdf { model: BsdfModel::Diffuse { reflectance }, two_sided: false }
+        Bsdf::new(BsdfModel::Diffuse { reflectance })
     }
 
     /// `true` when every lobe is a Dirac delta (no light sampling possible).
@@ -121,13 +132,98 @@ impl Bsdf {
     #[inline]
     pub fn to_local(&self, frame: &Frame, wo: Vec3, wi: Vec3) -> (Vec3, Vec3) {
         match self.model {
-            BsdfModel::Diffuse { .. } => (Vec3::new(0.0, 0.0, wo.dot(frame.n)), Vec3::new(0.0, 0.0, wi.dot(frame.n))),
+            BsdfModel::Diffuse { .. } if self.perturbation.is_none() => {
+                (Vec3::new(0.0, 0.0, wo.dot(frame.n)), Vec3::new(0.0, 0.0, wi.dot(frame.n)))
+            }
             _ => (frame.to_local(wo), frame.to_local(wi)),
         }
     }
 
+    /// `true` when a perturbed BSDF is zero for the pair: a direction on opposite sides of
+    /// the unperturbed and the perturbed normal (as Mitsuba's `bumpmap` and `normalmap`).
+    #[inline]
+    fn cut(&self, wo: Vec3, wi: Vec3, at: &At) -> bool {
+        self.perturbation.is_some() && !(same_side(at.base_n, wo) && same_side(at.base_n, wi))
+    }
+
+    /// The shadowing factor of a perturbed BSDF for the light's direction: `wi` when
+    /// tracing radiance, `wo` when tracing importance (the adjoint keeps it on the light's
+    /// side); 1 without a perturbation or with `use_shadowing_function` off.
+    #[inline]
+    fn shadowing(&self, wo: Vec3, wi: Vec3, at: &At, mode: TransportMode) -> f32 {
+        match &self.perturbation {
+            Some(p) if p.shadowing => {
+                shadow_terminator(at.base_n, if mode == TransportMode::Radiance { wi } else { wo })
+            }
+            _ => 1.0,
+        }
+    }
+
     /// BSDF value for light arriving along `wi` and leaving along `wo`.
-    pub fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3, at: impl Into<At>, mode: TransportMode) -> Rgb {
+        let at = at.into();
+        if self.perturbation.is_none() {
+            return self.eval_model(wo, wi, at.uv, mode);
+        }
+        if self.cut(wo, wi, &at) {
+            return Rgb::ZERO;
+        }
+        self.eval_model(wo, wi, at.uv, mode) * self.shadowing(wo, wi, &at, mode)
+    }
+
+    /// Solid-angle density of sampling `wi` given `wo`.
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, at: impl Into<At>, mode: TransportMode) -> f32 {
+        let at = at.into();
+        if self.cut(wo, wi, &at) { 0.0 } else { self.pdf_model(wo, wi, at.uv, mode) }
+    }
+
+    /// Forward and reverse densities of a pair: of `wi` given `wo`, and of `wo` given `wi`
+    /// (what a path generated from the other end would have used).
+    #[inline]
+    pub fn pdf_pair(&self, wo: Vec3, wi: Vec3, at: impl Into<At>, mode: TransportMode) -> (f32, f32) {
+        let at = at.into();
+        if self.cut(wo, wi, &at) { (0.0, 0.0) } else { self.pdf_pair_model(wo, wi, at.uv, mode) }
+    }
+
+    /// [`Bsdf::eval`] and [`Bsdf::pdf_pair`] together, with one dispatch: what a
+    /// connection needs from each of its ends.
+    #[inline]
+    pub fn eval_pdfs(&self, wo: Vec3, wi: Vec3, at: impl Into<At>, mode: TransportMode) -> (Rgb, f32, f32) {
+        let at = at.into();
+        if self.perturbation.is_none() {
+            return self.eval_pdfs_model(wo, wi, at.uv, mode);
+        }
+        if self.cut(wo, wi, &at) {
+            return (Rgb::ZERO, 0.0, 0.0);
+        }
+        let (f, fwd, rev) = self.eval_pdfs_model(wo, wi, at.uv, mode);
+        (f * self.shadowing(wo, wi, &at, mode), fwd, rev)
+    }
+
+    /// Samples `wi` given `wo` with the random numbers `u1` (lobe choice) and `u2`.
+    #[inline]
+    pub fn sample(&self, wo: Vec3, at: impl Into<At>, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        let at = at.into();
+        if self.perturbation.is_none() {
+            return self.sample_model(wo, at.uv, u1, u2, mode);
+        }
+        if !same_side(at.base_n, wo) {
+            return None;
+        }
+        let mut s = self.sample_model(wo, at.uv, u1, u2, mode)?;
+        if !same_side(at.base_n, s.wi) {
+            return None;
+        }
+        let g = self.shadowing(wo, s.wi, &at, mode);
+        s.f *= g;
+        s.weight *= g;
+        Some(s)
+    }
+
+    /// [`Bsdf::eval`] of the model alone (no perturbation's terms).
+    fn eval_model(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
         let (wo, wi) = self.orient(wo, wi);
         match &self.model {
             BsdfModel::Diffuse { reflectance } => diffuse::eval(reflectance.eval(uv), wo, wi),
@@ -148,8 +244,8 @@ impl Bsdf {
         }
     }
 
-    /// Solid-angle density of sampling `wi` given `wo`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2, _mode: TransportMode) -> f32 {
+    /// [`Bsdf::pdf`] of the model alone.
+    fn pdf_model(&self, wo: Vec3, wi: Vec3, uv: Vec2, _mode: TransportMode) -> f32 {
         let (wo, wi) = self.orient(wo, wi);
         match &self.model {
             BsdfModel::Diffuse { .. } => diffuse::pdf(wo, wi),
@@ -163,23 +259,21 @@ impl Bsdf {
         }
     }
 
-    /// Forward and reverse densities of a pair: of `wi` given `wo`, and of `wo` given `wi`
-    /// (what a path generated from the other end would have used).
-    pub fn pdf_pair(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (f32, f32) {
+    /// [`Bsdf::pdf_pair`] of the model alone.
+    fn pdf_pair_model(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (f32, f32) {
         match &self.model {
             // One side test for both directions (the same values as two `pdf` calls).
             BsdfModel::Diffuse { .. } => {
                 let (wo, wi) = self.orient(wo, wi);
                 diffuse::pdf_pair(wo, wi)
             }
-            _ => (self.pdf(wo, wi, uv, mode), self.pdf(wi, wo, uv, mode)),
+            _ => (self.pdf_model(wo, wi, uv, mode), self.pdf_model(wi, wo, uv, mode)),
         }
     }
 
-    /// [`Bsdf::eval`] and [`Bsdf::pdf_pair`] together, with one dispatch: what a
-    /// connection needs from each of its ends.
+    /// [`Bsdf::eval_pdfs`] of the model alone.
     #[inline]
-    pub fn eval_pdfs(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (Rgb, f32, f32) {
+    fn eval_pdfs_model(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (Rgb, f32, f32) {
         match &self.model {
             BsdfModel::Diffuse { reflectance } => {
                 let (wo, wi) = self.orient(wo, wi);
@@ -194,17 +288,17 @@ impl Bsdf {
         }
     }
 
-    /// [`Bsdf::eval_pdfs`] of the other models, out of line so that the diffuse case stays
+    /// [`Bsdf::eval_pdfs_model`] of the other models, out of line so that the diffuse case stays
     /// small where it is inlined.
     #[inline(never)]
     fn eval_pdfs_general(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> (Rgb, f32, f32) {
-        let (fwd, rev) = self.pdf_pair(wo, wi, uv, mode);
-        (self.eval(wo, wi, uv, mode), fwd, rev)
+        let (fwd, rev) = self.pdf_pair_model(wo, wi, uv, mode);
+        (self.eval_model(wo, wi, uv, mode), fwd, rev)
     }
 
-    /// Samples `wi` given `wo` with the random numbers `u1` (lobe choice) and `u2`.
+    /// [`Bsdf::sample`] of the model alone.
     #[inline]
-    pub fn sample(&self, wo: Vec3, uv: Vec2, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    fn sample_model(&self, wo: Vec3, uv: Vec2, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let flip = self.two_sided && wo.z < 0.0;
         let wo_f = if flip { Vec3::new(wo.x, wo.y, -wo.z) } else { wo };
         let mut s = match &self.model {
@@ -217,7 +311,7 @@ impl Bsdf {
         Some(s)
     }
 
-    /// [`Bsdf::sample`] of the other models (with `wo` already on the front side), out of
+    /// [`Bsdf::sample_model`] of the other models (with `wo` already on the front side), out of
     /// line so that the diffuse case stays small where it is inlined.
     #[inline(never)]
     fn sample_general(&self, wo_f: Vec3, uv: Vec2, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
@@ -286,6 +380,7 @@ mod tests {
                             specular_reflectance: c(1.0),
                         },
                         two_sided: false,
+                        perturbation: None,
                     },
                 ));
                 v.push((
@@ -298,6 +393,7 @@ mod tests {
                             specular_transmittance: c(1.0),
                         },
                         two_sided: false,
+                        perturbation: None,
                     },
                 ));
             }
@@ -313,12 +409,13 @@ mod tests {
             Bsdf {
                 model: BsdfModel::Plastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) },
                 two_sided: false,
+                perturbation: None,
             },
         ));
         for (kind, alpha) in [(MicrofacetType::Beckmann, 0.1), (MicrofacetType::Ggx, 0.4)] {
             let params = RoughPlasticParams::new(rough(kind, alpha, alpha), 1.5, false, 0.5);
             let model = BsdfModel::RoughPlastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) };
-            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false }));
+            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false, perturbation: None }));
         }
         v
     }
@@ -439,6 +536,7 @@ mod tests {
                         specular_reflectance: c(1.0),
                     },
                     two_sided: false,
+                    perturbation: None,
                 };
                 for cos in [1.0f32, 0.7, 0.3, 0.05] {
                     let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
@@ -462,6 +560,7 @@ mod tests {
         let b = Bsdf {
             model: BsdfModel::Dielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
             two_sided: false,
+            perturbation: None,
         };
         let mut s = Sampler::new(&[11]);
         let wo = Vec3::new(0.6, 0.0, 0.8);
@@ -498,6 +597,7 @@ mod tests {
         let b = Bsdf {
             model: BsdfModel::ThinDielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
             two_sided: false,
+            perturbation: None,
         };
         let mut s = Sampler::new(&[12]);
         for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.0, 0.6, -0.8)] {

@@ -101,7 +101,7 @@ impl PathTracer {
                 let light = &scene.lights[light_index];
                 if let Some(ls) = light.sample_li(&scene.shapes, &scene.bounds, si.p, u_light1, u_light2) {
                     let wi = si.shading.to_local(ls.wi);
-                    let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance) * wi.z.abs();
+                    let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
                     if f != Rgb::ZERO {
                         counters.shadow_rays += 1;
                         if !scene.occluded(&si.spawn_ray_to(ls.p)) {
@@ -109,7 +109,7 @@ impl PathTracer {
                             let w = if ls.delta {
                                 1.0
                             } else {
-                                power_heuristic(pdf_light, bsdf.pdf(wo, wi, si.uv, TransportMode::Radiance))
+                                power_heuristic(pdf_light, bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance))
                             };
                             l += beta * f * ls.li * (w / pdf_light);
                         }
@@ -120,7 +120,7 @@ impl PathTracer {
             // Continue the path by sampling the BSDF.
             let u_lobe = sampler.next_1d();
             let u_dir = sampler.next_2d();
-            let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u_dir, TransportMode::Radiance) else {
+            let Some(bs) = bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance) else {
                 break;
             };
             beta *= bs.weight;

@@ -26,6 +26,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+mod perturb;
 mod sensor;
 
 /// BSDF plugins this renderer implements.
@@ -39,6 +40,8 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughdielectric",
     "plastic",
     "roughplastic",
+    "bumpmap",
+    "normalmap",
 ];
 
 /// Integrator plugins a scene file may name (those [`crate::integrator::IntegratorKind::from_plugin`] knows).
@@ -475,6 +478,7 @@ impl<'d> Builder<'d> {
         let plugin = self.node(id).plugin.clone();
         let one = Vec3::ONE;
         let model = match plugin.as_str() {
+            "bumpmap" | "normalmap" => return self.perturbed_bsdf(id),
             "diffuse" => BsdfModel::Diffuse { reflectance: self.texture_prop(id, "reflectance", Vec3::splat(0.5))? },
             "twosided" => {
                 let inner: Vec<NodeId> = self.doc.children(id, "bsdf").map(|c| c.node).collect();
@@ -543,7 +547,7 @@ impl<'d> Builder<'d> {
             _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),
         };
         self.doc.check_unused(id)?;
-        Ok(Bsdf { model, two_sided: false })
+        Ok(Bsdf::new(model))
     }
 
     fn resolve_path(&self, node: &Node, name: &str) -> Result<PathBuf> {

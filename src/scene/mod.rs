@@ -119,7 +119,12 @@ impl Scene {
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
         let hit = self.accel.intersect(ray)?;
-        Some(self.shapes[hit.geom as usize].interaction(ray, &hit))
+        let shape = &self.shapes[hit.geom as usize];
+        let mut si = shape.interaction(ray, &hit);
+        if let Some(p) = &self.bsdfs[shape.bsdf].perturbation {
+            shape.perturb(&mut si, p);
+        }
+        Some(si)
     }
 
     /// `true` when something blocks the ray segment.

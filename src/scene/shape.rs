@@ -3,6 +3,8 @@
 
 use super::mesh::TriangleMesh;
 use crate::accel::{Geometry, Hit, Ray};
+use crate::bsdf::At;
+use crate::bsdf::perturb::{Perturbation, tangent_frame};
 use crate::math::Frame;
 use crate::sampling::{
     Distribution1D, square_to_uniform_cone, square_to_uniform_cone_pdf, square_to_uniform_sphere,
@@ -47,6 +49,9 @@ pub struct SurfaceInteraction {
     /// Shading frame (its `n` is the interpolated normal, after `flip_normals`).
     pub shading: Frame,
     pub uv: Vec2,
+    /// The unperturbed shading normal in `shading` where a `bumpmap` or `normalmap` has
+    /// perturbed it, `Vec3::Z` elsewhere (what the BSDF's side test and shadowing need).
+    pub base_n: Vec3,
     pub shape: u32,
     pub prim: u32,
     /// Unit direction back along the incoming ray.
@@ -54,6 +59,12 @@ pub struct SurfaceInteraction {
 }
 
 impl SurfaceInteraction {
+    /// Where the BSDF is evaluated: texture coordinates and the unperturbed normal.
+    #[inline]
+    pub fn at(&self) -> At {
+        At { uv: self.uv, base_n: self.base_n }
+    }
+
     /// A ray leaving the surface in direction `d`, offset to avoid self-intersection.
     #[inline]
     pub fn spawn_ray(&self, d: Vec3) -> Ray {
@@ -160,6 +171,7 @@ impl Shape {
                     ng,
                     shading: Frame::from_normal(ns),
                     uv,
+                    base_n: Vec3::Z,
                     shape: hit.geom,
                     prim: hit.prim,
                     wo,
@@ -176,11 +188,56 @@ impl Shape {
                     ng: n,
                     shading: Frame::from_normal(n),
                     uv,
+                    base_n: Vec3::Z,
                     shape: hit.geom,
                     prim: hit.prim,
                     wo,
                 }
             }
+        }
+    }
+
+    /// The partial derivatives `(dp/du, dp/dv)` of the surface at an interaction on it, as
+    /// Mitsuba 3 defines them: on a mesh with texture coordinates from the triangle's
+    /// positions and uvs (any tangent basis of the face normal when the uvs are
+    /// degenerate), on a mesh without them the edges `p1 - p0`, `p2 - p0` (the barycentric
+    /// parameterisation its `uv` then is); on a sphere those of its `(φ / 2π, θ / π)`.
+    pub fn tangents(&self, si: &SurfaceInteraction) -> (Vec3, Vec3) {
+        match &self.geometry {
+            ShapeGeometry::Mesh(m) => {
+                let tri = m.indices[si.prim as usize];
+                let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
+                let (dp0, dp1) = (p1 - p0, p2 - p0);
+                let Some(t) = &m.uvs else { return (dp0, dp1) };
+                let [t0, t1, t2] = tri.map(|k| t[k as usize]);
+                let (duv0, duv1) = (t1 - t0, t2 - t0);
+                let det = duv0.x * duv1.y - duv0.y * duv1.x;
+                if det == 0.0 {
+                    let f = Frame::from_normal(dp0.cross(dp1).normalize_or_zero());
+                    return (f.s, f.t);
+                }
+                let inv = 1.0 / det;
+                ((dp0 * duv1.y - dp1 * duv0.y) * inv, (dp1 * duv0.x - dp0 * duv1.x) * inv)
+            }
+            ShapeGeometry::Sphere { center, radius } => {
+                let local = (si.p - *center) / *radius;
+                let dp_du = Vec3::new(-local.y, local.x, 0.0) * (2.0 * PI * radius);
+                let rd = (local.x * local.x + local.y * local.y).sqrt();
+                let dp_dv =
+                    if rd == 0.0 { Vec3::X } else { Vec3::new(local.z * local.x / rd, local.z * local.y / rd, -rd) };
+                (dp_du, dp_dv * (PI * radius))
+            }
+        }
+    }
+
+    /// Perturbs the shading frame of an interaction on this shape (its BSDF's `bumpmap` or
+    /// `normalmap`), around Mitsuba 3's frame of the unperturbed normal and `dp/du`.
+    pub fn perturb(&self, si: &mut SurfaceInteraction, p: &Perturbation) {
+        let (dp_du, dp_dv) = self.tangents(si);
+        let base = tangent_frame(si.shading.n, dp_du);
+        if let Some((frame, base_n)) = p.apply(&base, dp_du, dp_dv, si.ng, si.uv) {
+            si.shading = frame;
+            si.base_n = base_n;
         }
     }
 

@@ -60,6 +60,8 @@ pub struct Vertex {
     /// axes).
     pub frame: Frame,
     pub uv: Vec2,
+    /// The unperturbed shading normal in `frame` (see [`SurfaceInteraction::base_n`]).
+    pub base_n: Vec3,
     /// Unit direction towards the previous vertex of its own walk (zero for endpoints).
     pub wo: Vec3,
     pub shape: u32,
@@ -91,6 +93,7 @@ impl Vertex {
             ng: Vec3::ZERO,
             frame: Frame::IDENTITY,
             uv: Vec2::ZERO,
+            base_n: Vec3::Z,
             wo: Vec3::ZERO,
             shape: u32::MAX,
             bsdf: u32::MAX,
@@ -112,6 +115,7 @@ impl Vertex {
             ng: n,
             frame: Frame::IDENTITY,
             uv,
+            base_n: Vec3::Z,
             wo: Vec3::ZERO,
             shape: u32::MAX,
             bsdf: u32::MAX,
@@ -169,6 +173,7 @@ impl Vertex {
             ng: si.ng,
             frame: si.shading,
             uv: si.uv,
+            base_n: si.base_n,
             wo: si.wo,
             shape: si.shape,
             bsdf,
@@ -181,6 +186,12 @@ impl Vertex {
             flat: si.shading.n == si.ng,
             infinite: false,
         }
+    }
+
+    /// Where the BSDF of a surface vertex is evaluated.
+    #[inline]
+    pub fn at(&self) -> crate::bsdf::At {
+        crate::bsdf::At { uv: self.uv, base_n: self.base_n }
     }
 
     /// The BSDF of a surface vertex.
@@ -225,7 +236,7 @@ impl Vertex {
             VertexKind::Surface => {
                 let bsdf = self.bsdf(scene);
                 let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
-                let (f, pdf_fwd, pdf_rev) = bsdf.eval_pdfs(lo, li, self.uv, mode);
+                let (f, pdf_fwd, pdf_rev) = bsdf.eval_pdfs(lo, li, self.at(), mode);
                 let mut f = f * li.z.abs();
                 if mode == TransportMode::Importance && !self.flat && f != Rgb::ZERO {
                     // `lo.z` and `li.z` are the cosines with the shading normal.
@@ -267,7 +278,7 @@ impl Vertex {
         li: Vec3,
         mode: TransportMode,
     ) -> Rgb {
-        let mut f = bsdf.eval(lo, li, self.uv, mode) * li.z.abs();
+        let mut f = bsdf.eval(lo, li, self.at(), mode) * li.z.abs();
         if mode == TransportMode::Importance {
             f *= shading_correction(self.ng, self.frame.n, wo, wi);
         }
@@ -294,7 +305,7 @@ impl Vertex {
                 let Some(prev) = prev else { return 0.0 };
                 let wo = if prev.at_infinity() { prev.ng } else { (prev.p - self.p).normalize_or_zero() };
                 let bsdf = self.bsdf(scene);
-                bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.uv, TransportMode::Radiance)
+                bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.at(), TransportMode::Radiance)
             }
         };
         if next.at_infinity() { solid } else { solid * next.cos_area(-w) / dist2 }
@@ -315,7 +326,7 @@ impl Vertex {
             VertexKind::Surface => {
                 let bsdf = self.bsdf(scene);
                 let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
-                let (fwd, rev) = bsdf.pdf_pair(lo, li, self.uv, TransportMode::Radiance);
+                let (fwd, rev) = bsdf.pdf_pair(lo, li, self.at(), TransportMode::Radiance);
                 (fwd * to_next, rev * self.to_prev)
             }
         }
@@ -584,7 +595,7 @@ fn random_walk<R: Random>(
         let wo = si.shading.to_local(si.wo);
         let u1 = rng.next_1d();
         let u2 = rng.next_2d();
-        let Some(bs) = bsdf.sample(wo, si.uv, u1, u2, mode) else { break };
+        let Some(bs) = bsdf.sample(wo, si.at(), u1, u2, mode) else { break };
         let wi = si.shading.to_world(bs.wi);
         let mut weight = bs.weight;
         if mode == TransportMode::Importance {

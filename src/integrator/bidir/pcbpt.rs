@@ -197,7 +197,7 @@ pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
         let bsdf = x.bsdf(scene);
         let (lo, li) = (x.frame.to_local(wo), x.frame.to_local(wi));
         let f = x.scatter_local(bsdf, wo, wi, lo, li, TransportMode::Importance);
-        let pdf = bsdf.pdf(lo, li, x.uv, TransportMode::Importance);
+        let pdf = bsdf.pdf(lo, li, x.at(), TransportMode::Importance);
         if pdf <= 0.0 || f == Rgb::ZERO {
             return;
         }
