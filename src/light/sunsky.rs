@@ -106,8 +106,9 @@ impl Default for Place {
 
 /// The sun's zenith angle and azimuth (`φ`, Mitsuba 3's convention) in the local frame, from
 /// "Computing the Solar Vector" (Blanco-Muriel et al., Solar Energy 2001) in single precision
-/// as Mitsuba 3 evaluates it: the Julian date is a float, so the time of day counts in steps
-/// of a quarter of a day once added to it.
+/// as Mitsuba 3 evaluates it: the Julian date is a float spaced a quarter of a day apart, so
+/// the sun's place along the ecliptic moves in quarter-day steps (the hour angle takes the
+/// time of day exactly).
 pub fn sun_coordinates(t: &DateTime, place: &Place) -> (f32, f32) {
     let dec_hours = t.hour - place.timezone + (t.minute + t.second / 60.0) / 60.0;
     let aux1 = (t.month - 14) / 12;
