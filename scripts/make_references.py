@@ -33,6 +33,8 @@ REFERENCES = {
     "veach-mis": ("scenes/veach-mis/scene.xml", {"resx": 192, "resy": 108}, 8192, None),
     "veach-ajar": ("scenes/veach-ajar/scene.xml", {"resx": 160, "resy": 90, "max_depth": -1}, 16384, None),
     "materials": ("scenes/materials/scene.xml", {"resx": 160, "resy": 120}, 4096, None),
+    # A diffuse ground and block under `sunsky` (Hosek-Wilkie sky and sun).
+    "sunsky": ("scenes/sunsky/scene.xml", {"resx": 80, "resy": 60}, 4096, None),
     # Bitterli's Mitsuba 0.5 export as published: its own maxDepth (65) and tent filter.
     "staircase2": ("scenes/staircase2/scene.xml", {}, 1024, (320, 180)),
     # The room lit by `sunsky` through a window: the file's own 320x180, max_depth (16)

@@ -119,6 +119,12 @@ impl Bitmap {
         matches!(self.texels, Texels::Byte { .. })
     }
 
+    /// The texel at integer coordinates `(x, y)`, wrapped as the bitmap's wrap mode says.
+    #[inline]
+    fn texel(&self, x: i64, y: i64) -> Rgb {
+        self.fetch(self.wrap_index(x, self.width), self.wrap_index(y, self.height))
+    }
+
     #[inline]
     fn fetch(&self, x: usize, y: usize) -> Rgb {
         match &self.texels {

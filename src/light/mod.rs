@@ -1,5 +1,6 @@
 //! Emitters: a closed set dispatched through an enum (Mitsuba 3's `area`, `point`, `spot`,
-//! `directional`, `constant`, `envmap`), and light selection by power.
+//! `directional`, `constant`, `envmap`, and the sky and the sun of `sunsky`), and light
+//! selection by power.
 //!
 //! Directions: `sample_li` returns the unit direction from the reference point towards the
 //! light; infinite lights are evaluated for the direction a ray travels when it leaves the
@@ -12,6 +13,8 @@ use crate::texture::{Bitmap, Texture};
 use glam::{Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::Arc;
+
+pub mod sunsky;
 
 /// A sphere enclosing the scene (for the power and sampling of lights at infinity).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -94,6 +97,10 @@ pub enum Light {
     Constant { radiance: Rgb },
     /// Radiance at infinity from a lat-long image.
     Envmap(Arc<EnvMap>),
+    /// The Hosek–Wilkie sky of `sunsky` (or `sky`).
+    Sky(Arc<sunsky::Sky>),
+    /// The sun of `sunsky` (or `sun`): a small bright disk at infinity.
+    Sun(Arc<sunsky::Sun>),
 }
 
 /// A sample of incident light at a reference point.
@@ -126,6 +133,8 @@ impl Light {
             Light::Directional { irradiance, .. } => disk * luminance(*irradiance),
             Light::Constant { radiance } => 4.0 * PI * disk * luminance(*radiance),
             Light::Envmap(e) => 4.0 * PI * disk * luminance(e.bitmap.mean()) * e.scale,
+            Light::Sky(s) => disk * s.luminance_integral(),
+            Light::Sun(s) => disk * luminance(s.irradiance()),
         }
     }
 
@@ -144,6 +153,8 @@ impl Light {
         match self {
             Light::Constant { radiance } => *radiance,
             Light::Envmap(e) => e.eval(d),
+            Light::Sky(s) => s.eval(d),
+            Light::Sun(s) => s.eval(d),
             _ => Rgb::ZERO,
         }
     }
@@ -154,13 +165,15 @@ impl Light {
         match self {
             Light::Constant { .. } => UNIFORM_SPHERE_PDF,
             Light::Envmap(e) => e.pdf(d),
+            Light::Sky(s) => s.pdf(d),
+            Light::Sun(s) => s.pdf(d),
             _ => 0.0,
         }
     }
 
     /// Lights at infinity that rays leaving the scene can hit.
     pub fn is_infinite(&self) -> bool {
-        matches!(self, Light::Constant { .. } | Light::Envmap(_))
+        matches!(self, Light::Constant { .. } | Light::Envmap(_) | Light::Sky(_) | Light::Sun(_))
     }
 
     /// Samples incident light at `reference`.
@@ -238,12 +251,8 @@ impl Light {
                     delta: false,
                 })
             }
-            Light::Envmap(e) => {
-                let (wi, pdf) = e.sample(u)?;
-                let li = e.eval(wi);
-                if li == Rgb::ZERO {
-                    return None;
-                }
+            Light::Envmap(_) | Light::Sky(_) | Light::Sun(_) => {
+                let (wi, pdf, li) = self.sample_infinite_direction(u)?;
                 Some(LightSample { wi, p: far(wi), n: Vec3::ZERO, li, pdf, delta: false })
             }
         }
@@ -289,9 +298,12 @@ impl Light {
         matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. })
     }
 
-    /// `true` for lights at infinity: `directional`, `constant`, `envmap`.
+    /// `true` for lights at infinity: `directional`, `constant`, `envmap`, sky and sun.
     pub fn at_infinity(&self) -> bool {
-        matches!(self, Light::Directional { .. } | Light::Constant { .. } | Light::Envmap(_))
+        matches!(
+            self,
+            Light::Directional { .. } | Light::Constant { .. } | Light::Envmap(_) | Light::Sky(_) | Light::Sun(_)
+        )
     }
 
     /// Samples light arriving from infinity, for a light subpath: the unit direction `wi`
@@ -306,6 +318,16 @@ impl Light {
             Light::Envmap(e) => {
                 let (wi, pdf) = e.sample(u)?;
                 let li = e.eval(wi);
+                (li != Rgb::ZERO && pdf > 0.0).then_some((wi, pdf, li))
+            }
+            Light::Sky(s) => {
+                let (wi, pdf) = s.sample(u)?;
+                let li = s.eval(wi);
+                (li != Rgb::ZERO && pdf > 0.0).then_some((wi, pdf, li))
+            }
+            Light::Sun(s) => {
+                let (wi, pdf) = s.sample(u);
+                let li = s.eval(wi);
                 (li != Rgb::ZERO && pdf > 0.0).then_some((wi, pdf, li))
             }
             _ => None,

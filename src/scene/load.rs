@@ -28,6 +28,7 @@ use std::time::Instant;
 
 mod perturb;
 mod sensor;
+mod sunsky;
 
 /// BSDF plugins this renderer implements.
 pub const BSDF_PLUGINS: &[&str] = &[
@@ -89,6 +90,10 @@ impl Scene {
                 "shape" => b.shape(child.node)?,
                 "bsdf" => {
                     b.bsdf(child.node)?;
+                }
+                "emitter" if SUNSKY_PLUGINS.contains(&doc.node(child.node).plugin.as_str()) => {
+                    let lights = b.sunsky(child.node)?;
+                    b.lights.extend(lights);
                 }
                 "emitter" => {
                     let light = b.emitter(child.node, None)?;
@@ -193,6 +198,9 @@ struct Builder<'d> {
     /// Bitmaps whose `filter_type` (`trilinear`, `ewa`) is read as bilinear lookups.
     read_as_bilinear: Vec<(String, Location)>,
 }
+
+/// The emitters at infinity that model the sun and the sky (`load/sunsky.rs`).
+const SUNSKY_PLUGINS: &[&str] = &["sunsky", "sun", "sky"];
 
 fn positive(node: &Node, name: &str, v: f32) -> Result<f32> {
     if v > 0.0 && v.is_finite() {
@@ -774,10 +782,15 @@ impl<'d> Builder<'d> {
                 }
                 Light::Envmap(Arc::new(EnvMap::new(Arc::new(bitmap), to_world, scale)))
             }
-            (p @ ("point" | "spot" | "directional" | "constant" | "envmap"), Some(_)) => {
+            (p @ ("point" | "spot" | "directional" | "constant" | "envmap" | "sunsky" | "sun" | "sky"), Some(_)) => {
                 return Err(Error::input(&node.loc, format!("a {p} emitter cannot be attached to a shape")));
             }
-            _ => return Err(self.unknown_plugin(id, &["area", "point", "spot", "directional", "constant", "envmap"])),
+            _ => {
+                return Err(self.unknown_plugin(
+                    id,
+                    &["area", "point", "spot", "directional", "constant", "envmap", "sunsky", "sun", "sky"],
+                ));
+            }
         };
         self.doc.check_unused(id)?;
         Ok(light)

@@ -31,6 +31,9 @@ enum Variant {
     Envmap,
     /// A directional light (a delta direction) beside the area light.
     Directional,
+    /// Mitsuba 3's sun and sky (`sunsky`) beside the area light: the sun a small cone of
+    /// directions, the sky a tabulated density, combined as one sky.
+    Sunsky,
 }
 
 fn scene(variant: Variant) -> Scene {
@@ -69,8 +72,25 @@ fn scene(variant: Variant) -> Scene {
             );
             set(&mut scene, "LeftWall", rough(0.2, MicrofacetType::Ggx));
         }
-        Variant::Envmap | Variant::Directional => {
-            if variant == Variant::Envmap {
+        Variant::Envmap | Variant::Directional | Variant::Sunsky => {
+            if variant == Variant::Sunsky {
+                // The sun shines in through the open front of the box, the sky's +z up is +y.
+                let to_world = glam::Mat3::from_rotation_x(-0.5 * std::f32::consts::PI);
+                let params = crate::light::sunsky::SunSkyParams {
+                    to_world,
+                    sun_local: to_world.inverse() * Vec3::new(-0.3, 0.5, 1.0).normalize(),
+                    turbidity: 3.0,
+                    albedo: Rgb::splat(0.3),
+                    sun_scale: 0.3,
+                    sky_scale: 0.2,
+                    sun_aperture: crate::light::sunsky::SUN_APERTURE_DEG,
+                    complex_sun: false,
+                };
+                let sky = crate::light::sunsky::Sky::new(&params);
+                let sun = crate::light::sunsky::Sun::new(&params);
+                scene.lights.push(Light::Sky(std::sync::Arc::new(sky)));
+                scene.lights.push(Light::Sun(std::sync::Arc::new(sun)));
+            } else if variant == Variant::Envmap {
                 let (w, h) = (32, 16);
                 let texels = (0..w * h)
                     .map(|i| {
@@ -273,7 +293,7 @@ fn check_variant(variant: Variant, seed: u64) {
     let scene = scene(variant);
     let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
     // Light paths from infinity mostly meet the box's outside: more of them fill the pool.
-    let k = if matches!(variant, Variant::Envmap | Variant::Directional) { 6 } else { 1 };
+    let k = if matches!(variant, Variant::Envmap | Variant::Directional | Variant::Sunsky) { 6 } else { 1 };
     let caches = [pc_cache(&scene, 120 * k, DistanceTerm::Falloff), pc_cache(&scene, 40 * k, DistanceTerm::Printed)];
     // Each `--pc-mis` option as the renderer sets it up, with V̄ = 3.1 and κ = 7.3 measured
     // by a previous iteration.
@@ -358,9 +378,14 @@ fn check_variant(variant: Variant, seed: u64) {
         checked += 1;
     }
     assert_eq!(checked, 300);
-    if matches!(variant, Variant::Envmap | Variant::Directional) {
+    if matches!(variant, Variant::Envmap | Variant::Directional | Variant::Sunsky) {
         let far = paths(&scene, seed, 300).iter().filter(|x| x[0].at_infinity()).count();
         assert!(far > 30, "{variant:?}: only {far} paths from a light at infinity");
+    }
+    if variant == Variant::Sunsky {
+        let from_sun = |x: &Vec<Vertex>| matches!(x[0].kind, VertexKind::Light(l) if matches!(scene.lights[l as usize], Light::Sun(_)));
+        let sun = paths(&scene, seed, 300).iter().filter(|x| from_sun(x)).count();
+        assert!(sun > 10, "only {sun} paths from the sun");
     }
     // The resampling counts follow the cached PMFs: far from constant.
     let (lo, hi) = resampled.iter().fold((f32::MAX, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
@@ -403,6 +428,11 @@ fn weights_sum_to_one_with_lights_at_infinity() {
 #[test]
 fn weights_sum_to_one_with_a_directional_light() {
     check_variant(Variant::Directional, 8);
+}
+
+#[test]
+fn weights_sum_to_one_with_sun_and_sky() {
+    check_variant(Variant::Sunsky, 9);
 }
 
 #[test]
