@@ -98,6 +98,7 @@ pub struct MethodEntry {
     pub bootstrap: Option<usize>,
     pub mlt_path_integrator: Option<String>,
     pub pc_light_paths: Option<usize>,
+    pub pc_pool_vertices: Option<usize>,
     pub pc_connections: Option<u32>,
     pub pc_cache_stride: Option<u32>,
     pub pc_cache_depth: Option<u32>,
@@ -234,6 +235,7 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     let pc = &mut o.bidir.pc;
     pc.light_paths = m.pc_light_paths.unwrap_or(pc.light_paths);
+    pc.pool_vertices = m.pc_pool_vertices.unwrap_or(pc.pool_vertices);
     pc.connections = m.pc_connections.unwrap_or(pc.connections);
     pc.stride = m.pc_cache_stride.unwrap_or(pc.stride);
     pc.cache_depth = m.pc_cache_depth.unwrap_or(pc.cache_depth);

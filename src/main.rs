@@ -157,9 +157,13 @@ struct RenderArgs {
     /// Memory limit of a light pool (lvc, pcbpt), in MiB.
     #[arg(long, default_value_t = 4096)]
     max_pool_mb: usize,
-    /// PCBPT: light paths per iteration (M).
+    /// PCBPT: light paths per iteration (M), the least (see --pc-pool-vertices).
     #[arg(long, default_value_t = PcOptions::default().light_paths)]
     pc_light_paths: usize,
+    /// PCBPT: add light paths per iteration until a pool holds about this many vertices
+    /// (judged on a pilot pool), up to one per pixel; 0 keeps --pc-light-paths exactly.
+    #[arg(long, default_value_t = PcOptions::default().pool_vertices)]
+    pc_pool_vertices: usize,
     /// PCBPT: connections drawn per camera vertex (N).
     #[arg(long, default_value_t = PcOptions::default().connections)]
     pc_connections: u32,
@@ -383,6 +387,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         max_pool_mb: a.max_pool_mb,
         pc: PcOptions {
             light_paths: a.pc_light_paths,
+            pool_vertices: a.pc_pool_vertices,
             connections: a.pc_connections,
             stride: a.pc_cache_stride,
             cache_depth: a.pc_cache_depth,

@@ -139,6 +139,24 @@ fn lvc_staircase2() {
     check(&STAIRCASE2, IntegratorKind::Lvc, 32);
 }
 
+// sunlit-room (sky and sun through a window, 320×180, max_depth 16). Light tracing alone is
+// not checked there either: the camera sees the room through the glass sphere.
+
+#[test]
+fn bdpt_sunlit_room() {
+    check(&SUNLIT_ROOM, IntegratorKind::Bdpt, 16);
+}
+
+#[test]
+fn eorr_sunlit_room() {
+    check(&SUNLIT_ROOM, IntegratorKind::Eorr, 16);
+}
+
+#[test]
+fn lvc_sunlit_room() {
+    check(&SUNLIT_ROOM, IntegratorKind::Lvc, 16);
+}
+
 /// Mean of `img` over the rectangle `x0..x1` × `y0..y1`.
 fn region_mean(img: &Image, (x0, x1): (u32, u32), (y0, y1): (u32, u32)) -> f64 {
     let mut sum = 0.0;

@@ -43,6 +43,13 @@ fn pssmlt_staircase2() {
 }
 
 #[test]
+fn pssmlt_sunlit_room() {
+    // Sky and sun through a window (whole-image mean: the sky seen through it counts).
+    let scene = SUNLIT_ROOM.scene();
+    check(&scene, SUNLIT_ROOM.reference, SUNLIT_ROOM.ref_noise, 16, "sunlit-room, PSSMLT, 2 × 16 spp");
+}
+
+#[test]
 fn pssmlt_is_deterministic_for_a_seed_and_thread_count() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     let run = |seed, threads, base| {

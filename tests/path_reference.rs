@@ -75,6 +75,16 @@ fn materials_scene_matches_mitsuba() {
 }
 
 #[test]
+fn sunlit_room_matches_mitsuba() {
+    // Lit by `sunsky` alone, through a window: the sun patch on the floor lights the room.
+    let case = &SUNLIT_ROOM;
+    let scene = case.scene();
+    let a = image(render(&scene, IntegratorKind::Path, 32, 1, 0));
+    let b = image(render(&scene, IntegratorKind::Path, 32, 2, 0));
+    case.check(&a, &b, "path, 2 × 32 spp");
+}
+
+#[test]
 fn staircase2_matches_mitsuba() {
     // Bitterli's Mitsuba 0.5 export as published, at 320×180 (`--resolution`), its own
     // max_depth 65: glass, glossy floors, 13 area lights on disks and rectangles. The

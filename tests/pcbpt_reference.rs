@@ -96,6 +96,9 @@ cases! {
     veach_mis_uniform_falloff_cmf: VEACH_MIS, 32, Uniform, Falloff, Cmf;
     veach_ajar_uniform_falloff_cmf: VEACH_AJAR, 512, Uniform, Falloff, Cmf;
     staircase2_harmonic_falloff: STAIRCASE2, 32, Harmonic, Falloff, Mixture;
+    sunlit_room_harmonic_falloff: SUNLIT_ROOM, 16, Harmonic, Falloff, Mixture;
+    sunlit_room_uniform_falloff: SUNLIT_ROOM, 16, Uniform, Falloff, Mixture;
+    sunlit_room_resampling_falloff: SUNLIT_ROOM, 8, Resampling, Falloff, Mixture;
 }
 
 /// Image means of same-seed pairs on `veach-ajar` (80×45, unlimited depth): option sets `a`

@@ -193,14 +193,17 @@ pub const STAIRCASE2: Case = Case {
 /// and the back wall lights the rest of the room, which a glass sphere, a rough gold sphere
 /// and a rough-plastic box share. Its reference has 1024 spp; its own noise (4.6e-3)
 /// is a quarter of the relMSE between the averages of its chunks 0–1 and 2–3 (the JSON's
-/// `noise`). The mean is held to 1%.
+/// `noise`). The mean is held to 1% over the pixels below 2.0 in the reference: the sky seen
+/// through the window is 61% of the whole image's mean and would hide a bias in the room
+/// (the room's pixels, mean 0.193, are what the sun patch lights; 8 645 sky and highlight
+/// pixels are left out of the mean, not of the relMSE).
 pub const SUNLIT_ROOM: Case = Case {
     name: "sunlit-room",
     scene: "scenes/sunlit-room/scene.xml",
     defines: &[],
     reference: "sunlit-room.exr",
     ref_noise: 4.6e-3,
-    mean_cutoff: None,
+    mean_cutoff: Some(2.0),
     resolution: None,
     mean_tol: 0.01,
 };

@@ -92,8 +92,15 @@ pub enum PcSampling {
 /// Options of PCBPT.
 #[derive(Clone, Debug, Serialize)]
 pub struct PcOptions {
-    /// Light subpaths per iteration (`M`).
+    /// Light subpaths per iteration (`M`): the least; see `pool_vertices`.
     pub light_paths: usize,
+    /// Light subpaths are added beyond `light_paths` until a pool holds about this many
+    /// vertices (the contract's "M such that V is a few thousand"), judged from the pilot
+    /// pool's vertices per path, and up to one per pixel; 0 keeps `light_paths` exactly.
+    /// Where most light paths miss what the camera sees (sky and sun outside a window), a
+    /// fixed `M` leaves a pool of a few hundred vertices that every pixel shares, and image
+    /// means spread by several percent from one render to the next.
+    pub pool_vertices: usize,
     /// Connections per camera vertex (`N`).
     pub connections: u32,
     /// One record pixel per `stride × stride` tile.
@@ -118,6 +125,7 @@ impl Default for PcOptions {
     fn default() -> PcOptions {
         PcOptions {
             light_paths: 500,
+            pool_vertices: 2000,
             connections: 4,
             stride: 64,
             cache_depth: 5,
@@ -161,6 +169,18 @@ impl PcOptions {
         let per_axis = |n: u32| n.div_ceil(self.stride) as usize;
         per_axis(width) * per_axis(height) * self.cache_depth as usize
     }
+}
+
+/// Light paths per iteration: at least `floor`, and enough for about `target` pool vertices
+/// at `vbar` vertices per path, but no more than one per pixel (beyond that the pool would
+/// cost more than BDPT's light subpaths). A `target` of 0, or a pilot with no vertices,
+/// keeps `floor`.
+pub fn light_paths_for(floor: usize, target: usize, vbar: f32, pixels: usize) -> usize {
+    if target == 0 || vbar.is_nan() || vbar <= 0.0 {
+        return floor;
+    }
+    let want = (target as f64 / vbar as f64).ceil() as usize;
+    floor.max(want.min(pixels))
 }
 
 /// The throughputs `α_L(x_k)`, `1 <= k < out.len()`, that a light subpath along the full
@@ -359,12 +379,13 @@ pub struct PcbptRender {
     previous: Option<Cache>,
     pool_size: Option<(usize, usize)>,
     cache_stats: Option<CacheStats>,
+    /// Light paths per iteration (`M`), fixed by the pilot (see [`light_paths_for`]).
+    light_paths: usize,
 }
 
 impl PcbptRender {
     pub fn new(pc: Pcbpt, heuristic: Heuristic, max_pool_mb: usize) -> PcbptRender {
         PcbptRender {
-            pc,
             heuristic,
             max_pool_mb,
             vbar: 0.0,
@@ -372,12 +393,14 @@ impl PcbptRender {
             previous: None,
             pool_size: None,
             cache_stats: None,
+            light_paths: pc.opts.light_paths,
+            pc,
         }
     }
 
     fn counts<'a>(&'a self, scene: &'a Scene) -> PcCounts<'a> {
         let pixels = scene.film.width as f32 * scene.film.height as f32;
-        let (m, vbar, kappa) = (self.pc.opts.light_paths, self.vbar, &self.concentration);
+        let (m, vbar, kappa) = (self.light_paths, self.vbar, &self.concentration);
         PcCounts::for_iteration(scene, &self.pc.opts, m, pixels, vbar, kappa, self.previous.as_ref())
     }
 
@@ -408,14 +431,21 @@ impl PcbptRender {
 impl Iterative for PcbptRender {
     type Pass = (LightPool, Cache, CacheStats);
 
-    /// Measures `V̄` on a pilot pool and checks the pool and the cache against their memory
-    /// limits from it.
+    /// Measures `V̄` on a pilot pool, sets `M` from it, and checks the pool and the cache
+    /// against their memory limits.
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
-        let (m, o) = (self.pc.opts.light_paths, &self.pc.opts);
-        let (pilot, _, _) =
-            LightPool::trace::<Counts>(ctx.scene, &self.pc.bdpt.limits, m, ctx.seed, PILOT_ITERATION, None);
-        check_pool_memory(m, &pilot, self.max_pool_mb, "--pc-light-paths")?;
+        let o = &self.pc.opts;
+        let (pilot, _, _) = LightPool::trace::<Counts>(
+            ctx.scene,
+            &self.pc.bdpt.limits,
+            o.light_paths,
+            ctx.seed,
+            PILOT_ITERATION,
+            None,
+        );
         let (w, h) = (ctx.scene.film.width, ctx.scene.film.height);
+        let m = light_paths_for(o.light_paths, o.pool_vertices, pilot.mean_vertices(), w as usize * h as usize);
+        check_pool_memory(m, &pilot, self.max_pool_mb, "--pc-light-paths")?;
         let fit = CacheFit { opts: o, light_paths: m, mean_vertices: pilot.mean_vertices() as f64, w, h };
         let (records, v, mb) = fit.size(o.stride, o.cache_depth, m);
         if mb > o.max_cache_mb as f64 {
@@ -427,6 +457,7 @@ impl Iterative for PcbptRender {
             )));
         }
         self.vbar = pilot.mean_vertices();
+        self.light_paths = m;
         Ok(())
     }
 
@@ -443,7 +474,7 @@ impl Iterative for PcbptRender {
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
         let splat = keep.then_some((&conn, &self.pc.bdpt, ctx.layers));
-        let (m, limits) = (self.pc.opts.light_paths, &self.pc.bdpt.limits);
+        let (m, limits) = (self.light_paths, &self.pc.bdpt.limits);
         let (pool, splats, mut counters) = LightPool::trace(ctx.scene, limits, m, ctx.seed, first as u64, splat);
         work.phases.light_pool += t.elapsed().as_secs_f64();
         work.shadow.light_pool += counters.shadow_rays;
@@ -555,5 +586,25 @@ impl CacheSelection<'_> {
     #[inline]
     fn factor(&self, pmf: f64, n: u32) -> Option<f32> {
         (pmf > 0.0).then(|| (1.0 / (n as f64 * self.paths * pmf)) as f32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::light_paths_for;
+
+    #[test]
+    fn light_paths_reach_the_pool_target_between_the_floor_and_one_per_pixel() {
+        // veach-ajar's 4.4 vertices per path: the floor already gives 2 000.
+        assert_eq!(light_paths_for(500, 2000, 4.4, 57_600), 500);
+        // sunlit-room's 0.62 (most paths from the sky miss the room): 3 226 paths.
+        assert_eq!(light_paths_for(500, 2000, 0.62, 57_600), 3226);
+        // At most one per pixel; a target of 0 or an empty pilot keeps the floor.
+        assert_eq!(light_paths_for(500, 2000, 0.01, 57_600), 57_600);
+        assert_eq!(light_paths_for(500, 0, 0.62, 57_600), 500);
+        assert_eq!(light_paths_for(500, 2000, 0.0, 57_600), 500);
+        assert_eq!(light_paths_for(500, 2000, f32::NAN, 57_600), 500);
+        // The floor wins over the pixel cap.
+        assert_eq!(light_paths_for(500, 2000, 0.01, 100), 500);
     }
 }
