@@ -7,6 +7,8 @@ holding every setting that made it. Needs `pip install mitsuba`.
 
 Scenes whose film size is fixed in the XML (Bitterli's Mitsuba 0.5 exports) are resized in
 memory, and the properties Mitsuba 3 refuses (`high_quality_edges`) are stripped there too;
+a `mask` whose opacity bitmap has an alpha channel gets that alpha as a single-channel EXR
+written to a scratch folder (pcbpt's opacity is the alpha; Mitsuba 3 would read the colour);
 the scene file is never changed (scripts/mitsuba_scene.py).
 
     python3 scripts/make_references.py cornell-box            # one reference
@@ -28,8 +30,13 @@ REFERENCES = {
     "veach-mis": ("scenes/veach-mis/scene.xml", {"resx": 192, "resy": 108}, 8192, None),
     "veach-ajar": ("scenes/veach-ajar/scene.xml", {"resx": 160, "resy": 90, "max_depth": -1}, 16384, None),
     "materials": ("scenes/materials/scene.xml", {"resx": 160, "resy": 120}, 4096, None),
+    # A quad cut out by the alpha of an RGBA texture (opaque, clear and half-clear texels).
+    "cutout": ("scenes/cutout/scene.xml", {"resx": 96, "resy": 72}, 4096, None),
     # Bitterli's Mitsuba 0.5 export as published: its own maxDepth (65) and tent filter.
     "staircase2": ("scenes/staircase2/scene.xml", {}, 1024, (320, 180)),
+    # "The Grey & White Room", as published: maxDepth 65, tent filter, the envmap; the
+    # leaves' mask reads leaf.png's alpha (handed to Mitsuba as a single-channel EXR).
+    "living-room": ("scenes/living-room/scene.xml", {}, 1024, (320, 180)),
 }
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -67,6 +74,14 @@ def render(name, variant, chunk, out_dir):
     if resolution is not None:
         settings["film"] = {"width": resolution[0], "height": resolution[1]}
         settings["stripped"] = list(mitsuba_scene.STRIP[:1])
+    import xml.etree.ElementTree as ET
+
+    masked = [e.get("value") for e in mitsuba_scene.mask_alpha_bitmaps(ET.parse(scene_path).getroot())]
+    if masked:
+        settings["mask_opacity"] = (
+            f"the alpha channel of {', '.join(masked)} where it has one, handed to Mitsuba 3 as a "
+            "single-channel EXR (Mitsuba 3 would read the colour of the RGBA file)"
+        )
     settings.update({
         "spp": chunks * chunk,
         "chunks": {"count": chunks, "spp": chunk, "seeds": f"0..{chunks - 1}"},

@@ -47,37 +47,80 @@ impl Bitmap {
         self.mean
     }
 
-    fn wrap_index(&self, i: i64, n: u32) -> usize {
-        let n = n as i64;
-        (match self.wrap {
-            WrapMode::Repeat => i.rem_euclid(n),
-            WrapMode::Clamp => i.clamp(0, n - 1),
-            WrapMode::Mirror => {
-                let p = i.rem_euclid(2 * n);
-                if p < n { p } else { 2 * n - 1 - p }
-            }
-        }) as usize
-    }
-
-    #[inline]
-    fn texel(&self, x: i64, y: i64) -> Rgb {
-        self.texels[self.wrap_index(y, self.height) * self.width as usize + self.wrap_index(x, self.width)]
-    }
-
     pub fn eval(&self, uv: Vec2) -> Rgb {
-        let p = Vec2::new(uv.x * self.width as f32, uv.y * self.height as f32);
-        match self.filter {
-            FilterType::Nearest => self.texel(p.x.floor() as i64, p.y.floor() as i64),
-            FilterType::Bilinear => {
-                let q = p - Vec2::splat(0.5);
-                let (x0, y0) = (q.x.floor(), q.y.floor());
-                let (fx, fy) = (q.x - x0, q.y - y0);
-                let (x0, y0) = (x0 as i64, y0 as i64);
-                let a = self.texel(x0, y0) * (1.0 - fx) + self.texel(x0 + 1, y0) * fx;
-                let b = self.texel(x0, y0 + 1) * (1.0 - fx) + self.texel(x0 + 1, y0 + 1) * fx;
-                a * (1.0 - fy) + b * fy
-            }
+        lookup(self.width, self.height, self.filter, self.wrap, &self.texels, uv)
+    }
+}
+
+/// A bitmap's alpha channel (a `mask`'s opacity), as stored: alpha is linear.
+#[derive(Debug, PartialEq)]
+pub struct AlphaBitmap {
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<f32>,
+    pub filter: FilterType,
+    pub wrap: WrapMode,
+}
+
+impl AlphaBitmap {
+    pub fn eval(&self, uv: Vec2) -> f32 {
+        lookup(self.width, self.height, self.filter, self.wrap, &self.texels, uv)
+    }
+}
+
+fn wrap_index(wrap: WrapMode, i: i64, n: u32) -> usize {
+    let n = n as i64;
+    (match wrap {
+        WrapMode::Repeat => i.rem_euclid(n),
+        WrapMode::Clamp => i.clamp(0, n - 1),
+        WrapMode::Mirror => {
+            let p = i.rem_euclid(2 * n);
+            if p < n { p } else { 2 * n - 1 - p }
         }
+    }) as usize
+}
+
+/// A nearest or bilinear lookup of a `width × height` image of texels `T` at `uv`.
+#[inline]
+fn lookup<T>(width: u32, height: u32, filter: FilterType, wrap: WrapMode, texels: &[T], uv: Vec2) -> T
+where
+    T: Copy + std::ops::Mul<f32, Output = T> + std::ops::Add<Output = T>,
+{
+    let texel = |x: i64, y: i64| texels[wrap_index(wrap, y, height) * width as usize + wrap_index(wrap, x, width)];
+    let p = Vec2::new(uv.x * width as f32, uv.y * height as f32);
+    match filter {
+        FilterType::Nearest => texel(p.x.floor() as i64, p.y.floor() as i64),
+        FilterType::Bilinear => {
+            let q = p - Vec2::splat(0.5);
+            let (x0, y0) = (q.x.floor(), q.y.floor());
+            let (fx, fy) = (q.x - x0, q.y - y0);
+            let (x0, y0) = (x0 as i64, y0 as i64);
+            let a = texel(x0, y0) * (1.0 - fx) + texel(x0 + 1, y0) * fx;
+            let b = texel(x0, y0 + 1) * (1.0 - fx) + texel(x0 + 1, y0 + 1) * fx;
+            a * (1.0 - fy) + b * fy
+        }
+    }
+}
+
+/// The opacity of a `mask` BSDF, a value in `[0, 1]` over the surface: a constant, the alpha
+/// channel of a bitmap that has one, or else the luminance of a colour texture (Mitsuba 3's
+/// scalar lookup of a colour texture). Values outside `[0, 1]` are clamped.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Opacity {
+    Constant(f32),
+    Alpha { bitmap: Arc<AlphaBitmap>, to_uv: Mat3 },
+    Luminance(Texture),
+}
+
+impl Opacity {
+    #[inline]
+    pub fn eval(&self, uv: Vec2) -> f32 {
+        let a = match self {
+            Opacity::Constant(a) => *a,
+            Opacity::Alpha { bitmap, to_uv } => bitmap.eval(apply(to_uv, uv)),
+            Opacity::Luminance(t) => crate::math::luminance(t.eval(uv)),
+        };
+        a.clamp(0.0, 1.0)
     }
 }
 

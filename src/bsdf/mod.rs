@@ -16,7 +16,7 @@ pub mod microfacet;
 pub mod plastic;
 
 use crate::math::{Frame, Rgb};
-use crate::texture::Texture;
+use crate::texture::{Opacity, Texture};
 use glam::{Vec2, Vec3};
 use microfacet::Roughness;
 use plastic::{PlasticParams, RoughPlasticParams};
@@ -75,6 +75,9 @@ pub enum BsdfModel {
 pub struct Bsdf {
     pub model: BsdfModel,
     pub two_sided: bool,
+    /// The opacity of a `mask` around the model: the accelerator skips the hits it does not
+    /// keep (`accel::keeps_hit`), and a kept hit scatters by `model` alone.
+    pub opacity: Option<std::sync::Arc<Opacity>>,
 }
 
 /// Local-frame helpers.
@@ -85,7 +88,7 @@ pub fn cos_theta(w: Vec3) -> f32 {
 
 impl Bsdf {
     pub fn diffuse(reflectance: Texture) -> Bsdf {
-        Bsdf { model: BsdfModel::Diffuse { reflectance }, two_sided: false }
+        Bsdf { model: BsdfModel::Diffuse { reflectance }, two_sided: false, opacity: None }
     }
 
     /// `true` when every lobe is a Dirac delta (no light sampling possible).
@@ -286,6 +289,7 @@ mod tests {
                             specular_reflectance: c(1.0),
                         },
                         two_sided: false,
+                        opacity: None,
                     },
                 ));
                 v.push((
@@ -298,6 +302,7 @@ mod tests {
                             specular_transmittance: c(1.0),
                         },
                         two_sided: false,
+                        opacity: None,
                     },
                 ));
             }
@@ -313,12 +318,13 @@ mod tests {
             Bsdf {
                 model: BsdfModel::Plastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) },
                 two_sided: false,
+                opacity: None,
             },
         ));
         for (kind, alpha) in [(MicrofacetType::Beckmann, 0.1), (MicrofacetType::Ggx, 0.4)] {
             let params = RoughPlasticParams::new(rough(kind, alpha, alpha), 1.5, false, 0.5);
             let model = BsdfModel::RoughPlastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) };
-            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false }));
+            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false, opacity: None }));
         }
         v
     }
@@ -439,6 +445,7 @@ mod tests {
                         specular_reflectance: c(1.0),
                     },
                     two_sided: false,
+                    opacity: None,
                 };
                 for cos in [1.0f32, 0.7, 0.3, 0.05] {
                     let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
@@ -462,6 +469,7 @@ mod tests {
         let b = Bsdf {
             model: BsdfModel::Dielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
             two_sided: false,
+            opacity: None,
         };
         let mut s = Sampler::new(&[11]);
         let wo = Vec3::new(0.6, 0.0, 0.8);
@@ -498,6 +506,7 @@ mod tests {
         let b = Bsdf {
             model: BsdfModel::ThinDielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
             two_sided: false,
+            opacity: None,
         };
         let mut s = Sampler::new(&[12]);
         for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.0, 0.6, -0.8)] {

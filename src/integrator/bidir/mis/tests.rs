@@ -48,7 +48,7 @@ fn scene(variant: Variant) -> Scene {
     };
     let set = |scene: &mut Scene, name: &str, model: BsdfModel| {
         let s = shape(scene, name);
-        scene.bsdfs.push(Bsdf { model, two_sided: true });
+        scene.bsdfs.push(Bsdf { model, two_sided: true, opacity: None });
         scene.shapes[s].bsdf = scene.bsdfs.len() - 1;
     };
     match variant {
