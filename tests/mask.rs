@@ -154,15 +154,29 @@ fn cutouts_need_a_triangle_mesh() {
     assert!(Accel::build_with_cutouts(Backend::Embree, &geometry, &cutouts, BuildOptions::default()).is_err());
 }
 
+/// The relMSE noise of the `cutout` reference (4096 spp), measured: Mitsuba 3's path tracer
+/// is 22× noisier on this scene than this renderer's at equal samples (two 256-spp Mitsuba
+/// renders with seeds 100 and 101: 0.0335 per render, so 0.0021 at 4096 spp; two of ours:
+/// 0.0015 per 256-spp render), so the reference's noise is not that of the estimator under
+/// test at 4096 spp, and is given here.
+const CUTOUT_REF_NOISE: f64 = 2.1e-3;
+
 /// `scenes/cutout`: a quad cut out by `checker.png`'s alpha (opaque, clear and
 /// half-clear texels) between an area light and a floor, against Mitsuba 3 (4096 spp, the
 /// alpha handed to it as a single-channel texture by `scripts/make_references.py`).
-fn cutout_check(kind: IntegratorKind, spp: u32, what: &str) {
-    let scene = load(&root().join("scenes/cutout/scene.xml"), &[("resx", "96"), ("resy", "72")], Backend::Embree);
+fn cutout_verdict(scene: &pcbpt::scene::Scene, kind: IntegratorKind, spp: u32) -> Verdict {
     let reference = reference("cutout.exr");
-    let a = image(render(&scene, kind, spp, 1, 0));
-    let b = image(render(&scene, kind, spp, 2, 0));
-    Verdict::new(&reference, &a, &b, spp, 4096).check(what, 0.005, 1.3).unwrap();
+    let a = image(render(scene, kind, spp, 1, 0));
+    let b = image(render(scene, kind, spp, 2, 0));
+    Verdict::averaged(&reference, &a, &b, CUTOUT_REF_NOISE).0
+}
+
+fn cutout_scene() -> pcbpt::scene::Scene {
+    load(&root().join("scenes/cutout/scene.xml"), &[("resx", "96"), ("resy", "72")], Backend::Embree)
+}
+
+fn cutout_check(kind: IntegratorKind, spp: u32, what: &str) {
+    cutout_verdict(&cutout_scene(), kind, spp).check(what, 0.005, 1.3).unwrap();
 }
 
 #[test]
@@ -178,13 +192,10 @@ fn cutout_scene_matches_mitsuba_with_bdpt() {
 #[test]
 fn cutout_scene_without_its_mask_is_caught() {
     // Negative control: the quad made opaque (its opacity ignored) must fail the check.
-    let mut scene = load(&root().join("scenes/cutout/scene.xml"), &[("resx", "96"), ("resy", "72")], Backend::Embree);
+    let mut scene = cutout_scene();
     let geometry: Vec<_> = scene.shapes.iter().map(|s| s.accel_geometry()).collect();
     scene.accel = Accel::build(Backend::Embree, &geometry, BuildOptions::default()).unwrap();
     drop(geometry);
-    let reference = reference("cutout.exr");
-    let a = image(render(&scene, IntegratorKind::Path, 128, 1, 0));
-    let b = image(render(&scene, IntegratorKind::Path, 128, 2, 0));
-    let v = Verdict::new(&reference, &a, &b, 128, 4096);
+    let v = cutout_verdict(&scene, IntegratorKind::Path, 128);
     assert!(v.check("cutout without its mask", 0.005, 1.3).is_err(), "an opaque quad went unnoticed");
 }

@@ -96,6 +96,7 @@ cases! {
     veach_mis_uniform_falloff_cmf: VEACH_MIS, 32, Uniform, Falloff, Cmf;
     veach_ajar_uniform_falloff_cmf: VEACH_AJAR, 512, Uniform, Falloff, Cmf;
     staircase2_harmonic_falloff: STAIRCASE2, 32, Harmonic, Falloff, Mixture;
+    living_room_harmonic_falloff: LIVING_ROOM, 32, Harmonic, Falloff, Mixture;
 }
 
 /// Image means of same-seed pairs on `veach-ajar` (80×45, unlimited depth): option sets `a`

@@ -286,6 +286,7 @@ pub struct EmbreeScene {
     device: Arc<Device>,
     /// The cut-outs the geometries' filter functions read through their user pointers
     /// (boxed, so each address is stable); dropped after the scene is released.
+    #[allow(clippy::vec_box)] // Embree holds the address of each boxed `Arc`.
     cutouts: Vec<Box<Arc<dyn Cutout>>>,
 }
 

@@ -82,7 +82,7 @@ pub fn keeps_hit(cutout: &dyn Cutout, ray: &Ray, geom: u32, prim: u32, u: f32, v
     if alpha >= 1.0 {
         return true;
     }
-    if !(alpha > 0.0) {
+    if alpha.is_nan() || alpha <= 0.0 {
         return false;
     }
     hit_hash01(ray, geom, prim) < alpha
@@ -100,10 +100,10 @@ pub fn hit_hash01(ray: &Ray, geom: u32, prim: u32) -> f32 {
         z ^ (z >> 31)
     }
     let words = [
-        (ray.o.x.to_bits() as u64) << 32 | ray.o.y.to_bits() as u64,
-        (ray.o.z.to_bits() as u64) << 32 | ray.d.x.to_bits() as u64,
-        (ray.d.y.to_bits() as u64) << 32 | ray.d.z.to_bits() as u64,
-        (geom as u64) << 32 | prim as u64,
+        ((ray.o.x.to_bits() as u64) << 32) | ray.o.y.to_bits() as u64,
+        ((ray.o.z.to_bits() as u64) << 32) | ray.d.x.to_bits() as u64,
+        ((ray.d.y.to_bits() as u64) << 32) | ray.d.z.to_bits() as u64,
+        ((geom as u64) << 32) | prim as u64,
     ];
     let h = words.iter().fold(0x5851_f42d_4c95_7f2d_u64, |h, &w| mix(h ^ w));
     (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
