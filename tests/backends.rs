@@ -134,7 +134,7 @@ struct ByParity {
 
 impl Cutout for ByParity {
     fn opacity(&self, prim: u32, _: f32, _: f32) -> f32 {
-        if prim % 2 == 0 { self.even } else { self.odd }
+        if prim.is_multiple_of(2) { self.even } else { self.odd }
     }
 }
 
