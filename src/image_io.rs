@@ -400,6 +400,19 @@ mod tests {
     }
 
     #[test]
+    fn alpha_is_read_linear_where_there_is_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let rgba = dir.path().join("a.png");
+        image::RgbaImage::from_raw(2, 1, vec![10, 20, 30, 0, 200, 100, 50, 128]).unwrap().save(&rgba).unwrap();
+        // Alpha as stored (not decoded from sRGB); the colour is what `read_texture` gives.
+        let (w, h, a) = read_alpha(&rgba).unwrap().unwrap();
+        assert_eq!((w, h, a), (2, 1, vec![0.0, 128.0 / 255.0]));
+        let rgb = dir.path().join("b.png");
+        image::RgbImage::from_raw(1, 1, vec![1, 2, 3]).unwrap().save(&rgb).unwrap();
+        assert_eq!(read_alpha(&rgb).unwrap(), None);
+    }
+
+    #[test]
     fn grey_and_alpha_become_rgb_like_the_image_crate() {
         // 2×1 grey+alpha, 8-bit: grey repeated, alpha dropped, sRGB decoded unless raw.
         let ga = image::DynamicImage::ImageLumaA8(image::ImageBuffer::from_raw(2, 1, vec![0, 7, 188, 255]).unwrap());

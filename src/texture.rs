@@ -192,6 +192,24 @@ mod tests {
     }
 
     #[test]
+    fn opacity_is_alpha_luminance_or_a_constant_clamped_to_one() {
+        let bitmap = AlphaBitmap {
+            width: 2,
+            height: 1,
+            texels: vec![0.0, 1.0],
+            filter: FilterType::Nearest,
+            wrap: WrapMode::Clamp,
+        };
+        let alpha = Opacity::Alpha { bitmap: Arc::new(bitmap), to_uv: Mat3::IDENTITY };
+        assert_eq!((alpha.eval(Vec2::new(0.25, 0.5)), alpha.eval(Vec2::new(0.75, 0.5))), (0.0, 1.0));
+        // Mitsuba 3's scalar lookup of a colour: its luminance.
+        let red = Opacity::Luminance(Texture::Constant(Rgb::new(1.0, 0.0, 0.0)));
+        assert!((red.eval(Vec2::ZERO) - 0.212671).abs() < 1e-5);
+        assert_eq!(Opacity::Luminance(Texture::Constant(Rgb::splat(3.0))).eval(Vec2::ZERO), 1.0);
+        assert_eq!(Opacity::Constant(0.3).eval(Vec2::ZERO), 0.3);
+    }
+
+    #[test]
     fn checkerboard_alternates() {
         let t = Texture::Checkerboard {
             color0: Rgb::ONE,
