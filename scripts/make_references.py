@@ -7,6 +7,8 @@ holding every setting that made it. Needs `pip install mitsuba`.
 
 Scenes whose film size is fixed in the XML (Bitterli's Mitsuba 0.5 exports) are resized in
 memory, and the properties Mitsuba 3 refuses (`high_quality_edges`) are stripped there too;
+a `mask` whose opacity bitmap has an alpha channel gets that alpha as a single-channel EXR
+written to a scratch folder (pcbpt's opacity is the alpha; Mitsuba 3 would read the colour);
 the scene file is never changed (scripts/mitsuba_scene.py).
 
     python3 scripts/make_references.py cornell-box            # one reference
@@ -40,6 +42,11 @@ REFERENCES = {
     # The room lit by `sunsky` through a window: the file's own 320x180, max_depth (16)
     # and tent filter.
     "sunlit-room": ("scenes/sunlit-room/scene.xml", {}, 1024, None),
+    # A quad cut out by the alpha of an RGBA texture (opaque, clear and half-clear texels).
+    "cutout": ("scenes/cutout/scene.xml", {"resx": 96, "resy": 72}, 4096, None),
+    # "The Grey & White Room", as published: maxDepth 65, tent filter, the envmap; the
+    # leaves' mask reads leaf.png's alpha (handed to Mitsuba as a single-channel EXR).
+    "living-room": ("scenes/living-room/scene.xml", {}, 1024, (320, 180)),
     # Shading normals perturbed by a bump map and by a normal map, under a grazing light.
     "bumpmap": ("scenes/bumpmap/scene.xml", {"resx": 160, "resy": 120}, 2048, None),
     "normalmap": ("scenes/bumpmap/normalmap.xml", {"resx": 160, "resy": 120}, 2048, None),
@@ -94,6 +101,14 @@ def render(name, variant, chunk, out_dir, chunks_dir=None):
         settings["film"] = {"width": resolution[0], "height": resolution[1]}
         settings["stripped"] = list(mitsuba_scene.STRIP[:1])
     settings.update(NOTES.get(name, {}))
+    import xml.etree.ElementTree as ET
+
+    masked = [e.get("value") for e in mitsuba_scene.mask_alpha_bitmaps(ET.parse(scene_path).getroot())]
+    if masked:
+        settings["mask_opacity"] = (
+            f"the alpha channel of {', '.join(masked)} where it has one, handed to Mitsuba 3 as a "
+            "single-channel EXR (Mitsuba 3 would read the colour of the RGBA file)"
+        )
     settings.update({
         "spp": chunks * chunk,
         "chunks": {"count": chunks, "spp": chunk, "seeds": f"0..{chunks - 1}"},

@@ -292,6 +292,48 @@ fn read_as(path: &Path, raw: bool, library: Library, what: &str) -> Result<Image
     }
 }
 
+/// The alpha channel of an image, if it has one: `(width, height, alpha)`, row-major from
+/// the top-left. Alpha is linear: 8/16-bit values are divided by their largest value, never
+/// decoded from sRGB. `None` for an image without alpha (JPEG, RGB PNG or EXR).
+pub fn read_alpha(path: &Path) -> Result<Option<(u32, u32, Vec<f32>)>> {
+    match reader(path, Library::from_env()?)? {
+        Reader::Exr => {
+            let meta = exr::meta::MetaData::read_from_file(path, false)
+                .map_err(|e| Error::in_file(path, format!("cannot read EXR: {e}")))?;
+            let has_alpha =
+                meta.headers.first().is_some_and(|h| h.channels.list.iter().any(|c| c.name.eq_case_insensitive("A")));
+            if !has_alpha {
+                return Ok(None);
+            }
+            let img = exr::prelude::read_first_rgba_layer_from_file(
+                path,
+                |res: ExrVec2<usize>, _| (res.width(), res.height(), vec![0.0f32; res.width() * res.height()]),
+                |(w, _, px): &mut (usize, usize, Vec<f32>), pos: ExrVec2<usize>, (_, _, _, a): (f32, f32, f32, f32)| {
+                    px[pos.y() * *w + pos.x()] = a;
+                },
+            )
+            .map_err(|e| Error::in_file(path, format!("cannot read EXR: {e}")))?;
+            let (w, h, px) = img.layer_data.channel_data.pixels;
+            Ok(Some((w as u32, h as u32, px)))
+        }
+        Reader::Image => {
+            let img = image::open(path).map_err(|e| Error::in_file(path, format!("cannot read texture: {e}")))?;
+            Ok(alpha_of(img))
+        }
+        #[cfg(feature = "oiio")]
+        Reader::Oiio => Ok(alpha_of(oiio::read(path)?)),
+    }
+}
+
+fn alpha_of(img: image::DynamicImage) -> Option<(u32, u32, Vec<f32>)> {
+    if !img.color().has_alpha() {
+        return None;
+    }
+    let rgba = img.into_rgba32f();
+    let (w, h) = rgba.dimensions();
+    Some((w, h, rgba.pixels().map(|p| p[3]).collect()))
+}
+
 /// Linear RGB of decoded pixels: float data as stored; 8/16-bit data divided by its
 /// largest value, then decoded from sRGB unless `raw`. Alpha is dropped, grey repeated.
 fn to_linear(img: image::DynamicImage, raw: bool) -> Image {
@@ -355,6 +397,19 @@ mod tests {
         assert!(e.contains("out.tiff") && e.contains("--features oiio"), "{e}");
         let e = read_with(&dir.path().join("a.tif"), false, Library::Oiio).unwrap_err().to_string();
         assert!(e.contains("PCBPT_IMAGE_IO=oiio") && e.contains("--features oiio"), "{e}");
+    }
+
+    #[test]
+    fn alpha_is_read_linear_where_there_is_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let rgba = dir.path().join("a.png");
+        image::RgbaImage::from_raw(2, 1, vec![10, 20, 30, 0, 200, 100, 50, 128]).unwrap().save(&rgba).unwrap();
+        // Alpha as stored (not decoded from sRGB); the colour is what `read_texture` gives.
+        let (w, h, a) = read_alpha(&rgba).unwrap().unwrap();
+        assert_eq!((w, h, a), (2, 1, vec![0.0, 128.0 / 255.0]));
+        let rgb = dir.path().join("b.png");
+        image::RgbImage::from_raw(1, 1, vec![1, 2, 3]).unwrap().save(&rgb).unwrap();
+        assert_eq!(read_alpha(&rgb).unwrap(), None);
     }
 
     #[test]

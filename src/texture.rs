@@ -201,6 +201,78 @@ impl Bitmap {
     }
 }
 
+/// A bitmap's alpha channel (a `mask`'s opacity), as stored: alpha is linear.
+#[derive(Debug, PartialEq)]
+pub struct AlphaBitmap {
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<f32>,
+    pub filter: FilterType,
+    pub wrap: WrapMode,
+}
+
+impl AlphaBitmap {
+    pub fn eval(&self, uv: Vec2) -> f32 {
+        lookup(self.width, self.height, self.filter, self.wrap, &self.texels, uv)
+    }
+}
+
+fn wrap_index(wrap: WrapMode, i: i64, n: u32) -> usize {
+    let n = n as i64;
+    (match wrap {
+        WrapMode::Repeat => i.rem_euclid(n),
+        WrapMode::Clamp => i.clamp(0, n - 1),
+        WrapMode::Mirror => {
+            let p = i.rem_euclid(2 * n);
+            if p < n { p } else { 2 * n - 1 - p }
+        }
+    }) as usize
+}
+
+/// A nearest or bilinear lookup of a `width × height` image of texels `T` at `uv`.
+#[inline]
+fn lookup<T>(width: u32, height: u32, filter: FilterType, wrap: WrapMode, texels: &[T], uv: Vec2) -> T
+where
+    T: Copy + std::ops::Mul<f32, Output = T> + std::ops::Add<Output = T>,
+{
+    let texel = |x: i64, y: i64| texels[wrap_index(wrap, y, height) * width as usize + wrap_index(wrap, x, width)];
+    let p = Vec2::new(uv.x * width as f32, uv.y * height as f32);
+    match filter {
+        FilterType::Nearest => texel(p.x.floor() as i64, p.y.floor() as i64),
+        FilterType::Bilinear => {
+            let q = p - Vec2::splat(0.5);
+            let (x0, y0) = (q.x.floor(), q.y.floor());
+            let (fx, fy) = (q.x - x0, q.y - y0);
+            let (x0, y0) = (x0 as i64, y0 as i64);
+            let a = texel(x0, y0) * (1.0 - fx) + texel(x0 + 1, y0) * fx;
+            let b = texel(x0, y0 + 1) * (1.0 - fx) + texel(x0 + 1, y0 + 1) * fx;
+            a * (1.0 - fy) + b * fy
+        }
+    }
+}
+
+/// The opacity of a `mask` BSDF, a value in `[0, 1]` over the surface: a constant, the alpha
+/// channel of a bitmap that has one, or else the luminance of a colour texture (Mitsuba 3's
+/// scalar lookup of a colour texture). Values outside `[0, 1]` are clamped.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Opacity {
+    Constant(f32),
+    Alpha { bitmap: Arc<AlphaBitmap>, to_uv: Mat3 },
+    Luminance(Texture),
+}
+
+impl Opacity {
+    #[inline]
+    pub fn eval(&self, uv: Vec2) -> f32 {
+        let a = match self {
+            Opacity::Constant(a) => *a,
+            Opacity::Alpha { bitmap, to_uv } => bitmap.eval(apply(to_uv, uv)),
+            Opacity::Luminance(t) => crate::math::luminance(t.eval(uv)),
+        };
+        a.clamp(0.0, 1.0)
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub enum Texture {
     Constant(Rgb),
@@ -320,6 +392,24 @@ mod tests {
             assert!(b.is_compact(), "raw = {raw}");
             assert!(b.texels().eq(img.pixels.iter().copied()));
         }
+    }
+
+    #[test]
+    fn opacity_is_alpha_luminance_or_a_constant_clamped_to_one() {
+        let bitmap = AlphaBitmap {
+            width: 2,
+            height: 1,
+            texels: vec![0.0, 1.0],
+            filter: FilterType::Nearest,
+            wrap: WrapMode::Clamp,
+        };
+        let alpha = Opacity::Alpha { bitmap: Arc::new(bitmap), to_uv: Mat3::IDENTITY };
+        assert_eq!((alpha.eval(Vec2::new(0.25, 0.5)), alpha.eval(Vec2::new(0.75, 0.5))), (0.0, 1.0));
+        // Mitsuba 3's scalar lookup of a colour: its luminance.
+        let red = Opacity::Luminance(Texture::Constant(Rgb::new(1.0, 0.0, 0.0)));
+        assert!((red.eval(Vec2::ZERO) - 0.212671).abs() < 1e-5);
+        assert_eq!(Opacity::Luminance(Texture::Constant(Rgb::splat(3.0))).eval(Vec2::ZERO), 1.0);
+        assert_eq!(Opacity::Constant(0.3).eval(Vec2::ZERO), 0.3);
     }
 
     #[test]

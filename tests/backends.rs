@@ -14,10 +14,11 @@ mod common;
 use common::hits::*;
 use common::*;
 use glam::Vec3;
-use pcbpt::accel::{Accel, Backend, BuildOptions, Geometry, Ray};
+use pcbpt::accel::{Accel, Backend, BuildOptions, Cutout, Geometry, Ray};
 use pcbpt::integrator::IntegratorKind;
 use pcbpt::sampling::{Sampler, square_to_uniform_sphere};
 use pcbpt::scene::mesh::{self, TriangleMesh};
+use std::sync::Arc;
 
 /// One edge tie allowed per this many rays. Measured with Embree 3.13's SSE4.2, AVX and AVX2
 /// kernels (`max_isa=`): 6 in the Cornell box's 100 000 rays (3 hits, 3 occlusions) and 1
@@ -26,8 +27,18 @@ use pcbpt::scene::mesh::{self, TriangleMesh};
 const CAP_PER: usize = 5_000;
 
 fn compare_backends(geometry: &[Geometry<'_>], lo: Vec3, hi: Vec3, n: usize) -> Tally {
-    let embree = Accel::build(Backend::Embree, geometry, BuildOptions::default()).unwrap();
-    let obvhs = Accel::build(Backend::Obvhs, geometry, BuildOptions::default()).unwrap();
+    compare_backends_with_cutouts(geometry, &[], lo, hi, n)
+}
+
+fn compare_backends_with_cutouts(
+    geometry: &[Geometry<'_>],
+    cutouts: &[(u32, Arc<dyn Cutout>)],
+    lo: Vec3,
+    hi: Vec3,
+    n: usize,
+) -> Tally {
+    let build = |backend| Accel::build_with_cutouts(backend, geometry, cutouts, BuildOptions::default()).unwrap();
+    let (embree, obvhs) = (build(Backend::Embree), build(Backend::Obvhs));
     let mut s = Sampler::new(&[2024]);
     let mut out = Tally { rays: n, ..Tally::default() };
     let mut rays = Vec::with_capacity(n);
@@ -112,6 +123,62 @@ fn random_rays_in_the_door_ajar_room() {
     geometry.push(Geometry::Sphere { center: (lo + hi) * 0.5, radius: 0.3 });
     let a = compare_backends(&geometry, lo, hi, 150_000);
     assert!(a.capped() <= a.rays / CAP_PER, "{} edge ties in {} rays", a.capped(), a.rays);
+}
+
+/// A cut-out whose opacity depends only on the triangle (exact in both backends): even
+/// triangles `even`, odd ones `odd`.
+struct ByParity {
+    even: f32,
+    odd: f32,
+}
+
+impl Cutout for ByParity {
+    fn opacity(&self, prim: u32, _: f32, _: f32) -> f32 {
+        if prim.is_multiple_of(2) { self.even } else { self.odd }
+    }
+}
+
+#[test]
+fn random_rays_in_the_door_ajar_room_with_cutouts() {
+    // `veach-ajar`'s meshes with cut-outs on the larger half of them (opacity 0, 0.3, 0.5,
+    // 1 and 0.4 by triangle parity): both backends skip the same hits for every ray, in
+    // closest-hit queries, batches and shadow rays.
+    let dir = root().join("scenes/veach-ajar/models");
+    let mut meshes: Vec<TriangleMesh> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
+        .map(|p| mesh::load_obj(&p).unwrap())
+        .collect();
+    meshes.sort_by_key(|m| m.indices.len());
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for m in &meshes {
+        for p in &m.positions {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+    }
+    let geometry: Vec<Geometry> =
+        meshes.iter().map(|m| Geometry::Triangles { positions: &m.positions, indices: &m.indices }).collect();
+    let kinds = [(0.0, 0.0), (0.3, 0.3), (0.5, 0.5), (1.0, 0.4)];
+    let cutouts: Vec<(u32, Arc<dyn Cutout>)> = (geometry.len() / 2..geometry.len())
+        .zip(kinds.iter().cycle())
+        .map(|(g, &(even, odd))| (g as u32, Arc::new(ByParity { even, odd }) as Arc<dyn Cutout>))
+        .collect();
+    let a = compare_backends_with_cutouts(&geometry, &cutouts, lo, hi, 100_000);
+    assert!(a.capped() <= a.rays / CAP_PER, "{} edge ties in {} rays", a.capped(), a.rays);
+    // The cut-outs change what is hit: against the same rays without them, some hits differ.
+    let plain = Accel::build(Backend::Embree, &geometry, BuildOptions::default()).unwrap();
+    let cut = Accel::build_with_cutouts(Backend::Embree, &geometry, &cutouts, BuildOptions::default()).unwrap();
+    let mut s = Sampler::new(&[7]);
+    let differ = (0..10_000)
+        .filter(|_| {
+            let o = lo + (hi - lo) * Vec3::new(s.next_1d(), s.next_1d(), s.next_1d());
+            let r = Ray::new(o, square_to_uniform_sphere(s.next_2d()));
+            plain.intersect(&r).map(|h| h.geom) != cut.intersect(&r).map(|h| h.geom)
+        })
+        .count();
+    assert!(differ > 500, "only {differ} of 10 000 rays changed with the cut-outs");
 }
 
 #[test]

@@ -376,3 +376,42 @@ fn staircase2_loads_unchanged() {
         s.stats.warnings
     );
 }
+
+#[test]
+fn living_room_loads_unchanged() {
+    let path = root().join("scenes/living-room/scene.xml");
+    // As published: Mitsuba 0.5 names, the film's options for Mitsuba 0.5, and the leaves
+    // cut out by a mask whose opacity is leaf.png (RGBA: its alpha).
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        text.contains("<scene version=\"0.5.0\" >")
+            && text.contains("high_quality_edges")
+            && text.contains("<bsdf type=\"mask\" id=\"Leaves\" >")
+            && text.contains("textures/leaf.png")
+    );
+    let s = Scene::load(&path, &LoadOptions::default()).unwrap();
+    assert_eq!((s.film.width, s.film.height), (1280, 720));
+    assert_eq!((s.integrator.plugin.as_str(), s.integrator.max_depth), ("path", 65));
+    assert_eq!((s.lights.len(), s.infinite_lights.len()), (1, 1));
+    // One BSDF has the leaves' cut-out, read from the alpha channel: opaque and clear
+    // texels both, with the nested two-sided diffuse model.
+    let masked: Vec<_> = s.bsdfs.iter().filter(|b| b.opacity.is_some()).collect();
+    assert_eq!(masked.len(), 1);
+    assert!(masked[0].two_sided);
+    let Some(pcbpt::texture::Opacity::Alpha { bitmap, .. }) = masked[0].opacity.as_deref() else {
+        panic!("the leaves' opacity is not leaf.png's alpha: {:?}", masked[0].opacity.is_some())
+    };
+    assert!(bitmap.texels.contains(&0.0) && bitmap.texels.contains(&1.0));
+    let leaves = s.shapes.iter().filter(|sh| s.bsdfs[sh.bsdf].opacity.is_some()).count();
+    assert!(leaves > 0);
+    let ignored: Vec<&String> = s.stats.warnings.iter().filter(|w| w.contains("ignored")).collect();
+    assert_eq!(ignored.len(), 1, "{:?}", s.stats.warnings);
+    for name in ["high_quality_edges", "file_format", "pixel_format", "banner"] {
+        assert!(ignored[0].contains(name), "{name}: {}", ignored[0]);
+    }
+    assert!(
+        s.stats.warnings.iter().all(|w| w.contains("ignored") || w.contains("degenerate")),
+        "{:?}",
+        s.stats.warnings
+    );
+}

@@ -50,6 +50,14 @@ fn pssmlt_sunlit_room() {
 }
 
 #[test]
+fn pssmlt_living_room() {
+    // Bitterli's "The Grey & White Room" as published, at 320×180: the envmap through the
+    // windows, the leaves' cut-outs.
+    let scene = LIVING_ROOM.scene();
+    check(&scene, LIVING_ROOM.reference, LIVING_ROOM.ref_noise, 32, "living-room, PSSMLT, 2 × 32 spp");
+}
+
+#[test]
 fn pssmlt_is_deterministic_for_a_seed_and_thread_count() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     let run = |seed, threads, base| {

@@ -99,6 +99,7 @@ cases! {
     sunlit_room_harmonic_falloff: SUNLIT_ROOM, 16, Harmonic, Falloff, Mixture;
     sunlit_room_uniform_falloff: SUNLIT_ROOM, 16, Uniform, Falloff, Mixture;
     sunlit_room_resampling_falloff: SUNLIT_ROOM, 8, Resampling, Falloff, Mixture;
+    living_room_harmonic_falloff: LIVING_ROOM, 32, Harmonic, Falloff, Mixture;
 }
 
 /// Image means of same-seed pairs on `veach-ajar` (80×45, unlimited depth): option sets `a`

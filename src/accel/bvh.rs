@@ -2,9 +2,12 @@
 //! same triangles and spheres Embree sees, with our own primitive tests. Exists so that
 //! every result can be cross-checked against Embree, ray by ray.
 
-use super::{BuildOptions, BuildQuality, Geometry, Hit, Ray, intersect_sphere, intersect_triangle};
+use super::{
+    BuildOptions, BuildQuality, Cutout, Cutouts, Geometry, Hit, Ray, intersect_sphere, intersect_triangle, keeps_hit,
+};
 use glam::{Vec3, Vec3A};
 use obvhs::{BvhBuildParams, aabb::Aabb, cwbvh::CwBvh, cwbvh::builder::build_cwbvh, ray::RayHit};
+use std::sync::Arc;
 
 #[derive(Clone, Copy)]
 enum Prim {
@@ -18,10 +21,12 @@ pub struct ObvhsScene {
     prims: Vec<Prim>,
     /// (geometry id, primitive id) of each entry of `prims`.
     ids: Vec<(u32, u32)>,
+    /// The cut-out of each geometry, if it has one.
+    cutouts: Vec<Option<Arc<dyn Cutout>>>,
 }
 
 impl ObvhsScene {
-    pub fn build(geometry: &[Geometry<'_>], options: BuildOptions) -> ObvhsScene {
+    pub fn build(geometry: &[Geometry<'_>], cutouts: &Cutouts, options: BuildOptions) -> ObvhsScene {
         let mut prims = Vec::new();
         let mut ids = Vec::new();
         for (g, geom) in geometry.iter().enumerate() {
@@ -56,7 +61,22 @@ impl ObvhsScene {
         let bvh = if aabbs.is_empty() { CwBvh::default() } else { build_cwbvh(&aabbs, params, &mut build_time) };
         let ordered = bvh.primitive_indices.iter().map(|&i| prims[i as usize]).collect();
         let ordered_ids = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
-        ObvhsScene { bvh, prims: ordered, ids: ordered_ids }
+        let mut by_geometry: Vec<Option<Arc<dyn Cutout>>> = vec![None; geometry.len()];
+        for (g, c) in cutouts {
+            by_geometry[*g as usize] = Some(c.clone());
+        }
+        ObvhsScene { bvh, prims: ordered, ids: ordered_ids, cutouts: by_geometry }
+    }
+
+    /// Whether a hit with barycentrics `(u, v)` on leaf triangle `id` counts (its
+    /// geometry's cut-out, if any, keeps it).
+    #[inline]
+    fn keeps(&self, r: &Ray, id: usize, u: f32, v: f32) -> bool {
+        let (geom, prim) = self.ids[id];
+        match &self.cutouts[geom as usize] {
+            None => true,
+            Some(c) => keeps_hit(c.as_ref(), r, geom, prim, u, v),
+        }
     }
 
     fn bvh_ray(r: &Ray) -> obvhs::ray::Ray {
@@ -72,12 +92,12 @@ impl ObvhsScene {
         let mut ray = *r;
         self.bvh.ray_traverse(Self::bvh_ray(r), &mut hit, |_, id| match self.prims[id] {
             Prim::Triangle { p } => match intersect_triangle(&ray, p[0], p[1], p[2]) {
-                Some((t, u, v)) => {
+                Some((t, u, v)) if self.keeps(r, id, u, v) => {
                     best = Some((t, id as u32, u, v));
                     ray.tmax = t;
                     t
                 }
-                None => f32::INFINITY,
+                _ => f32::INFINITY,
             },
             Prim::Sphere { center, radius } => match intersect_sphere(&ray, center, radius) {
                 Some(t) => {
@@ -100,7 +120,9 @@ impl ObvhsScene {
         }
         !self.bvh.ray_traverse_miss(Self::bvh_ray(r), |_, id| {
             let t = match self.prims[id] {
-                Prim::Triangle { p } => intersect_triangle(r, p[0], p[1], p[2]).map(|h| h.0),
+                Prim::Triangle { p } => {
+                    intersect_triangle(r, p[0], p[1], p[2]).filter(|&(_, u, v)| self.keeps(r, id, u, v)).map(|h| h.0)
+                }
                 Prim::Sphere { center, radius } => intersect_sphere(r, center, radius),
             };
             t.unwrap_or(f32::INFINITY)

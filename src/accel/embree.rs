@@ -9,7 +9,7 @@
 //! [`AccelError::Embree`]; nothing aborts.
 #![allow(unsafe_code)]
 
-use super::{AccelError, BuildOptions, BuildQuality, BvhLayout, Geometry, Hit, Ray};
+use super::{AccelError, BuildOptions, BuildQuality, BvhLayout, Cutout, Cutouts, Geometry, Hit, Ray, keeps_hit};
 use std::ffi::{CStr, c_char, c_void};
 use std::ptr;
 use std::sync::{Arc, Mutex};
@@ -45,6 +45,46 @@ pub fn set_flush_denormals() {
             let new = csr | FTZ_DAZ;
             if new != csr {
                 std::arch::asm!("ldmxcsr [{0}]", in(reg) &new, options(nostack, preserves_flags));
+            }
+        }
+    }
+}
+
+/// The filter function of a geometry with a cut-out, for intersection and occlusion
+/// queries alike (Embree 3 and 4 pass the same arguments): a candidate hit that
+/// [`keeps_hit`] does not keep is marked invalid, so Embree goes on as if the ray had
+/// missed it. The hash sees the ray's origin and direction as the caller gave them, so a
+/// query gets the answer the obvhs backend gives.
+unsafe extern "C" fn cutout_filter(args: *const ffi::RTCFilterFunctionNArguments) {
+    // SAFETY: Embree passes valid arguments for the duration of the call: `valid` points to
+    // `N` ints, `ray` and `hit` to `N`-wide structures of arrays (`RTCRayN`, `RTCHitN`:
+    // field `k` of lane `i` is 4-byte item `k N + i`, the layout of Embree's `RTCRayN_*` and
+    // `RTCHitN_*` accessors), and the user pointer is the `Arc<dyn Cutout>` set in
+    // `new_geometry`, alive as long as the scene. The cut-out's lookup does not panic (its
+    // indices come from the mesh the geometry was built from).
+    unsafe {
+        let args = &*args;
+        let cutout = &*(args.geometryUserPtr as *const Arc<dyn Cutout>);
+        let n = args.N as usize;
+        let ray = args.ray as *const f32;
+        let hit = args.hit as *const f32;
+        for i in 0..n {
+            let valid = args.valid.add(i);
+            if *valid == 0 {
+                continue;
+            }
+            let r = |k: usize| *ray.add(k * n + i);
+            let query = Ray {
+                o: glam::Vec3::new(r(0), r(1), r(2)),
+                d: glam::Vec3::new(r(4), r(5), r(6)),
+                tmin: r(3),
+                tmax: r(8),
+            };
+            let (u, v) = (*hit.add(3 * n + i), *hit.add(4 * n + i));
+            let prim = *(hit as *const u32).add(5 * n + i);
+            let geom = *(hit as *const u32).add(6 * n + i);
+            if !keeps_hit(cutout.as_ref(), &query, geom, prim, u, v) {
+                *valid = 0;
             }
         }
     }
@@ -244,6 +284,10 @@ impl Drop for GeometryHandle {
 pub struct EmbreeScene {
     raw: ffi::RTCScene,
     device: Arc<Device>,
+    /// The cut-outs the geometries' filter functions read through their user pointers
+    /// (boxed, so each address is stable); dropped after the scene is released.
+    #[allow(clippy::vec_box)] // Embree holds the address of each boxed `Arc`.
+    cutouts: Vec<Box<Arc<dyn Cutout>>>,
 }
 
 // SAFETY: see the type's documentation: a committed scene is immutable and Embree's query
@@ -270,7 +314,11 @@ fn quality(q: BuildQuality) -> ffi::RTCBuildQuality {
 
 impl EmbreeScene {
     /// Builds and commits a scene; geometry `i` gets geometry id `i`.
-    pub fn build(geometry: &[Geometry<'_>], options: &BuildOptions) -> Result<EmbreeScene, AccelError> {
+    pub fn build(
+        geometry: &[Geometry<'_>],
+        cutouts: &Cutouts,
+        options: &BuildOptions,
+    ) -> Result<EmbreeScene, AccelError> {
         let device = Device::new(options.embree_config.as_deref())?;
         // SAFETY: `device.raw` is a live device.
         let raw = unsafe { ffi::rtcNewScene(device.raw) };
@@ -278,7 +326,7 @@ impl EmbreeScene {
             device.check("rtcNewScene")?;
             return Err(AccelError::Embree("rtcNewScene returned null".into()));
         }
-        let scene = EmbreeScene { raw, device };
+        let mut scene = EmbreeScene { raw, device, cutouts: Vec::new() };
         let mut flags = ffi::RTCSceneFlags::RTC_SCENE_FLAG_NONE;
         if options.robust {
             flags |= ffi::RTCSceneFlags::RTC_SCENE_FLAG_ROBUST;
@@ -304,7 +352,9 @@ impl EmbreeScene {
             ffi::rtcSetSceneBuildQuality(scene.raw, scene_quality);
         }
         for (id, g) in geometry.iter().enumerate() {
-            let handle = scene.new_geometry(g, options.quality)?;
+            let cutout = cutouts.iter().find(|(c, _)| *c as usize == id).map(|(_, c)| Box::new(c.clone()));
+            let handle = scene.new_geometry(g, options.quality, cutout.as_deref())?;
+            scene.cutouts.extend(cutout);
             // SAFETY: both handles are live; the id is unique because it is the index.
             unsafe { ffi::rtcAttachGeometryByID(scene.raw, handle.0, id as u32) };
             scene.device.check("rtcAttachGeometryByID")?;
@@ -315,7 +365,15 @@ impl EmbreeScene {
         Ok(scene)
     }
 
-    fn new_geometry(&self, g: &Geometry<'_>, q: BuildQuality) -> Result<GeometryHandle, AccelError> {
+    /// A committed geometry; with a cut-out, its intersection and occlusion filter functions
+    /// skip the hits [`keeps_hit`] does not keep. `cutout` must stay where it is for as long
+    /// as the scene lives (`self.cutouts` holds it).
+    fn new_geometry(
+        &self,
+        g: &Geometry<'_>,
+        q: BuildQuality,
+        cutout: Option<&Arc<dyn Cutout>>,
+    ) -> Result<GeometryHandle, AccelError> {
         let kind = match g {
             Geometry::Triangles { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_TRIANGLE,
             Geometry::Sphere { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_SPHERE_POINT,
@@ -357,6 +415,17 @@ impl EmbreeScene {
                 )?;
                 v[0] = [center.x, center.y, center.z, *radius];
             }
+        }
+        if let Some(c) = cutout {
+            // SAFETY: the geometry is live and not committed; the user pointer points to an
+            // `Arc<dyn Cutout>` in a box the scene keeps until after it is released (the
+            // geometry lives no longer than the scene), and `cutout_filter` only reads it.
+            unsafe {
+                ffi::rtcSetGeometryUserData(handle.0, c as *const Arc<dyn Cutout> as *mut c_void);
+                ffi::rtcSetGeometryIntersectFilterFunction(handle.0, Some(cutout_filter));
+                ffi::rtcSetGeometryOccludedFilterFunction(handle.0, Some(cutout_filter));
+            }
+            self.device.check("rtcSetGeometryIntersectFilterFunction")?;
         }
         // SAFETY: the geometry is live and its buffers are filled.
         unsafe {
@@ -609,7 +678,7 @@ mod tests {
         let p = [glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y];
         let geometry = [Geometry::Triangles { positions: &p, indices: &[[0, 1, 2]] }];
         let options = BuildOptions { embree_config: Some("max_isa=sse4.2".into()), ..BuildOptions::default() };
-        let scene = EmbreeScene::build(&geometry, &options).unwrap();
+        let scene = EmbreeScene::build(&geometry, &[], &options).unwrap();
         let hit = scene.intersect(&Ray::new(glam::Vec3::new(0.25, 0.25, 1.0), -glam::Vec3::Z)).unwrap();
         assert_eq!((hit.geom, hit.prim), (0, 0));
         assert!((hit.t - 1.0).abs() < 1e-6 && (hit.u - 0.25).abs() < 1e-6 && (hit.v - 0.25).abs() < 1e-6);

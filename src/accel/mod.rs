@@ -12,6 +12,7 @@ pub mod embree;
 
 use glam::Vec3;
 use std::fmt;
+use std::sync::Arc;
 
 /// A ray segment `o + t d` for `t` in `[tmin, tmax]`. `d` need not be normalised.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,6 +55,58 @@ pub struct Hit {
 pub enum Geometry<'a> {
     Triangles { positions: &'a [Vec3], indices: &'a [[u32; 3]] },
     Sphere { center: Vec3, radius: f32 },
+}
+
+/// A cut-out (Mitsuba's `mask` BSDF) on a triangle mesh: the opacity `α` in `[0, 1]` at a
+/// hit. Both backends skip a hit where [`keeps_hit`] says so, for every kind of query, so a
+/// transparent part of a surface is never hit nor blocks a shadow ray.
+pub trait Cutout: Send + Sync {
+    /// The opacity at the hit of triangle `prim` with barycentric coordinates `(u, v)` (as
+    /// in [`Hit`]).
+    fn opacity(&self, prim: u32, u: f32, v: f32) -> f32;
+}
+
+/// The cut-outs of a scene: `(geometry id, cut-out)` pairs for the triangle meshes that have
+/// one.
+pub type Cutouts = [(u32, Arc<dyn Cutout>)];
+
+/// Whether a hit on a geometry with a cut-out counts: always where the opacity `α` is 1,
+/// never where it is 0, and in between with probability `α`, decided by a hash of the ray
+/// (origin and direction, bit for bit) and the hit primitive (pbrt-v4's stochastic alpha).
+/// The same query gets the same answer in both backends and on every thread, and a hit
+/// that is kept is fully opaque: every ray, traced or a shadow ray, passes a surface of
+/// opacity `α` with probability `1 - α`, so every estimator keeps its expectation.
+#[inline]
+pub fn keeps_hit(cutout: &dyn Cutout, ray: &Ray, geom: u32, prim: u32, u: f32, v: f32) -> bool {
+    let alpha = cutout.opacity(prim, u, v);
+    if alpha >= 1.0 {
+        return true;
+    }
+    if alpha.is_nan() || alpha <= 0.0 {
+        return false;
+    }
+    hit_hash01(ray, geom, prim) < alpha
+}
+
+/// A number in `[0, 1)` from the ray's origin and direction bits and the hit's ids.
+#[inline]
+pub fn hit_hash01(ray: &Ray, geom: u32, prim: u32) -> f32 {
+    #[inline]
+    fn mix(h: u64) -> u64 {
+        // SplitMix64's finaliser.
+        let mut z = h.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    let words = [
+        ((ray.o.x.to_bits() as u64) << 32) | ray.o.y.to_bits() as u64,
+        ((ray.o.z.to_bits() as u64) << 32) | ray.d.x.to_bits() as u64,
+        ((ray.d.y.to_bits() as u64) << 32) | ray.d.z.to_bits() as u64,
+        ((geom as u64) << 32) | prim as u64,
+    ];
+    let h = words.iter().fold(0x5851_f42d_4c95_7f2d_u64, |h, &w| mix(h ^ w));
+    (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
 }
 
 /// Build quality of the acceleration structure (Embree's `RTCBuildQuality`; for obvhs the
@@ -134,11 +187,35 @@ pub enum Accel {
 
 impl Accel {
     pub fn build(backend: Backend, geometry: &[Geometry<'_>], options: BuildOptions) -> Result<Accel, AccelError> {
+        Accel::build_with_cutouts(backend, geometry, &[], options)
+    }
+
+    /// As [`Accel::build`], with cut-outs on some geometries (each id at most once): their
+    /// hits are kept or skipped by [`keeps_hit`] in every query.
+    pub fn build_with_cutouts(
+        backend: Backend,
+        geometry: &[Geometry<'_>],
+        cutouts: &Cutouts,
+        options: BuildOptions,
+    ) -> Result<Accel, AccelError> {
         validate(geometry)?;
+        let mut seen = vec![false; geometry.len()];
+        for (g, _) in cutouts {
+            let index = *g as usize;
+            match (seen.get_mut(index), geometry.get(index)) {
+                (Some(s), Some(Geometry::Triangles { .. })) if !*s => *s = true,
+                _ => {
+                    return Err(AccelError::BadGeometry {
+                        index,
+                        message: "a cut-out needs a triangle mesh that exists and has no other cut-out".into(),
+                    });
+                }
+            }
+        }
         match backend {
-            Backend::Embree => Ok(Accel::Embree(embree::EmbreeScene::build(geometry, &options)?)),
+            Backend::Embree => Ok(Accel::Embree(embree::EmbreeScene::build(geometry, cutouts, &options)?)),
             #[cfg(feature = "obvhs")]
-            Backend::Obvhs => Ok(Accel::Obvhs(bvh::ObvhsScene::build(geometry, options))),
+            Backend::Obvhs => Ok(Accel::Obvhs(bvh::ObvhsScene::build(geometry, cutouts, options))),
             #[cfg(not(feature = "obvhs"))]
             Backend::Obvhs => Err(AccelError::ObvhsDisabled),
         }

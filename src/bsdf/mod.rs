@@ -17,7 +17,7 @@ pub mod perturb;
 pub mod plastic;
 
 use crate::math::{Frame, Rgb};
-use crate::texture::Texture;
+use crate::texture::{Opacity, Texture};
 use glam::{Vec2, Vec3};
 use microfacet::Roughness;
 pub use perturb::At;
@@ -82,6 +82,9 @@ pub struct Bsdf {
     /// The perturbation of the shading frame (applied where a ray hits the surface; see
     /// [`perturb`]), whose side test and shadowing term the BSDF's values include.
     pub perturbation: Option<Box<Perturbation>>,
+    /// The opacity of a `mask` around the model: the accelerator skips the hits it does not
+    /// keep (`accel::keeps_hit`), and a kept hit scatters by `model` alone.
+    pub opacity: Option<std::sync::Arc<Opacity>>,
 }
 
 /// Local-frame helpers.
@@ -92,7 +95,7 @@ pub fn cos_theta(w: Vec3) -> f32 {
 
 impl Bsdf {
     pub fn new(model: BsdfModel) -> Bsdf {
-        Bsdf { model, two_sided: false, perturbation: None }
+        Bsdf { model, two_sided: false, perturbation: None, opacity: None }
     }
 
     pub fn diffuse(reflectance: Texture) -> Bsdf {
@@ -381,6 +384,7 @@ mod tests {
                         },
                         two_sided: false,
                         perturbation: None,
+                        opacity: None,
                     },
                 ));
                 v.push((
@@ -394,6 +398,7 @@ mod tests {
                         },
                         two_sided: false,
                         perturbation: None,
+                        opacity: None,
                     },
                 ));
             }
@@ -410,12 +415,13 @@ mod tests {
                 model: BsdfModel::Plastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) },
                 two_sided: false,
                 perturbation: None,
+                opacity: None,
             },
         ));
         for (kind, alpha) in [(MicrofacetType::Beckmann, 0.1), (MicrofacetType::Ggx, 0.4)] {
             let params = RoughPlasticParams::new(rough(kind, alpha, alpha), 1.5, false, 0.5);
             let model = BsdfModel::RoughPlastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) };
-            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false, perturbation: None }));
+            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false, perturbation: None, opacity: None }));
         }
         v
     }
@@ -537,6 +543,7 @@ mod tests {
                     },
                     two_sided: false,
                     perturbation: None,
+                    opacity: None,
                 };
                 for cos in [1.0f32, 0.7, 0.3, 0.05] {
                     let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
@@ -561,6 +568,7 @@ mod tests {
             model: BsdfModel::Dielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
             two_sided: false,
             perturbation: None,
+            opacity: None,
         };
         let mut s = Sampler::new(&[11]);
         let wo = Vec3::new(0.6, 0.0, 0.8);
@@ -598,6 +606,7 @@ mod tests {
             model: BsdfModel::ThinDielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
             two_sided: false,
             perturbation: None,
+            opacity: None,
         };
         let mut s = Sampler::new(&[12]);
         for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.0, 0.6, -0.8)] {

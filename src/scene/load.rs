@@ -9,7 +9,7 @@ use super::shape::{Shape, ShapeGeometry};
 use super::xml::Value;
 use super::xml::{self, Document, Node, NodeId};
 use super::{IntegratorSpec, LoadOptions, LoadStats, Scene};
-use crate::accel::Accel;
+use crate::accel::{Accel, Cutout};
 use crate::bsdf::fresnel::{fresnel_diffuse_reflectance, lookup_conductor, lookup_ior};
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::plastic::{PlasticParams, RoughPlasticParams};
@@ -27,12 +27,14 @@ use std::sync::Arc;
 use std::time::Instant;
 
 mod perturb;
+mod mask;
 mod sensor;
 mod sunsky;
 
 /// BSDF plugins this renderer implements.
 pub const BSDF_PLUGINS: &[&str] = &[
     "diffuse",
+    "mask",
     "twosided",
     "conductor",
     "roughconductor",
@@ -160,7 +162,13 @@ impl Scene {
             group_thousands(b.stats.triangles as u64)
         ));
         let geometry: Vec<_> = b.shapes.iter().map(|s| s.accel_geometry()).collect();
-        let accel = Accel::build(options.backend, &geometry, options.build.clone())?;
+        let cutouts: Vec<(u32, Arc<dyn Cutout>)> = b
+            .shapes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| Some((i as u32, s.cutout(b.bsdfs[s.bsdf].opacity.as_ref()?)?)))
+            .collect();
+        let accel = Accel::build_with_cutouts(options.backend, &geometry, &cutouts, options.build.clone())?;
         drop(geometry);
         b.stats.bvh_seconds = bvh_start.elapsed().as_secs_f64();
         LoadProgress::done(spinner, format!("built the {} BVH in {:.2} s", options.backend, b.stats.bvh_seconds));
@@ -314,36 +322,7 @@ impl<'d> Builder<'d> {
         let to_uv = Mat3::from_mat4(node.transform("to_uv")?.unwrap_or(Mat4::IDENTITY));
         let t = match node.plugin.as_str() {
             "bitmap" => {
-                let path = self.resolve_path(node, "filename")?;
-                let filter = match node.string("filter_type")?.unwrap_or("bilinear") {
-                    "bilinear" => FilterType::Bilinear,
-                    "nearest" => FilterType::Nearest,
-                    // Mitsuba 0.6's mip-mapped filters: bilinear lookups of the full-resolution
-                    // image (README, "Mitsuba 0.5/0.6 scenes").
-                    f @ ("trilinear" | "ewa") => {
-                        self.read_as_bilinear.push((f.to_string(), node.prop_loc("filter_type")));
-                        FilterType::Bilinear
-                    }
-                    f => {
-                        return Err(Error::input(
-                            &node.prop_loc("filter_type"),
-                            format!(
-                                "unknown filter_type \"{f}\" (bilinear, nearest; trilinear and ewa are read as bilinear)"
-                            ),
-                        ));
-                    }
-                };
-                let wrap = match node.string("wrap_mode")?.unwrap_or("repeat") {
-                    "repeat" => WrapMode::Repeat,
-                    "mirror" => WrapMode::Mirror,
-                    "clamp" => WrapMode::Clamp,
-                    w => {
-                        return Err(Error::input(
-                            &node.prop_loc("wrap_mode"),
-                            format!("unknown wrap_mode \"{w}\" (repeat, mirror, clamp)"),
-                        ));
-                    }
-                };
+                let (path, filter, wrap) = self.bitmap_params(id)?;
                 let raw = node.boolean_or("raw", false)?;
                 let bitmap = load_bitmap(&path, raw, filter, wrap)
                     .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
@@ -360,6 +339,40 @@ impl<'d> Builder<'d> {
         self.doc.check_unused(id)?;
         self.textures.insert(id, t.clone());
         Ok(t)
+    }
+
+    /// A `bitmap` texture's file, filter and wrap mode.
+    fn bitmap_params(&mut self, id: NodeId) -> Result<(PathBuf, FilterType, WrapMode)> {
+        let node = self.doc.node(id);
+        let path = self.resolve_path(node, "filename")?;
+        let filter = match node.string("filter_type")?.unwrap_or("bilinear") {
+            "bilinear" => FilterType::Bilinear,
+            "nearest" => FilterType::Nearest,
+            // Mitsuba 0.6's mip-mapped filters: bilinear lookups of the full-resolution
+            // image (README, "Mitsuba 0.5/0.6 scenes").
+            f @ ("trilinear" | "ewa") => {
+                self.read_as_bilinear.push((f.to_string(), node.prop_loc("filter_type")));
+                FilterType::Bilinear
+            }
+            f => {
+                return Err(Error::input(
+                    &node.prop_loc("filter_type"),
+                    format!("unknown filter_type \"{f}\" (bilinear, nearest; trilinear and ewa are read as bilinear)"),
+                ));
+            }
+        };
+        let wrap = match node.string("wrap_mode")?.unwrap_or("repeat") {
+            "repeat" => WrapMode::Repeat,
+            "mirror" => WrapMode::Mirror,
+            "clamp" => WrapMode::Clamp,
+            w => {
+                return Err(Error::input(
+                    &node.prop_loc("wrap_mode"),
+                    format!("unknown wrap_mode \"{w}\" (repeat, mirror, clamp)"),
+                ));
+            }
+        };
+        Ok((path, filter, wrap))
     }
 
     /// An index of refraction given as a number or by name (`bk7`, `air`, …).
@@ -552,6 +565,7 @@ impl<'d> Builder<'d> {
                     BsdfModel::RoughPlastic { params, diffuse_reflectance, specular_reflectance }
                 }
             }
+            "mask" => return self.mask(id),
             _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),
         };
         self.doc.check_unused(id)?;
@@ -684,7 +698,23 @@ impl<'d> Builder<'d> {
         } else {
             self.stats.spheres += 1;
         }
+        let masked = self.bsdfs[shape.bsdf].opacity.is_some();
+        if masked && matches!(shape.geometry, ShapeGeometry::Sphere { .. }) {
+            return Err(Error::input(
+                &node.loc,
+                format!("shape \"{}\": a mask (cut-out) is supported on triangle meshes, not on spheres", shape.name),
+            ));
+        }
         if let Some(e) = self.single_child(id, "emitter", "a shape")? {
+            if masked {
+                return Err(Error::input(
+                    &self.node(e).loc,
+                    format!(
+                        "the emitting shape \"{}\" has a mask: emitters with cut-outs are not supported",
+                        shape.name
+                    ),
+                ));
+            }
             if shape.area().is_nan() || shape.area() <= 0.0 {
                 return Err(Error::input(
                     &self.node(e).loc,

@@ -2,7 +2,7 @@
 //! the area sampling that area lights use.
 
 use super::mesh::TriangleMesh;
-use crate::accel::{Geometry, Hit, Ray};
+use crate::accel::{Cutout, Geometry, Hit, Ray};
 use crate::bsdf::At;
 use crate::bsdf::perturb::{Perturbation, tangent_frame};
 use crate::math::Frame;
@@ -10,8 +10,10 @@ use crate::sampling::{
     Distribution1D, square_to_uniform_cone, square_to_uniform_cone_pdf, square_to_uniform_sphere,
     square_to_uniform_triangle,
 };
+use crate::texture::Opacity;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
+use std::sync::Arc;
 
 #[derive(Clone, Debug)]
 pub enum ShapeGeometry {
@@ -136,6 +138,16 @@ impl Shape {
             ShapeGeometry::Mesh(m) => Geometry::Triangles { positions: &m.positions, indices: &m.indices },
             ShapeGeometry::Sphere { center, radius } => Geometry::Sphere { center: *center, radius: *radius },
         }
+    }
+
+    /// The cut-out a `mask` of this opacity makes of the shape (a mesh; `None` for a
+    /// sphere, or where the opacity is 1 everywhere).
+    pub fn cutout(&self, opacity: &Arc<Opacity>) -> Option<Arc<dyn Cutout>> {
+        let ShapeGeometry::Mesh(m) = &self.geometry else { return None };
+        if matches!(**opacity, Opacity::Constant(a) if a >= 1.0) {
+            return None;
+        }
+        Some(Arc::new(MeshCutout { indices: m.indices.clone(), uvs: m.uvs.clone(), opacity: opacity.clone() }))
     }
 
     /// The surface interaction of a hit on this shape.
@@ -322,6 +334,28 @@ impl Shape {
         let dist2 = d.length_squared();
         let cos = n.dot(d).abs() / dist2.sqrt();
         if cos <= 0.0 { 0.0 } else { dist2 / (cos * self.area) }
+    }
+}
+
+/// A mesh's cut-out: the opacity at the texture coordinates of a hit, interpolated as
+/// [`Shape::interaction`] interpolates them (its own copy of the indices and uvs, which the
+/// accelerator keeps as long as it lives).
+struct MeshCutout {
+    indices: Vec<[u32; 3]>,
+    uvs: Option<Vec<Vec2>>,
+    opacity: Arc<Opacity>,
+}
+
+impl Cutout for MeshCutout {
+    fn opacity(&self, prim: u32, u: f32, v: f32) -> f32 {
+        let uv = match (&self.uvs, self.indices.get(prim as usize)) {
+            (Some(t), Some(tri)) => {
+                let [t0, t1, t2] = tri.map(|k| t[k as usize]);
+                t0 * (1.0 - u - v) + t1 * u + t2 * v
+            }
+            _ => Vec2::new(u, v),
+        };
+        self.opacity.eval(uv)
     }
 }
 

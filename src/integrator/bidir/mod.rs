@@ -728,6 +728,12 @@ fn infinite_light_start(scene: &Scene, l: usize, pmf: f32, u_pos: Vec2, u_dir: V
 #[inline]
 pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
     counters.shadow_rays += 1;
+    // The segment stops `SHADOW_EPSILON` of its length short of its far end. A vertex at
+    // infinity is a point beyond the scene, some scene diameters away: the ray starts at the
+    // finite vertex, so that margin lies outside the scene rather than in front of the
+    // surface (from the far point it left centimetres before the surface untested, and
+    // light leaked past the edges of whatever stood there).
+    let (a, b) = if a.infinite && !b.infinite { (b, a) } else { (a, b) };
     let d = b.p - a.p;
     let o = if a.ng == Vec3::ZERO { a.p } else { offset_origin(a.p, a.ng, d) };
     let e = if b.ng == Vec3::ZERO { b.p } else { offset_origin(b.p, b.ng, -d) };

@@ -51,7 +51,7 @@ fn scene(variant: Variant) -> Scene {
     };
     let set = |scene: &mut Scene, name: &str, model: BsdfModel| {
         let s = shape(scene, name);
-        scene.bsdfs.push(Bsdf { model, two_sided: true, perturbation: None });
+        scene.bsdfs.push(Bsdf { model, two_sided: true, perturbation: None, opacity: None });
         scene.shapes[s].bsdf = scene.bsdfs.len() - 1;
     };
     match variant {
