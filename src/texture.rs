@@ -367,7 +367,10 @@ mod tests {
                 for y in 0..h {
                     for x in 0..w {
                         let uv = Vec2::new((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
-                        assert_eq!(b.eval(uv).to_array().map(f32::to_bits), texels[(y * w + x) as usize].to_array().map(f32::to_bits));
+                        assert_eq!(
+                            b.eval(uv).to_array().map(f32::to_bits),
+                            texels[(y * w + x) as usize].to_array().map(f32::to_bits)
+                        );
                     }
                 }
             }

@@ -421,7 +421,10 @@ mod tests {
         for (kind, alpha) in [(MicrofacetType::Beckmann, 0.1), (MicrofacetType::Ggx, 0.4)] {
             let params = RoughPlasticParams::new(rough(kind, alpha, alpha), 1.5, false, 0.5);
             let model = BsdfModel::RoughPlastic { params, diffuse_reflectance: c(0.5), specular_reflectance: c(1.0) };
-            v.push((format!("roughplastic {kind:?} α={alpha}"), Bsdf { model, two_sided: false, perturbation: None, opacity: None }));
+            v.push((
+                format!("roughplastic {kind:?} α={alpha}"),
+                Bsdf { model, two_sided: false, perturbation: None, opacity: None },
+            ));
         }
         v
     }

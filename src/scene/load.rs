@@ -26,8 +26,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-mod perturb;
 mod mask;
+mod perturb;
 mod sensor;
 mod sunsky;
 

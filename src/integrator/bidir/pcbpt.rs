@@ -435,14 +435,8 @@ impl Iterative for PcbptRender {
     /// against their memory limits.
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
         let o = &self.pc.opts;
-        let (pilot, _, _) = LightPool::trace::<Counts>(
-            ctx.scene,
-            &self.pc.bdpt.limits,
-            o.light_paths,
-            ctx.seed,
-            PILOT_ITERATION,
-            None,
-        );
+        let (pilot, _, _) =
+            LightPool::trace::<Counts>(ctx.scene, &self.pc.bdpt.limits, o.light_paths, ctx.seed, PILOT_ITERATION, None);
         let (w, h) = (ctx.scene.film.width, ctx.scene.film.height);
         let m = light_paths_for(o.light_paths, o.pool_vertices, pilot.mean_vertices(), w as usize * h as usize);
         check_pool_memory(m, &pilot, self.max_pool_mb, "--pc-light-paths")?;
