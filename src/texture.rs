@@ -138,18 +138,7 @@ impl Bitmap {
 
     #[inline]
     fn wrap_index(&self, i: i64, n: u32) -> usize {
-        if (i as u64) < n as u64 {
-            return i as usize;
-        }
-        let n = n as i64;
-        (match self.wrap {
-            WrapMode::Repeat => i.rem_euclid(n),
-            WrapMode::Clamp => i.clamp(0, n - 1),
-            WrapMode::Mirror => {
-                let p = i.rem_euclid(2 * n);
-                if p < n { p } else { 2 * n - 1 - p }
-            }
-        }) as usize
+        wrap_index(self.wrap, i, n)
     }
 
     pub fn eval(&self, uv: Vec2) -> Rgb {
@@ -217,7 +206,13 @@ impl AlphaBitmap {
     }
 }
 
+/// Index `i` of a row or column of `n` texels wrapped into `0..n` (inside already: as it is,
+/// without a division).
+#[inline]
 fn wrap_index(wrap: WrapMode, i: i64, n: u32) -> usize {
+    if (i as u64) < n as u64 {
+        return i as usize;
+    }
     let n = n as i64;
     (match wrap {
         WrapMode::Repeat => i.rem_euclid(n),

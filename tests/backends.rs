@@ -100,9 +100,8 @@ fn compare_backends_with_cutouts(
     out
 }
 
-#[test]
-fn random_rays_in_the_door_ajar_room() {
-    // The 4 544 triangles of `veach-ajar` (its meshes have identity transforms), plus a sphere.
+/// `veach-ajar`'s meshes (smallest first) and their bounding box.
+fn door_ajar_meshes() -> (Vec<TriangleMesh>, Vec3, Vec3) {
     let dir = root().join("scenes/veach-ajar/models");
     let mut meshes: Vec<TriangleMesh> = std::fs::read_dir(&dir)
         .unwrap()
@@ -118,6 +117,13 @@ fn random_rays_in_the_door_ajar_room() {
             hi = hi.max(*p);
         }
     }
+    (meshes, lo, hi)
+}
+
+#[test]
+fn random_rays_in_the_door_ajar_room() {
+    // The 4 544 triangles of `veach-ajar` (its meshes have identity transforms), plus a sphere.
+    let (meshes, lo, hi) = door_ajar_meshes();
     let mut geometry: Vec<Geometry> =
         meshes.iter().map(|m| Geometry::Triangles { positions: &m.positions, indices: &m.indices }).collect();
     geometry.push(Geometry::Sphere { center: (lo + hi) * 0.5, radius: 0.3 });
@@ -143,21 +149,7 @@ fn random_rays_in_the_door_ajar_room_with_cutouts() {
     // `veach-ajar`'s meshes with cut-outs on the larger half of them (opacity 0, 0.3, 0.5,
     // 1 and 0.4 by triangle parity): both backends skip the same hits for every ray, in
     // closest-hit queries, batches and shadow rays.
-    let dir = root().join("scenes/veach-ajar/models");
-    let mut meshes: Vec<TriangleMesh> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-        .map(|p| mesh::load_obj(&p).unwrap())
-        .collect();
-    meshes.sort_by_key(|m| m.indices.len());
-    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    for m in &meshes {
-        for p in &m.positions {
-            lo = lo.min(*p);
-            hi = hi.max(*p);
-        }
-    }
+    let (meshes, lo, hi) = door_ajar_meshes();
     let geometry: Vec<Geometry> =
         meshes.iter().map(|m| Geometry::Triangles { positions: &m.positions, indices: &m.indices }).collect();
     let kinds = [(0.0, 0.0), (0.3, 0.3), (0.5, 0.5), (1.0, 0.4)];
