@@ -100,6 +100,10 @@ cases! {
     sunlit_room_uniform_falloff: SUNLIT_ROOM, 16, Uniform, Falloff, Mixture;
     sunlit_room_resampling_falloff: SUNLIT_ROOM, 8, Resampling, Falloff, Mixture;
     living_room_harmonic_falloff: LIVING_ROOM, 32, Harmonic, Falloff, Mixture;
+    living_room_uniform_falloff: LIVING_ROOM, 32, Uniform, Falloff, Mixture;
+    living_room_resampling_falloff: LIVING_ROOM, 16, Resampling, Falloff, Mixture;
+    staircase2_uniform_falloff: STAIRCASE2, 32, Uniform, Falloff, Mixture;
+    staircase2_resampling_falloff: STAIRCASE2, 16, Resampling, Falloff, Mixture;
 }
 
 /// Image means of same-seed pairs on `veach-ajar` (80×45, unlimited depth): option sets `a`
