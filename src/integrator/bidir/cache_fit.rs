@@ -51,7 +51,9 @@ impl CacheFit<'_> {
             paths = ((paths as f64 * self.opts.max_cache_mb as f64 / mb).floor() as usize).min(paths - 1);
         }
         if paths > 0 {
-            ways.push(format!("--pc-light-paths {paths}"));
+            // With a pool-vertex target, M would grow back past the count suggested.
+            let fixed = if self.opts.pool_vertices > 0 { " --pc-pool-vertices 0" } else { "" };
+            ways.push(format!("--pc-light-paths {paths}{fixed}"));
         }
         let need = self.size(s, d, m).2.ceil() as usize;
         ways.push(format!("raise the limit to --pc-max-cache-mb {need}"));
