@@ -122,7 +122,7 @@ impl Bitmap {
     /// The texel at integer coordinates `(x, y)`, wrapped as the bitmap's wrap mode says.
     #[inline]
     fn texel(&self, x: i64, y: i64) -> Rgb {
-        self.fetch(self.wrap_index(x, self.width), self.wrap_index(y, self.height))
+        self.fetch(wrap_index(self.wrap, x, self.width), wrap_index(self.wrap, y, self.height))
     }
 
     #[inline]
@@ -136,30 +136,8 @@ impl Bitmap {
         }
     }
 
-    #[inline]
-    fn wrap_index(&self, i: i64, n: u32) -> usize {
-        wrap_index(self.wrap, i, n)
-    }
-
     pub fn eval(&self, uv: Vec2) -> Rgb {
-        let p = Vec2::new(uv.x * self.width as f32, uv.y * self.height as f32);
-        match self.filter {
-            FilterType::Nearest => self.fetch(
-                self.wrap_index(p.x.floor() as i64, self.width),
-                self.wrap_index(p.y.floor() as i64, self.height),
-            ),
-            FilterType::Bilinear => {
-                let q = p - Vec2::splat(0.5);
-                let (x0, y0) = (q.x.floor(), q.y.floor());
-                let (fx, fy) = (q.x - x0, q.y - y0);
-                let (x0, y0) = (x0 as i64, y0 as i64);
-                let (xa, xb) = (self.wrap_index(x0, self.width), self.wrap_index(x0 + 1, self.width));
-                let (ya, yb) = (self.wrap_index(y0, self.height), self.wrap_index(y0 + 1, self.height));
-                let a = self.fetch(xa, ya) * (1.0 - fx) + self.fetch(xb, ya) * fx;
-                let b = self.fetch(xa, yb) * (1.0 - fx) + self.fetch(xb, yb) * fx;
-                a * (1.0 - fy) + b * fy
-            }
-        }
+        lookup(self.width, self.height, self.filter, self.wrap, |x, y| self.fetch(x, y), uv)
     }
 
     /// The gradient `(∂/∂u, ∂/∂v)` of the luminance of [`Bitmap::eval`] at `uv`, where `to_uv`
@@ -202,7 +180,7 @@ pub struct AlphaBitmap {
 
 impl AlphaBitmap {
     pub fn eval(&self, uv: Vec2) -> f32 {
-        lookup(self.width, self.height, self.filter, self.wrap, &self.texels, uv)
+        lookup(self.width, self.height, self.filter, self.wrap, |x, y| self.texels[y * self.width as usize + x], uv)
     }
 }
 
@@ -224,23 +202,35 @@ fn wrap_index(wrap: WrapMode, i: i64, n: u32) -> usize {
     }) as usize
 }
 
-/// A nearest or bilinear lookup of a `width × height` image of texels `T` at `uv`.
+/// A nearest or bilinear lookup at `uv` of a `width × height` image whose texel in column
+/// `x`, row `y` (both inside) `fetch` reads: what colour bitmaps (bytes or floats) and alpha
+/// bitmaps share.
 #[inline]
-fn lookup<T>(width: u32, height: u32, filter: FilterType, wrap: WrapMode, texels: &[T], uv: Vec2) -> T
+fn lookup<T>(
+    width: u32,
+    height: u32,
+    filter: FilterType,
+    wrap: WrapMode,
+    fetch: impl Fn(usize, usize) -> T,
+    uv: Vec2,
+) -> T
 where
     T: Copy + std::ops::Mul<f32, Output = T> + std::ops::Add<Output = T>,
 {
-    let texel = |x: i64, y: i64| texels[wrap_index(wrap, y, height) * width as usize + wrap_index(wrap, x, width)];
     let p = Vec2::new(uv.x * width as f32, uv.y * height as f32);
     match filter {
-        FilterType::Nearest => texel(p.x.floor() as i64, p.y.floor() as i64),
+        FilterType::Nearest => {
+            fetch(wrap_index(wrap, p.x.floor() as i64, width), wrap_index(wrap, p.y.floor() as i64, height))
+        }
         FilterType::Bilinear => {
             let q = p - Vec2::splat(0.5);
             let (x0, y0) = (q.x.floor(), q.y.floor());
             let (fx, fy) = (q.x - x0, q.y - y0);
             let (x0, y0) = (x0 as i64, y0 as i64);
-            let a = texel(x0, y0) * (1.0 - fx) + texel(x0 + 1, y0) * fx;
-            let b = texel(x0, y0 + 1) * (1.0 - fx) + texel(x0 + 1, y0 + 1) * fx;
+            let (xa, xb) = (wrap_index(wrap, x0, width), wrap_index(wrap, x0 + 1, width));
+            let (ya, yb) = (wrap_index(wrap, y0, height), wrap_index(wrap, y0 + 1, height));
+            let a = fetch(xa, ya) * (1.0 - fx) + fetch(xb, ya) * fx;
+            let b = fetch(xa, yb) * (1.0 - fx) + fetch(xb, yb) * fx;
             a * (1.0 - fy) + b * fy
         }
     }
