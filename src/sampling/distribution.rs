@@ -3,26 +3,52 @@
 /// A piecewise-constant distribution over `n` entries, sampled by inverting its CMF.
 #[derive(Clone, Debug)]
 pub struct Distribution1D {
-    pmf: Vec<f32>,
-    cmf: Vec<f32>,
+    /// Each entry's CMF (the probability of it and the entries before it) beside its PMF, so
+    /// that the cache line a search ends in also holds the probability it returns (an
+    /// environment map's row is sampled at random: each separate array read is a miss).
+    entries: Vec<Entry>,
     total: f64,
-    /// For more than [`GUIDE_MIN`] entries, `guide[j]` is the first index whose CMF
-    /// exceeds `j / (guide.len() - 1)`: a sample searches only between the guide entries
-    /// around `u` (a few cache lines) instead of the whole CMF (one cache miss per halving
-    /// on an environment map's rows), and finds the same index.
+    /// For more than [`GUIDE_MIN`] entries, `guide[j]` is the number of entries whose CMF is
+    /// at most `j / (guide.len() - 1)`, one bucket per [`GUIDE_STRIDE`] entries: a sample
+    /// counts CMF entries only between the guide entries around `u` (a few adjacent cache
+    /// lines, read at once) instead of a binary search over the whole CMF (one cache miss
+    /// per halving), and finds the same index. The guide is small enough (1 KB for a row of
+    /// a 2048-pixel map) for all rows' guides to stay in cache.
     guide: Vec<u32>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    cmf: f32,
+    pmf: f32,
 }
 
 /// Distributions with more entries than this get a guide table.
 const GUIDE_MIN: usize = 64;
+/// Entries per guide bucket.
+const GUIDE_STRIDE: usize = 8;
+/// Up to this many CMF entries are counted one by one (branch-free, the loads independent)
+/// rather than searched by halving.
+const COUNT_MAX: usize = 64;
 
-/// The guide table of a CMF of `n` entries (one bucket per entry).
+/// The guide table of a CMF of `n` entries.
 fn guide_table(cmf: &[f32]) -> Vec<u32> {
     let n = cmf.len();
     if n <= GUIDE_MIN {
         return Vec::new();
     }
-    (0..=n).map(|j| cmf.partition_point(|&c| c <= j as f32 / n as f32) as u32).collect()
+    let g = n.div_ceil(GUIDE_STRIDE);
+    (0..=g).map(|j| cmf.partition_point(|&c| c <= j as f32 / g as f32) as u32).collect()
+}
+
+/// The number of entries whose CMF is at most `u` (the CMF is non-decreasing).
+#[inline]
+fn count_at_most(entries: &[Entry], u: f32) -> usize {
+    if entries.len() <= COUNT_MAX {
+        entries.iter().map(|e| (e.cmf <= u) as usize).sum()
+    } else {
+        entries.partition_point(|e| e.cmf <= u)
+    }
 }
 
 impl Distribution1D {
@@ -36,24 +62,24 @@ impl Distribution1D {
             cmf.push(sum);
         }
         let n = weights.len();
-        if sum > 0.0 && sum.is_finite() {
+        let (pmf, cmf, total): (Vec<f32>, Vec<f32>, f64) = if sum > 0.0 && sum.is_finite() {
             let pmf =
                 weights.iter().map(|&w| if w.is_finite() && w > 0.0 { (w as f64 / sum) as f32 } else { 0.0 }).collect();
-            let cmf: Vec<f32> = cmf.iter().map(|&c| (c / sum) as f32).collect();
-            Distribution1D { pmf, guide: guide_table(&cmf), cmf, total: sum }
+            (pmf, cmf.iter().map(|&c| (c / sum) as f32).collect(), sum)
         } else {
-            let pmf = vec![1.0 / n.max(1) as f32; n];
-            let cmf: Vec<f32> = (1..=n).map(|i| i as f32 / n as f32).collect();
-            Distribution1D { pmf, guide: guide_table(&cmf), cmf, total: 0.0 }
-        }
+            (vec![1.0 / n.max(1) as f32; n], (1..=n).map(|i| i as f32 / n as f32).collect(), 0.0)
+        };
+        let guide = guide_table(&cmf);
+        let entries = cmf.iter().zip(&pmf).map(|(&cmf, &pmf)| Entry { cmf, pmf }).collect();
+        Distribution1D { entries, total, guide }
     }
 
     pub fn len(&self) -> usize {
-        self.pmf.len()
+        self.entries.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.pmf.is_empty()
+        self.entries.is_empty()
     }
 
     /// Sum of the weights the distribution was built from.
@@ -63,40 +89,45 @@ impl Distribution1D {
 
     #[inline]
     pub fn pmf(&self, i: usize) -> f32 {
-        self.pmf[i]
+        self.entries[i].pmf
+    }
+
+    /// The probability of entries `0..=i`.
+    #[inline]
+    pub fn cmf(&self, i: usize) -> f32 {
+        self.entries[i].cmf
     }
 
     /// Samples an index for `u` in `[0,1)`; returns the index and `u` rescaled to `[0,1)`
     /// within the chosen entry (so one number can be reused).
+    #[inline]
     pub fn sample(&self, u: f32) -> (usize, f32) {
-        let n = self.cmf.len();
+        let n = self.entries.len();
         if n == 1 {
             // One entry (of probability one): what the search below returns.
             return (0, u.clamp(0.0, 1.0 - f32::EPSILON));
         }
-        // The number of CMF entries at or below `u`: a branch-free count for a few entries
-        // (an emitting quad's two triangles), a binary search for more, within the guide
-        // table's buckets around `u` for many; the same index. The buckets searched reach
-        // two below and two above the one `u · g` falls in, so the rounding of `u · g` and
-        // of the bucket bounds cannot leave the index outside them.
-        let i = if n <= 8 {
-            self.cmf[..n - 1].iter().map(|&c| (c <= u) as usize).sum()
-        } else if self.guide.is_empty() {
-            self.cmf.partition_point(|&c| c <= u).min(n - 1)
+        // The number of CMF entries at or below `u`, counted within the guide's buckets
+        // around `u` for many entries. They reach one below and one above the bucket `u · g`
+        // falls in: the rounding of `u · g` and of the buckets' bounds moves either by far
+        // less than a bucket, so the index cannot lie outside them.
+        let i = if self.guide.is_empty() {
+            count_at_most(&self.entries[..n - 1], u)
         } else {
             let g = self.guide.len() - 1;
             let k = ((u * g as f32) as usize).min(g);
-            let lo = self.guide[k.saturating_sub(2)] as usize;
-            let hi = self.guide[(k + 3).min(g)] as usize;
-            (lo + self.cmf[lo..hi].partition_point(|&c| c <= u)).min(n - 1)
-        };
+            let lo = self.guide[k.saturating_sub(1)] as usize;
+            let hi = (self.guide[(k + 2).min(g)] as usize).min(n);
+            lo + count_at_most(&self.entries[lo..hi], u)
+        }
+        .min(n - 1);
         // Skip zero-probability entries that a CMF plateau could land on.
         let mut i = i;
-        while self.pmf[i] == 0.0 && i + 1 < n {
+        while self.entries[i].pmf == 0.0 && i + 1 < n {
             i += 1;
         }
-        let lo = if i == 0 { 0.0 } else { self.cmf[i - 1] };
-        let p = self.pmf[i];
+        let lo = if i == 0 { 0.0 } else { self.entries[i - 1].cmf };
+        let p = self.entries[i].pmf;
         let rescaled = if p > 0.0 { ((u - lo) / p).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 };
         (i, rescaled)
     }
@@ -166,10 +197,11 @@ mod tests {
 
     #[test]
     fn small_and_large_distributions_pick_the_binary_search_index() {
-        // Up to 8 entries the index is a count; it must be the binary search's, also at
-        // `u` exactly on a CMF entry and one ulp either side, and on zero-weight plateaus.
+        // The index counted (up to 64 entries, or within guide buckets) or searched within
+        // the buckets must be the full binary search's, also at `u` exactly on a CMF entry and
+        // one ulp either side, and on zero-weight plateaus.
         let mut s = crate::sampling::Sampler::new(&[5]);
-        for n in (1..=12).chain([63, 64, 65, 100, 1000, 4096]) {
+        for n in (1..=12).chain([63, 64, 65, 66, 71, 72, 73, 100, 1000, 2048, 4096]) {
             for trial in 0..20 {
                 // Every fifth trial one entry outweighs the rest by far (a sun in a sky map):
                 // many entries then share one guide bucket.
@@ -182,18 +214,19 @@ mod tests {
                     .collect();
                 let d = Distribution1D::new(&w);
                 let mut us: Vec<f32> = (0..50).map(|_| s.next_1d()).collect();
-                for &c in &d.cmf {
+                let cmf: Vec<f32> = (0..n).map(|i| d.cmf(i)).collect();
+                for &c in &cmf {
                     us.extend([c, c.next_down(), c.next_up()].iter().filter(|u| (0.0..1.0).contains(*u)));
                 }
                 us.push(0.0);
                 for u in us {
-                    let mut i = d.cmf.partition_point(|&c| c <= u).min(n - 1);
-                    while d.pmf[i] == 0.0 && i + 1 < n {
+                    let mut i = cmf.partition_point(|&c| c <= u).min(n - 1);
+                    while d.pmf(i) == 0.0 && i + 1 < n {
                         i += 1;
                     }
                     let (j, r) = d.sample(u);
-                    assert_eq!(j, i, "n = {n}, u = {u}, cmf = {:?}", d.cmf);
-                    assert!(d.pmf[j] > 0.0 && (0.0..1.0).contains(&r));
+                    assert_eq!(j, i, "n = {n}, u = {u}, cmf = {cmf:?}");
+                    assert!(d.pmf(j) > 0.0 && (0.0..1.0).contains(&r));
                 }
             }
         }
