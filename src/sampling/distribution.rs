@@ -9,12 +9,42 @@ pub struct Distribution1D {
     entries: Vec<Entry>,
     total: f64,
     /// For more than [`GUIDE_MIN`] entries, `guide[j]` is the number of entries whose CMF is
-    /// at most `j / (guide.len() - 1)`, one bucket per [`GUIDE_STRIDE`] entries: a sample
+    /// at most `j / g` (`g + 1` of them, one bucket per [`GUIDE_STRIDE`] entries): a sample
     /// counts CMF entries only between the guide entries around `u` (a few adjacent cache
     /// lines, read at once) instead of a binary search over the whole CMF (one cache miss
-    /// per halving), and finds the same index. The guide is small enough (1 KB for a row of
-    /// a 2048-pixel map) for all rows' guides to stay in cache.
-    guide: Vec<u32>,
+    /// per halving), and finds the same index. The guide is small enough (256 bytes for a
+    /// row of a 2048-pixel map) for all rows' guides to stay in cache.
+    guide: Guide,
+}
+
+/// A guide table's entries, in 16 bits where the distribution is small enough.
+#[derive(Clone, Debug)]
+enum Guide {
+    None,
+    Short(Vec<u16>),
+    Long(Vec<u32>),
+}
+
+impl Guide {
+    /// Entries `j` and `k` (`j < k`).
+    #[inline]
+    fn pair(&self, j: usize, k: usize) -> (usize, usize) {
+        match self {
+            Guide::None => unreachable!("sample() reads the guide only where there is one"),
+            Guide::Short(g) => (g[j] as usize, g[k] as usize),
+            Guide::Long(g) => (g[j] as usize, g[k] as usize),
+        }
+    }
+
+    /// The number of buckets `g`.
+    #[inline]
+    fn buckets(&self) -> usize {
+        match self {
+            Guide::None => 0,
+            Guide::Short(g) => g.len() - 1,
+            Guide::Long(g) => g.len() - 1,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -26,19 +56,23 @@ struct Entry {
 /// Distributions with more entries than this get a guide table.
 const GUIDE_MIN: usize = 64;
 /// Entries per guide bucket.
-const GUIDE_STRIDE: usize = 8;
+const GUIDE_STRIDE: usize = 16;
 /// Up to this many CMF entries are counted one by one (branch-free, the loads independent)
 /// rather than searched by halving.
 const COUNT_MAX: usize = 64;
 
 /// The guide table of a CMF of `n` entries.
-fn guide_table(cmf: &[f32]) -> Vec<u32> {
+fn guide_table(cmf: &[f32]) -> Guide {
     let n = cmf.len();
     if n <= GUIDE_MIN {
-        return Vec::new();
+        return Guide::None;
     }
     let g = n.div_ceil(GUIDE_STRIDE);
-    (0..=g).map(|j| cmf.partition_point(|&c| c <= j as f32 / g as f32) as u32).collect()
+    let counts = (0..=g).map(|j| cmf.partition_point(|&c| c <= j as f32 / g as f32));
+    match u16::try_from(n) {
+        Ok(_) => Guide::Short(counts.map(|c| c as u16).collect()),
+        Err(_) => Guide::Long(counts.map(|c| c as u32).collect()),
+    }
 }
 
 /// The number of entries whose CMF is at most `u` (the CMF is non-decreasing).
@@ -111,14 +145,13 @@ impl Distribution1D {
         // around `u` for many entries. They reach one below and one above the bucket `u · g`
         // falls in: the rounding of `u · g` and of the buckets' bounds moves either by far
         // less than a bucket, so the index cannot lie outside them.
-        let i = if self.guide.is_empty() {
+        let i = if let Guide::None = self.guide {
             count_at_most(&self.entries[..n - 1], u)
         } else {
-            let g = self.guide.len() - 1;
+            let g = self.guide.buckets();
             let k = ((u * g as f32) as usize).min(g);
-            let lo = self.guide[k.saturating_sub(1)] as usize;
-            let hi = (self.guide[(k + 2).min(g)] as usize).min(n);
-            lo + count_at_most(&self.entries[lo..hi], u)
+            let (lo, hi) = self.guide.pair(k.saturating_sub(1), (k + 2).min(g));
+            lo + count_at_most(&self.entries[lo..hi.min(n)], u)
         }
         .min(n - 1);
         // Skip zero-probability entries that a CMF plateau could land on.
@@ -201,7 +234,7 @@ mod tests {
         // the buckets must be the full binary search's, also at `u` exactly on a CMF entry and
         // one ulp either side, and on zero-weight plateaus.
         let mut s = crate::sampling::Sampler::new(&[5]);
-        for n in (1..=12).chain([63, 64, 65, 66, 71, 72, 73, 100, 1000, 2048, 4096]) {
+        for n in (1..=12).chain([63, 64, 65, 66, 71, 72, 73, 100, 1000, 2048, 4096, 70_000]) {
             for trial in 0..20 {
                 // Every fifth trial one entry outweighs the rest by far (a sun in a sky map):
                 // many entries then share one guide bucket.
