@@ -238,4 +238,80 @@ impl Case {
         }
         v.check(&format!("{}, {what}", self.name), self.mean_tol, 1.3).unwrap();
     }
+
+    /// [`Case::check`] over the pixels `keep` marks: the others are set to the reference's
+    /// values in both renders (adding nothing to the relMSE or the noise), the reference's
+    /// own noise is scaled to the share of pixels kept, and the image mean is taken over
+    /// the kept pixels alone.
+    pub fn check_kept(&self, a: &Image, b: &Image, keep: &[bool], what: &str) -> Result<(), String> {
+        let reference = reference(self.reference);
+        let fill = |img: &Image| {
+            let pixels = img.pixels.iter().zip(&reference.pixels).zip(keep).map(|((p, r), k)| if *k { *p } else { *r });
+            Image::new(img.width, img.height, pixels.collect())
+        };
+        let kept = keep.iter().filter(|k| **k).count();
+        let share = kept as f64 / keep.len() as f64;
+        let (mut v, avg) = Verdict::averaged(&reference, &fill(a), &fill(b), self.ref_noise * share);
+        let sum = |img: &Image| {
+            img.pixels.iter().zip(keep).filter(|(_, k)| **k).map(|(p, _)| (p.x + p.y + p.z) as f64).sum::<f64>()
+        };
+        v.metrics.mean_ratio = sum(&avg) / sum(&reference);
+        v.excluded = keep.len() - kept;
+        v.check(&format!("{}, {what} ({kept} pixels kept)", self.name), self.mean_tol, 1.3)
+    }
+}
+
+/// The pixels that light tracing (`t = 1`: a light subpath connected to the camera) can
+/// render: for each pixel, camera rays on an 8 × 8 grid over the film positions whose
+/// samples reach it through the scene's filter, none of which may escape to a light at
+/// infinity or first hit a surface with a Dirac lobe (glass, a mirror, smooth plastic's
+/// coat): light subpaths never connect to the camera through those. Where `min_alpha` is
+/// above zero, first hits on microfacet surfaces smoother than it are left out too: light
+/// subpaths reach the camera through their narrow lobes only rarely, with huge weights.
+pub fn reachable_by_light_tracing(scene: &Scene, min_alpha: f32) -> Vec<bool> {
+    use pcbpt::bsdf::BsdfModel;
+    let alpha = |model: &BsdfModel, uv: glam::Vec2| {
+        let m = match model {
+            BsdfModel::RoughConductor { distribution, .. } | BsdfModel::RoughDielectric { distribution, .. } => {
+                distribution.at(uv)
+            }
+            BsdfModel::RoughPlastic { params, .. } => params.distribution,
+            _ => return f32::INFINITY,
+        };
+        m.alpha_u.min(m.alpha_v)
+    };
+    let (w, h) = (scene.film.width, scene.film.height);
+    let r = scene.film.filter.radius().max(0.5);
+    let n = 8;
+    let mut keep = vec![true; (w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let centre = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            'grid: for j in 0..n {
+                for i in 0..n {
+                    let offset = glam::Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32) * 2.0 - 1.0;
+                    let pos = (centre + offset * r).clamp(glam::Vec2::ZERO, glam::Vec2::new(w as f32, h as f32));
+                    let ray = scene.camera.generate_ray(pos);
+                    let seen = match scene.intersect(&ray) {
+                        None => false,
+                        Some(si) => {
+                            let model = &scene.bsdf(&si).model;
+                            !matches!(
+                                model,
+                                BsdfModel::Conductor { .. }
+                                    | BsdfModel::Dielectric { .. }
+                                    | BsdfModel::ThinDielectric { .. }
+                                    | BsdfModel::Plastic { .. }
+                            ) && alpha(model, si.uv) >= min_alpha
+                        }
+                    };
+                    if !seen {
+                        keep[(y * w + x) as usize] = false;
+                        break 'grid;
+                    }
+                }
+            }
+        }
+    }
+    keep
 }
