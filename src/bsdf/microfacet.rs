@@ -108,13 +108,19 @@ impl Microfacet {
     /// Beckmann, the erf form rather than the rational fit `g1` uses), so that it is the
     /// density the sampler really draws from.
     pub fn pdf(&self, wo: Vec3, m: Vec3) -> f32 {
+        self.pdf_given_d(wo, m, self.d(m))
+    }
+
+    /// [`Microfacet::pdf`] where `d` is `self.d(m)`, already computed.
+    #[inline]
+    pub fn pdf_given_d(&self, wo: Vec3, m: Vec3, d: f32) -> f32 {
         if self.sample_visible {
             if wo.z <= 0.0 || wo.dot(m) <= 0.0 {
                 return 0.0;
             }
-            self.d(m) * self.g1_exact(wo) * wo.dot(m) / wo.z
+            d * self.g1_exact(wo) * wo.dot(m) / wo.z
         } else {
-            self.d(m) * m.z
+            d * m.z
         }
     }
 

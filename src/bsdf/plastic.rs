@@ -117,7 +117,12 @@ impl RoughPlasticParams {
     }
 
     fn prob_specular(&self, wo: Vec3) -> f32 {
-        let t = self.transmittance(wo.z);
+        self.prob_specular_from(self.transmittance(wo.z))
+    }
+
+    /// The specular lobe's sampling probability given the transmittance `t` towards `wo`.
+    #[inline]
+    fn prob_specular_from(&self, t: f32) -> f32 {
         let ps = (1.0 - t) * self.specular_sampling_weight;
         let pd = t * (1.0 - self.specular_sampling_weight);
         if ps + pd > 0.0 { ps / (ps + pd) } else { 0.0 }
@@ -154,31 +159,50 @@ fn interface_energy(d: &Microfacet, mu: f32, eta: f32) -> (f32, f32) {
 }
 
 pub fn eval_rough(p: &RoughPlasticParams, diffuse: Rgb, specular: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
-    if wo.z <= 0.0 || wi.z <= 0.0 {
-        return Rgb::ZERO;
-    }
-    let d = &p.distribution;
-    let m = (wo + wi).normalize_or_zero();
-    let spec = if m == Vec3::ZERO {
-        0.0
-    } else {
-        fresnel_dielectric(wo.dot(m), p.eta) * d.d(m) * d.g(wi, wo, m) / (4.0 * wo.z * wi.z)
-    };
-    let base = if p.nonlinear {
-        diffuse / (Rgb::ONE - diffuse * p.internal_reflectance)
-    } else {
-        diffuse / (1.0 - p.internal_reflectance)
-    };
-    specular * spec + base * (FRAC_1_PI / (p.eta * p.eta) * p.transmittance(wo.z) * p.transmittance(wi.z))
+    eval_pdf_rough(p, diffuse, specular, wo, wi).0
 }
 
 pub fn pdf_rough(p: &RoughPlasticParams, wo: Vec3, wi: Vec3) -> f32 {
     if wo.z <= 0.0 || wi.z <= 0.0 {
         return 0.0;
     }
-    let ps = p.prob_specular(wo);
     let m = (wo + wi).normalize_or_zero();
-    let spec = if m == Vec3::ZERO || wo.dot(m) <= 0.0 { 0.0 } else { p.distribution.pdf(wo, m) / (4.0 * wo.dot(m)) };
+    let d = if m == Vec3::ZERO { 0.0 } else { p.distribution.d(m) };
+    pdf_rough_with(p, p.prob_specular(wo), m, d, wo, wi)
+}
+
+/// [`eval_rough`] and [`pdf_rough`] together, the half vector, its microfacet density and
+/// the coating's transmittance towards `wo` computed once (the same values as the two calls).
+pub fn eval_pdf_rough(p: &RoughPlasticParams, diffuse: Rgb, specular: Rgb, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return (Rgb::ZERO, 0.0);
+    }
+    let dist = &p.distribution;
+    let m = (wo + wi).normalize_or_zero();
+    let d = if m == Vec3::ZERO { 0.0 } else { dist.d(m) };
+    let spec = if m == Vec3::ZERO {
+        0.0
+    } else {
+        fresnel_dielectric(wo.dot(m), p.eta) * d * dist.g(wi, wo, m) / (4.0 * wo.z * wi.z)
+    };
+    let base = if p.nonlinear {
+        diffuse / (Rgb::ONE - diffuse * p.internal_reflectance)
+    } else {
+        diffuse / (1.0 - p.internal_reflectance)
+    };
+    let t_o = p.transmittance(wo.z);
+    let f = specular * spec + base * (FRAC_1_PI / (p.eta * p.eta) * t_o * p.transmittance(wi.z));
+    (f, pdf_rough_with(p, p.prob_specular_from(t_o), m, d, wo, wi))
+}
+
+/// [`pdf_rough`] given the specular lobe's probability, the half vector and its density.
+#[inline]
+fn pdf_rough_with(p: &RoughPlasticParams, ps: f32, m: Vec3, d: f32, wo: Vec3, wi: Vec3) -> f32 {
+    let spec = if m == Vec3::ZERO || wo.dot(m) <= 0.0 {
+        0.0
+    } else {
+        p.distribution.pdf_given_d(wo, m, d) / (4.0 * wo.dot(m))
+    };
     ps * spec + (1.0 - ps) * square_to_cosine_hemisphere_pdf(wi)
 }
 
@@ -205,10 +229,9 @@ pub fn sample_rough(
     if wi.z <= 0.0 {
         return None;
     }
-    let pdf = pdf_rough(p, wo, wi);
+    let (f, pdf) = eval_pdf_rough(p, diffuse, specular, wo, wi);
     if pdf <= 0.0 || !pdf.is_finite() {
         return None;
     }
-    let f = eval_rough(p, diffuse, specular, wo, wi);
     Some(BsdfSample { wi, f, pdf, weight: f * (wi.z / pdf), delta: false })
 }
