@@ -159,45 +159,65 @@ fn interface_energy(d: &Microfacet, mu: f32, eta: f32) -> (f32, f32) {
 }
 
 pub fn eval_rough(p: &RoughPlasticParams, diffuse: Rgb, specular: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
-    eval_pdf_rough(p, diffuse, specular, wo, wi).0
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return Rgb::ZERO;
+    }
+    value_rough(p, diffuse, specular, half_vector(p, wo, wi), p.transmittance(wo.z), wo, wi)
 }
 
 pub fn pdf_rough(p: &RoughPlasticParams, wo: Vec3, wi: Vec3) -> f32 {
     if wo.z <= 0.0 || wi.z <= 0.0 {
         return 0.0;
     }
-    let m = (wo + wi).normalize_or_zero();
-    let d = if m == Vec3::ZERO { 0.0 } else { p.distribution.d(m) };
-    pdf_rough_with(p, p.prob_specular(wo), m, d, wo, wi)
+    pdf_rough_with(p, p.prob_specular(wo), half_vector(p, wo, wi), wo, wi)
 }
 
 /// [`eval_rough`] and [`pdf_rough`] together, the half vector, its microfacet density and
 /// the coating's transmittance towards `wo` computed once (the same values as the two calls).
-pub fn eval_pdf_rough(p: &RoughPlasticParams, diffuse: Rgb, specular: Rgb, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+fn eval_pdf_rough(p: &RoughPlasticParams, diffuse: Rgb, specular: Rgb, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
     if wo.z <= 0.0 || wi.z <= 0.0 {
         return (Rgb::ZERO, 0.0);
     }
-    let dist = &p.distribution;
+    let half = half_vector(p, wo, wi);
+    let t_o = p.transmittance(wo.z);
+    (value_rough(p, diffuse, specular, half, t_o, wo, wi), pdf_rough_with(p, p.prob_specular_from(t_o), half, wo, wi))
+}
+
+/// The half vector of `wo` and `wi` and its microfacet density (zero where it is undefined).
+#[inline]
+fn half_vector(p: &RoughPlasticParams, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
     let m = (wo + wi).normalize_or_zero();
-    let d = if m == Vec3::ZERO { 0.0 } else { dist.d(m) };
+    (m, if m == Vec3::ZERO { 0.0 } else { p.distribution.d(m) })
+}
+
+/// [`eval_rough`] of two directions on the front side, given their half vector and its
+/// density (`half_vector`) and the coating's transmittance `t_o` towards `wo`.
+#[inline]
+fn value_rough(
+    p: &RoughPlasticParams,
+    diffuse: Rgb,
+    specular: Rgb,
+    (m, d): (Vec3, f32),
+    t_o: f32,
+    wo: Vec3,
+    wi: Vec3,
+) -> Rgb {
     let spec = if m == Vec3::ZERO {
         0.0
     } else {
-        fresnel_dielectric(wo.dot(m), p.eta) * d * dist.g(wi, wo, m) / (4.0 * wo.z * wi.z)
+        fresnel_dielectric(wo.dot(m), p.eta) * d * p.distribution.g(wi, wo, m) / (4.0 * wo.z * wi.z)
     };
     let base = if p.nonlinear {
         diffuse / (Rgb::ONE - diffuse * p.internal_reflectance)
     } else {
         diffuse / (1.0 - p.internal_reflectance)
     };
-    let t_o = p.transmittance(wo.z);
-    let f = specular * spec + base * (FRAC_1_PI / (p.eta * p.eta) * t_o * p.transmittance(wi.z));
-    (f, pdf_rough_with(p, p.prob_specular_from(t_o), m, d, wo, wi))
+    specular * spec + base * (FRAC_1_PI / (p.eta * p.eta) * t_o * p.transmittance(wi.z))
 }
 
 /// [`pdf_rough`] given the specular lobe's probability, the half vector and its density.
 #[inline]
-fn pdf_rough_with(p: &RoughPlasticParams, ps: f32, m: Vec3, d: f32, wo: Vec3, wi: Vec3) -> f32 {
+fn pdf_rough_with(p: &RoughPlasticParams, ps: f32, (m, d): (Vec3, f32), wo: Vec3, wi: Vec3) -> f32 {
     let spec = if m == Vec3::ZERO || wo.dot(m) <= 0.0 {
         0.0
     } else {
