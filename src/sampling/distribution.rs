@@ -26,23 +26,20 @@ enum Guide {
 }
 
 impl Guide {
-    /// Entries `j` and `k` (`j < k`).
+    /// The entries whose CMF may be the first above `u`, as a range `lo..hi`: those between
+    /// the guide entries one bucket below and one above the bucket `u · g` falls in (the
+    /// rounding of `u · g` and of the buckets' bounds moves either by far less than a
+    /// bucket, so the index cannot lie outside them); `None` without a guide.
     #[inline]
-    fn pair(&self, j: usize, k: usize) -> (usize, usize) {
-        match self {
-            Guide::None => unreachable!("sample() reads the guide only where there is one"),
-            Guide::Short(g) => (g[j] as usize, g[k] as usize),
-            Guide::Long(g) => (g[j] as usize, g[k] as usize),
+    fn around(&self, u: f32) -> Option<(usize, usize)> {
+        fn bracket(g: usize, at: impl Fn(usize) -> usize, u: f32) -> (usize, usize) {
+            let k = ((u * g as f32) as usize).min(g);
+            (at(k.saturating_sub(1)), at((k + 2).min(g)))
         }
-    }
-
-    /// The number of buckets `g`.
-    #[inline]
-    fn buckets(&self) -> usize {
         match self {
-            Guide::None => 0,
-            Guide::Short(g) => g.len() - 1,
-            Guide::Long(g) => g.len() - 1,
+            Guide::None => None,
+            Guide::Short(g) => Some(bracket(g.len() - 1, |j| g[j] as usize, u)),
+            Guide::Long(g) => Some(bracket(g.len() - 1, |j| g[j] as usize, u)),
         }
     }
 }
@@ -142,16 +139,10 @@ impl Distribution1D {
             return (0, u.clamp(0.0, 1.0 - f32::EPSILON));
         }
         // The number of CMF entries at or below `u`, counted within the guide's buckets
-        // around `u` for many entries. They reach one below and one above the bucket `u · g`
-        // falls in: the rounding of `u · g` and of the buckets' bounds moves either by far
-        // less than a bucket, so the index cannot lie outside them.
-        let i = if let Guide::None = self.guide {
-            count_at_most(&self.entries[..n - 1], u)
-        } else {
-            let g = self.guide.buckets();
-            let k = ((u * g as f32) as usize).min(g);
-            let (lo, hi) = self.guide.pair(k.saturating_sub(1), (k + 2).min(g));
-            lo + count_at_most(&self.entries[lo..hi.min(n)], u)
+        // around `u` for many entries.
+        let i = match self.guide.around(u) {
+            None => count_at_most(&self.entries[..n - 1], u),
+            Some((lo, hi)) => lo + count_at_most(&self.entries[lo..hi.min(n)], u),
         }
         .min(n - 1);
         // Skip zero-probability entries that a CMF plateau could land on.
