@@ -28,10 +28,13 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
         IntegratorKind::Lvc,
         IntegratorKind::Pcbpt,
     ] {
-        // Several passes, so EORR's thresholds and LVC's pools come from earlier passes.
+        // Several passes where an integrator keeps state between them, so EORR's
+        // thresholds and LVC's and PCBPT's pools come from earlier passes (light tracing
+        // and BDPT keep none and render all 4 spp in one pass).
         let one = render(&scene, kind, 4, 42, 1);
         let two = render(&scene, kind, 4, 42, 2);
-        assert_eq!(one.stats.passes, 4, "{kind:?}");
+        let stateless = matches!(kind, IntegratorKind::Lighttrace | IntegratorKind::Bdpt);
+        assert_eq!(one.stats.passes > 1, !stateless, "{kind:?}: {} passes", one.stats.passes);
         assert!(
             one.image
                 .iter()
