@@ -13,14 +13,18 @@ pub struct Distribution1D {
     /// counts CMF entries only between the guide entries around `u` (a few adjacent cache
     /// lines, read at once) instead of a binary search over the whole CMF (one cache miss
     /// per halving), and finds the same index. The guide is small enough (256 bytes for a
-    /// row of a 2048-pixel map) for all rows' guides to stay in cache.
+    /// row of a 2048-pixel map) for all rows' guides to stay in cache. A near-uniform
+    /// distribution needs none: its index is found by stepping from `⌊u · n⌋`.
     guide: Guide,
 }
 
-/// A guide table's entries, in 16 bits where the distribution is small enough.
-#[derive(Clone, Debug)]
+/// A guide table's entries, in 16 bits where the distribution is small enough; or none for a
+/// near-uniform distribution (a tessellated disk's triangles, a constant row of a map), whose
+/// index lies within an entry of `u · n`.
+#[derive(Clone, Debug, PartialEq)]
 enum Guide {
     None,
+    Uniform,
     Short(Vec<u16>),
     Long(Vec<u32>),
 }
@@ -37,7 +41,7 @@ impl Guide {
             (at(k.saturating_sub(1)), at((k + 2).min(g)))
         }
         match self {
-            Guide::None => None,
+            Guide::None | Guide::Uniform => None,
             Guide::Short(g) => Some(bracket(g.len() - 1, |j| g[j] as usize, u)),
             Guide::Long(g) => Some(bracket(g.len() - 1, |j| g[j] as usize, u)),
         }
@@ -64,6 +68,10 @@ fn guide_table(cmf: &[f32]) -> Guide {
     if n <= GUIDE_MIN {
         return Guide::None;
     }
+    // Every CMF entry within one entry's width of the uniform distribution's.
+    if cmf.iter().enumerate().all(|(i, &c)| (c as f64 * n as f64 - (i + 1) as f64).abs() <= 1.0) {
+        return Guide::Uniform;
+    }
     let g = n.div_ceil(GUIDE_STRIDE);
     let counts = (0..=g).map(|j| cmf.partition_point(|&c| c <= j as f32 / g as f32));
     match u16::try_from(n) {
@@ -80,6 +88,21 @@ fn count_at_most(entries: &[Entry], u: f32) -> usize {
     } else {
         entries.partition_point(|e| e.cmf <= u)
     }
+}
+
+/// The number of entries whose CMF is at most `u`, walking from entry `⌊u · n⌋` (where a
+/// near-uniform CMF puts it, give or take one entry) to the first CMF above `u`.
+#[inline]
+fn count_from_uniform(entries: &[Entry], u: f32) -> usize {
+    let n = entries.len();
+    let mut i = ((u * n as f32) as usize).min(n);
+    while i < n && entries[i].cmf <= u {
+        i += 1;
+    }
+    while i > 0 && entries[i - 1].cmf > u {
+        i -= 1;
+    }
+    i
 }
 
 impl Distribution1D {
@@ -140,9 +163,10 @@ impl Distribution1D {
         }
         // The number of CMF entries at or below `u`, counted within the guide's buckets
         // around `u` for many entries.
-        let i = match self.guide.around(u) {
-            None => count_at_most(&self.entries[..n - 1], u),
-            Some((lo, hi)) => lo + count_at_most(&self.entries[lo..hi.min(n)], u),
+        let i = match (&self.guide, self.guide.around(u)) {
+            (Guide::Uniform, _) => count_from_uniform(&self.entries, u),
+            (_, None) => count_at_most(&self.entries[..n - 1], u),
+            (_, Some((lo, hi))) => lo + count_at_most(&self.entries[lo..hi.min(n)], u),
         }
         .min(n - 1);
         // Skip zero-probability entries that a CMF plateau could land on.
@@ -228,15 +252,20 @@ mod tests {
         for n in (1..=12).chain([63, 64, 65, 66, 71, 72, 73, 100, 1000, 2048, 4096, 70_000]) {
             for trial in 0..20 {
                 // Every fifth trial one entry outweighs the rest by far (a sun in a sky map):
-                // many entries then share one guide bucket.
+                // many entries then share one guide bucket. Two in five are uniform or
+                // nearly so (a tessellated disk's triangles), with no guide table.
                 let w: Vec<f32> = (0..n)
                     .map(|i| match () {
+                        _ if trial % 5 == 2 => 1.0,
+                        _ if trial % 5 == 3 => 1.0 + s.next_1d() * 1e-3,
                         _ if (i + trial) % 4 == 1 => 0.0,
                         _ if trial % 5 == 0 && i == n / 2 => 1e6,
                         _ => 0.1 + s.next_1d() * 3.0,
                     })
                     .collect();
                 let d = Distribution1D::new(&w);
+                let near_uniform = matches!(trial % 5, 2 | 3);
+                assert_eq!(d.guide == Guide::Uniform, near_uniform && n > GUIDE_MIN, "n = {n}, trial {trial}");
                 let mut us: Vec<f32> = (0..50).map(|_| s.next_1d()).collect();
                 let cmf: Vec<f32> = (0..n).map(|i| d.cmf(i)).collect();
                 for &c in &cmf {
