@@ -260,7 +260,11 @@ pub(crate) fn run<M: Iterative>(
             let mut scratch = Work::default();
             let prepared = method.prepare(&ctx, i, false, &mut scratch);
             let results: Vec<TileResult> = if warm.tiles {
-                tile_list.par_iter().with_max_len(1).map(|&t| method.render_tile(&ctx, &prepared.pass, t, i, end - i)).collect()
+                tile_list
+                    .par_iter()
+                    .with_max_len(1)
+                    .map(|&t| method.render_tile(&ctx, &prepared.pass, t, i, end - i))
+                    .collect()
             } else {
                 Vec::new()
             };
