@@ -87,6 +87,27 @@ pub struct Bsdf {
     pub opacity: Option<std::sync::Arc<Opacity>>,
 }
 
+/// One lobe of a BSDF as Manifold Exploration sees it (contract `memlt.md`, "What the rest
+/// of a renderer must supply"): whether it reflects or transmits, and how rough it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lobe {
+    pub transmission: bool,
+    /// 0 for a Dirac lobe, the microfacet α for a glossy one (the mean of `α_u` and `α_v`
+    /// where they differ, as Mitsuba 0.6's `getRoughness`), [`DIFFUSE_ROUGHNESS`] for a
+    /// diffuse one.
+    pub roughness: f32,
+}
+
+/// The roughness of a diffuse lobe.
+pub const DIFFUSE_ROUGHNESS: f32 = f32::INFINITY;
+
+impl Lobe {
+    /// `true` for a Dirac lobe (a mirror or a smooth interface).
+    pub fn is_delta(&self) -> bool {
+        self.roughness == 0.0
+    }
+}
+
 /// Local-frame helpers.
 #[inline]
 pub fn cos_theta(w: Vec3) -> f32 {
@@ -108,6 +129,35 @@ impl Bsdf {
             self.model,
             BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. }
         )
+    }
+
+    /// The lobes of the model at texture coordinates `uv` (where a textured roughness is
+    /// looked up): a smooth coating's Dirac reflection over a diffuse base counts as two.
+    pub fn lobes(&self, uv: Vec2) -> impl Iterator<Item = Lobe> {
+        let reflection = |roughness| Some(Lobe { transmission: false, roughness });
+        let both = |roughness| [reflection(roughness), Some(Lobe { transmission: true, roughness })];
+        let alpha = |m: microfacet::Microfacet| 0.5 * (m.alpha_u + m.alpha_v);
+        let lobes = match &self.model {
+            BsdfModel::Diffuse { .. } => [reflection(DIFFUSE_ROUGHNESS), None],
+            BsdfModel::Conductor { .. } => [reflection(0.0), None],
+            BsdfModel::RoughConductor { distribution, .. } => [reflection(alpha(distribution.at(uv))), None],
+            BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => both(0.0),
+            BsdfModel::RoughDielectric { distribution, .. } => both(alpha(distribution.at(uv))),
+            BsdfModel::Plastic { .. } => [reflection(0.0), reflection(DIFFUSE_ROUGHNESS)],
+            BsdfModel::RoughPlastic { params, .. } => {
+                [reflection(alpha(params.distribution)), reflection(DIFFUSE_ROUGHNESS)]
+            }
+        };
+        lobes.into_iter().flatten()
+    }
+
+    /// The relative index of refraction (interior over exterior) of light crossing the
+    /// surface: 1 where none crosses, and for a thin pane, which lets light through unbent.
+    pub fn eta(&self) -> f32 {
+        match &self.model {
+            BsdfModel::Dielectric { eta, .. } | BsdfModel::RoughDielectric { eta, .. } => *eta,
+            _ => 1.0,
+        }
     }
 
     /// `true` when the BSDF can transmit light to the other side.
@@ -451,6 +501,72 @@ mod tests {
                         assert_eq!(b.pdf_pair(wo, wi, Vec2::ZERO, mode), (expected.1, expected.2), "{name}");
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn lobes_are_what_sampling_produces() {
+        // Which kinds of direction each model's sampling produces (Dirac or not, reflected
+        // or transmitted) are exactly the kinds its lobes name.
+        let mut rng = Sampler::new(&[8]);
+        let (eta, k) = fresnel::lookup_conductor("Au").unwrap();
+        let smooth = [
+            ("conductor", BsdfModel::Conductor { eta, k, specular_reflectance: c(1.0) }),
+            (
+                "dielectric",
+                BsdfModel::Dielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
+            ),
+            (
+                "thindielectric",
+                BsdfModel::ThinDielectric { eta: 1.5, specular_reflectance: c(1.0), specular_transmittance: c(1.0) },
+            ),
+        ]
+        .map(|(name, model)| (name.to_string(), Bsdf::new(model)));
+        for (name, b) in models().into_iter().chain(smooth) {
+            let lobes: Vec<Lobe> = b.lobes(Vec2::ZERO).collect();
+            let mut named: Vec<(bool, bool)> = lobes.iter().map(|l| (l.is_delta(), l.transmission)).collect();
+            let mut seen = Vec::new();
+            let wo = Vec3::new(0.3, -0.2, 0.9).normalize();
+            for _ in 0..4000 {
+                if let Some(s) = b.sample(wo, Vec2::ZERO, rng.next_1d(), rng.next_2d(), TransportMode::Radiance) {
+                    // A thin pane's transmission keeps `wi = -wo`: below the surface too.
+                    seen.push((s.delta, s.wi.z < 0.0));
+                }
+            }
+            for v in [&mut named, &mut seen] {
+                v.sort();
+                v.dedup();
+            }
+            assert_eq!(named, seen, "{name}: lobes {lobes:?}");
+            assert_eq!(lobes.iter().all(Lobe::is_delta), b.is_delta(), "{name}");
+            assert_eq!(lobes.iter().any(|l| l.transmission), b.transmits(), "{name}");
+            for l in &lobes {
+                let expected = match &b.model {
+                    BsdfModel::RoughConductor { distribution, .. }
+                    | BsdfModel::RoughDielectric { distribution, .. } => {
+                        let m = distribution.at(Vec2::ZERO);
+                        0.5 * (m.alpha_u + m.alpha_v)
+                    }
+                    BsdfModel::RoughPlastic { params, .. } if l.roughness.is_finite() => params.distribution.alpha_u,
+                    _ => l.roughness,
+                };
+                assert_eq!(l.roughness, expected, "{name}");
+                assert!(l.roughness == 0.0 || l.roughness == DIFFUSE_ROUGHNESS || l.roughness > 0.0, "{name}");
+            }
+            // A Dirac transmission bends by Snell's law with `eta()` (entering from outside:
+            // sin θ_o = η sin θ_i); nothing else refracts.
+            match lobes.iter().find(|l| l.transmission) {
+                Some(l) if l.is_delta() => {
+                    let s = (0..100)
+                        .filter_map(|_| b.sample(wo, Vec2::ZERO, rng.next_1d(), rng.next_2d(), TransportMode::Radiance))
+                        .find(|s| s.wi.z < 0.0)
+                        .unwrap();
+                    let (sin_o, sin_i) = (wo.truncate().length(), s.wi.truncate().length());
+                    assert!((sin_o - b.eta() * sin_i).abs() < 1e-5, "{name}: {sin_o} against {} · {sin_i}", b.eta());
+                }
+                Some(_) => assert!(b.eta() > 1.0, "{name}"),
+                None => assert_eq!(b.eta(), 1.0, "{name}"),
             }
         }
     }

@@ -242,6 +242,57 @@ impl Shape {
         }
     }
 
+    /// The partial derivatives `(∂n/∂u, ∂n/∂v)` of the unit shading normal at an interaction,
+    /// in the parameterisation of [`Shape::tangents`] (what Manifold Exploration's
+    /// constraint Jacobians need beside `dp/du`, `dp/dv`; contract `memlt.md`, "What the rest
+    /// of a renderer must supply"). On a mesh with vertex normals the normal is the
+    /// normalised barycentric interpolation `N / |N|`, whose derivative is
+    /// `(∂N - n (n · ∂N)) / |N|`; on a mesh without them (and where the interpolation
+    /// vanishes) it is the constant face normal, zero derivatives; on a sphere `n = (p - c) / r`.
+    /// Both after `flip_normals`. A `bumpmap` or `normalmap` is not differentiated: these
+    /// are the derivatives of the unperturbed normal.
+    pub fn normal_derivatives(&self, si: &SurfaceInteraction) -> (Vec3, Vec3) {
+        let sign = if self.flip_normals { -1.0 } else { 1.0 };
+        match &self.geometry {
+            ShapeGeometry::Mesh(m) => {
+                let Some(normals) = &m.normals else { return (Vec3::ZERO, Vec3::ZERO) };
+                let tri = m.indices[si.prim as usize];
+                let [p0, p1, p2] = tri.map(|k| m.positions[k as usize]);
+                let [n0, n1, n2] = tri.map(|k| normals[k as usize]);
+                let (e1, e2) = (p1 - p0, p2 - p0);
+                // Barycentrics of the point, and their derivatives along u and v: both by
+                // the normal equations of `e1 b1 + e2 b2 = x` in the triangle's plane.
+                let (g11, g12, g22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+                let det = g11 * g22 - g12 * g12;
+                if det == 0.0 || !det.is_finite() {
+                    return (Vec3::ZERO, Vec3::ZERO);
+                }
+                let bary = |x: Vec3| {
+                    let (r1, r2) = (e1.dot(x), e2.dot(x));
+                    ((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det)
+                };
+                let (b1, b2) = bary(si.p - p0);
+                let big_n = n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2;
+                let len = big_n.length();
+                if len == 0.0 || !len.is_finite() {
+                    return (Vec3::ZERO, Vec3::ZERO);
+                }
+                let n = big_n / len;
+                let (dp_du, dp_dv) = self.tangents(si);
+                let d = |dp: Vec3| {
+                    let (d1, d2) = bary(dp);
+                    let dn = (n1 - n0) * d1 + (n2 - n0) * d2;
+                    (dn - n * n.dot(dn)) / len * sign
+                };
+                (d(dp_du), d(dp_dv))
+            }
+            ShapeGeometry::Sphere { radius, .. } => {
+                let (dp_du, dp_dv) = self.tangents(si);
+                (dp_du * (sign / radius), dp_dv * (sign / radius))
+            }
+        }
+    }
+
     /// Perturbs the shading frame of an interaction on this shape (its BSDF's `bumpmap` or
     /// `normalmap`), around Mitsuba 3's frame of the unperturbed normal and `dp/du`.
     pub fn perturb(&self, si: &mut SurfaceInteraction, p: &Perturbation) {
@@ -366,4 +417,105 @@ fn sphere_uv(local: Vec3) -> Vec2 {
         phi += 2.0 * PI;
     }
     Vec2::new(phi / (2.0 * PI), local.z.clamp(-1.0, 1.0).acos() / PI)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hit at barycentrics `(b1, b2)` of triangle 0.
+    fn mesh_hit(shape: &Shape, b1: f32, b2: f32) -> SurfaceInteraction {
+        let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z);
+        shape.interaction(&ray, &Hit { t: 1.0, geom: 0, prim: 0, u: b1, v: b2 })
+    }
+
+    /// The barycentrics of a point of triangle 0's plane, by Cramer's rule on cross products
+    /// (not the normal equations `normal_derivatives` uses).
+    fn barycentrics(m: &TriangleMesh, p: Vec3) -> (f32, f32) {
+        let [p0, p1, p2] = m.triangle(0);
+        let (e1, e2, x) = (p1 - p0, p2 - p0, p - p0);
+        let n = e1.cross(e2);
+        (x.cross(e2).dot(n) / n.length_squared(), e1.cross(x).dot(n) / n.length_squared())
+    }
+
+    /// Central differences of the shading normal along `dp/du` and `dp/dv`, stepping `h`
+    /// in the parameters, against `normal_derivatives`; returns the largest difference
+    /// relative to the derivatives' size, and that size.
+    fn compare(shape: &Shape, si: &SurfaceInteraction, at: impl Fn(Vec3) -> SurfaceInteraction, h: f32) -> (f32, f32) {
+        let (dp_du, dp_dv) = shape.tangents(si);
+        let (dn_du, dn_dv) = shape.normal_derivatives(si);
+        let scale = dn_du.length().max(dn_dv.length());
+        let mut worst = 0.0f32;
+        for (dp, dn) in [(dp_du, dn_du), (dp_dv, dn_dv)] {
+            let fd = (at(si.p + dp * h).shading.n - at(si.p - dp * h).shading.n) / (2.0 * h);
+            worst = worst.max((fd - dn).length() / scale.max(1e-6));
+            // The derivative of a unit vector is orthogonal to it.
+            assert!(dn.dot(si.shading.n).abs() <= 1e-4 * scale.max(1.0), "{dn} not tangent to {}", si.shading.n);
+        }
+        (worst, scale)
+    }
+
+    fn curved_triangle(uvs: Option<Vec<Vec2>>) -> TriangleMesh {
+        TriangleMesh {
+            positions: vec![Vec3::new(0.0, 0.0, 0.0), Vec3::new(2.0, 0.3, 0.1), Vec3::new(0.4, 1.5, -0.2)],
+            normals: Some(vec![
+                Vec3::new(-0.3, -0.2, 1.0).normalize(),
+                Vec3::new(0.5, 0.1, 1.0).normalize(),
+                Vec3::new(0.0, 0.6, 1.0).normalize(),
+            ]),
+            uvs,
+            indices: vec![[0, 1, 2]],
+        }
+    }
+
+    #[test]
+    fn mesh_normal_derivatives_match_finite_differences() {
+        let skewed = Some(vec![Vec2::new(0.1, 0.2), Vec2::new(0.9, 0.35), Vec2::new(0.3, 1.1)]);
+        let degenerate = Some(vec![Vec2::splat(0.5); 3]);
+        for (name, uvs) in [("uvs", skewed), ("no uvs", None), ("degenerate uvs", degenerate)] {
+            for flip in [false, true] {
+                let shape = Shape::new(ShapeGeometry::Mesh(curved_triangle(uvs.clone())), 0, flip, name.into());
+                let ShapeGeometry::Mesh(m) = &shape.geometry else { unreachable!() };
+                for (b1, b2) in [(0.2, 0.3), (0.6, 0.1), (0.1, 0.7)] {
+                    let si = mesh_hit(&shape, b1, b2);
+                    let at = |p: Vec3| {
+                        let (c1, c2) = barycentrics(m, p);
+                        mesh_hit(&shape, c1, c2)
+                    };
+                    let (err, scale) = compare(&shape, &si, at, 1e-3);
+                    assert!(err < 1e-2, "{name}, flip {flip}, ({b1}, {b2}): relative error {err}");
+                    // The normals bend: a zero derivative would fail the comparison.
+                    assert!(scale > 0.05, "{name}: the test triangle's normals must vary ({scale})");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sphere_normal_derivatives_match_finite_differences() {
+        let (center, radius) = (Vec3::new(0.5, -1.0, 2.0), 1.7);
+        for flip in [false, true] {
+            let shape = Shape::new(ShapeGeometry::Sphere { center, radius }, 0, flip, "sphere".into());
+            // A ray from outside towards the surface point in direction `dir` from the centre.
+            let hit_towards = |p: Vec3| {
+                let dir = (p - center).normalize();
+                let ray = Ray::new(center + dir * (3.0 * radius), -dir);
+                shape.interaction(&ray, &Hit { t: 2.0 * radius, geom: 0, prim: 0, u: 0.0, v: 0.0 })
+            };
+            for dir in [Vec3::new(0.3, 0.4, 0.5), Vec3::new(-0.7, 0.2, -0.3), Vec3::new(0.1, -0.9, 0.2)] {
+                let si = hit_towards(center + dir.normalize() * radius);
+                let (err, scale) = compare(&shape, &si, hit_towards, 1e-3);
+                assert!(err < 1e-2, "flip {flip}, {dir}: relative error {err}");
+                assert!(scale > 0.5, "{scale}");
+            }
+        }
+    }
+
+    #[test]
+    fn flat_meshes_have_constant_normals() {
+        let mut m = curved_triangle(None);
+        m.normals = None;
+        let shape = Shape::new(ShapeGeometry::Mesh(m), 0, false, "flat".into());
+        assert_eq!(shape.normal_derivatives(&mesh_hit(&shape, 0.3, 0.3)), (Vec3::ZERO, Vec3::ZERO));
+    }
 }
