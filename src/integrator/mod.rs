@@ -3,6 +3,7 @@
 //! sample per pixel, [`mlt`]'s own for the Markov chains.
 
 pub mod bidir;
+pub mod manifold;
 pub mod mlt;
 pub mod path;
 pub(crate) mod render_loop;
