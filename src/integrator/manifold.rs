@@ -19,8 +19,17 @@
 //! `n + u dn/du + v dn/dv` normalised, and the frame's tangent `s` the reference tangent
 //! projected onto the tangent plane (so the frame turns with the normal: `ds = -n (dn · s)`).
 //! All in `f64`: the walk's Newton steps compare constraints near zero.
+//!
+//! [`walk`] moves a chain traced through a scene ([`TracedChain`]) along its manifold until
+//! its end reaches a target: Newton steps on the first specular vertex from the tangent map,
+//! the chain re-traced from its fixed start by specular scattering after each.
 
-use glam::{DMat2, DVec2, DVec3};
+use crate::accel::Ray;
+use crate::bsdf::fresnel::refract;
+use crate::math::reflect;
+use crate::scene::Scene;
+use crate::scene::shape::SurfaceInteraction;
+use glam::{DMat2, DVec2, DVec3, Vec3};
 
 /// A vertex of a chain: its position and normal with their first derivatives in the surface's
 /// parameters, the tangent of its constraint frame, and the relative index of refraction of
@@ -198,6 +207,150 @@ fn inverse(m: DMat2) -> Option<DMat2> {
     (det != 0.0 && det.is_finite()).then(|| m.inverse())
 }
 
+/// How a specular vertex scatters the chain: about its shading normal, by reflection or by
+/// refraction with its BSDF's relative index.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scatter {
+    Reflect,
+    Refract,
+}
+
+/// A chain traced through a scene: a fixed start (a point, not necessarily on a surface),
+/// the hits of its specular vertices, and last the hit of its end.
+#[derive(Clone, Debug)]
+pub struct TracedChain {
+    pub start: Vec3,
+    pub hits: Vec<SurfaceInteraction>,
+}
+
+impl TracedChain {
+    /// The end's hit.
+    pub fn end(&self) -> &SurfaceInteraction {
+        self.hits.last().expect("a chain has an end")
+    }
+
+    /// How each specular vertex scatters: a reflection where its neighbours lie on one side
+    /// of its shading normal.
+    pub fn scatters(&self) -> Vec<Scatter> {
+        let k = self.hits.len().saturating_sub(1);
+        (0..k)
+            .map(|i| {
+                let prev = if i == 0 { self.start } else { self.hits[i - 1].p };
+                let (x, next) = (&self.hits[i], self.hits[i + 1].p);
+                let n = x.shading.n;
+                if (prev - x.p).dot(n) * (next - x.p).dot(n) > 0.0 { Scatter::Reflect } else { Scatter::Refract }
+            })
+            .collect()
+    }
+
+    /// The chain's vertices with their surfaces' first-order geometry; `None` where a
+    /// surface has no tangent frame. The start gets a placeholder frame: it never moves.
+    pub fn vertices(&self, scene: &Scene) -> Option<Vec<ChainVertex>> {
+        let d = |v: Vec3| v.as_dvec3();
+        let start = ChainVertex::new(d(self.start), (DVec3::X, DVec3::Y), DVec3::Z, (DVec3::ZERO, DVec3::ZERO), 1.0)?;
+        let mut out = vec![start];
+        for si in &self.hits {
+            let shape = &scene.shapes[si.shape as usize];
+            let (dp_du, dp_dv) = shape.tangents(si);
+            let (dn_du, dn_dv) = shape.normal_derivatives(si);
+            let eta = scene.bsdf(si).eta() as f64;
+            let n = si.shading.n.as_dvec3().normalize();
+            out.push(ChainVertex::new(d(si.p), (d(dp_du), d(dp_dv)), n, (d(dn_du), d(dn_dv)), eta)?);
+        }
+        Some(out)
+    }
+}
+
+/// Traces a chain from `start` towards `aim`: at each hit before the last it scatters as
+/// `scatters` says, and every hit must lie on the shape `shapes` names for it (a walk that
+/// lands on another shape is rejected, contract `memlt.md`, "Pitfalls"). `None` when a ray
+/// escapes, lands elsewhere, or a refraction is total internal reflection.
+pub fn trace(scene: &Scene, start: Vec3, aim: Vec3, scatters: &[Scatter], shapes: &[u32]) -> Option<TracedChain> {
+    let mut ray = Ray::new(start, (aim - start).try_normalize()?);
+    let mut hits = Vec::with_capacity(shapes.len());
+    for (i, &shape) in shapes.iter().enumerate() {
+        let si = scene.intersect(&ray)?;
+        if si.shape != shape {
+            return None;
+        }
+        if let Some(scatter) = scatters.get(i) {
+            let n = si.shading.n;
+            let d = match scatter {
+                Scatter::Reflect => reflect(si.wo, n),
+                Scatter::Refract => refract(si.wo, n, scene.bsdf(&si).eta())?.0,
+            };
+            ray = si.spawn_ray(d.try_normalize()?);
+        }
+        hits.push(si);
+    }
+    Some(TracedChain { start, hits })
+}
+
+/// The parameter offset `(du, dv)` that moves a vertex by `delta` as nearly as its tangent
+/// plane allows (least squares on `dp/du`, `dp/dv`).
+fn parameter_offset(v: &ChainVertex, delta: DVec3) -> Option<DVec2> {
+    let g = DMat2::from_cols(
+        DVec2::new(v.dp_du.dot(v.dp_du), v.dp_du.dot(v.dp_dv)),
+        DVec2::new(v.dp_du.dot(v.dp_dv), v.dp_dv.dot(v.dp_dv)),
+    );
+    Some(inverse(g)? * DVec2::new(v.dp_du.dot(delta), v.dp_dv.dot(delta)))
+}
+
+/// The result of a manifold walk.
+#[derive(Clone, Debug)]
+pub struct Walk {
+    /// The chain whose end reached the target (`None` when the walk did not converge).
+    pub chain: Option<TracedChain>,
+    /// Newton iterations taken.
+    pub iterations: u32,
+}
+
+/// Newton iterations a walk may take (Mitsuba 0.6's limit).
+pub const MAX_ITERATIONS: u32 = 20;
+
+/// Walks `chain` on its specular manifold until its end reaches `target` (a point on the
+/// end's surface), keeping the start fixed (contract `memlt.md`, "Manifold perturbation",
+/// step 6): each Newton step moves the end towards the target in its tangent plane, takes
+/// the first specular vertex's step from the tangent map ([`Jacobian::follow_end`]),
+/// re-traces the chain from the start through it, scattering specularly at every specular
+/// vertex (so the constraints hold by construction and only the end can miss), and keeps the
+/// new chain only if its end came closer; the step doubles (up to the full one) after a
+/// success and halves after a failure. Converged when the end lies within `tolerance` times
+/// the chain's length of the target.
+pub fn walk(scene: &Scene, chain: &TracedChain, target: Vec3, tolerance: f64) -> Walk {
+    let scatters = chain.scatters();
+    let shapes: Vec<u32> = chain.hits.iter().map(|h| h.shape).collect();
+    let target = target.as_dvec3();
+    let mut length = 0.0;
+    let mut prev = chain.start;
+    for h in &chain.hits {
+        length += (h.p - prev).length() as f64;
+        prev = h.p;
+    }
+    let mut current = chain.clone();
+    let mut dist = (current.end().p.as_dvec3() - target).length();
+    let mut step = 1.0;
+    let mut iterations = 0;
+    while dist > tolerance * length && iterations < MAX_ITERATIONS && !scatters.is_empty() {
+        iterations += 1;
+        let Some(vertices) = current.vertices(scene) else { break };
+        let end = vertices.last().expect("a chain has an end");
+        let Some(offset) = parameter_offset(end, target - end.p) else { break };
+        let Some(steps) = jacobian(&vertices).follow_end(offset * step) else { break };
+        let first = &vertices[1];
+        let aim = first.p + first.dp_du * steps[0].x + first.dp_dv * steps[0].y;
+        match trace(scene, chain.start, aim.as_vec3(), &scatters, &shapes) {
+            Some(next) if (next.end().p.as_dvec3() - target).length() < dist => {
+                dist = (next.end().p.as_dvec3() - target).length();
+                current = next;
+                step = (step * 2.0).min(1.0);
+            }
+            _ => step *= 0.5,
+        }
+    }
+    Walk { chain: (dist <= tolerance * length).then_some(current), iterations }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -357,6 +510,88 @@ mod tests {
         // Bent by the wrong index, or not bent, the constraint is not met.
         assert!(c(1.5, refracted(1.0 / 1.5)) > 1e-2 && c(1.5, refracted(1.0)) > 1e-2);
         assert!(c(1.0, mirrored + DVec3::new(0.05, 0.0, 0.0)) > 1e-2);
+    }
+
+    fn scene(shapes: &str) -> Scene {
+        let text = format!(
+            r#"<scene version="3.0.0">
+<sensor type="perspective"><float name="fov" value="40"/><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>
+<emitter type="point"><point name="position" x="0" y="0" z="50"/></emitter>
+{shapes}
+</scene>"#
+        );
+        Scene::load_str(&text, std::path::Path::new("manifold.xml"), &crate::scene::LoadOptions::default()).unwrap()
+    }
+
+    const GLASS_BALL: &str = r#"<shape type="sphere"><point name="center" x="0" y="0" z="0"/><float name="radius" value="1"/><bsdf type="dielectric"/></shape>"#;
+    const MIRROR_FLOOR: &str = r#"<shape type="rectangle"><transform name="to_world"><scale value="10"/><translate z="-2"/></transform><bsdf type="conductor"/></shape>"#;
+    const DIFFUSE_FLOOR: &str = r#"<shape type="rectangle"><transform name="to_world"><scale value="10"/><translate z="-2"/></transform><bsdf type="diffuse"/></shape>"#;
+    const MIRROR_WALL: &str = r#"<shape type="rectangle"><transform name="to_world"><rotate y="1" angle="-90"/><scale value="3"/><translate x="3" z="1"/></transform><bsdf type="conductor"/></shape>"#;
+    const CEILING: &str = r#"<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="180"/><scale value="10"/><translate z="4"/></transform><bsdf type="diffuse"/></shape>"#;
+
+    /// Walks the chain traced from `start` towards `aim` to its end moved by `offset`, and
+    /// checks the result: the end at the target, the shapes kept, the constraints met.
+    fn check_walk(scene: &Scene, start: Vec3, aim: Vec3, scatters: &[Scatter], shapes: &[u32], offset: Vec3) {
+        let chain = trace(scene, start, aim, scatters, shapes).expect("the test chain traces");
+        assert_eq!(chain.scatters(), scatters);
+        let target = chain.end().p + offset;
+        let walk = walk(scene, &chain, target, 1e-5);
+        let walked = walk.chain.unwrap_or_else(|| panic!("{scatters:?}: no convergence in {} steps", walk.iterations));
+        assert!((walked.end().p - target).length() < 1e-4, "{scatters:?}: {} against {target}", walked.end().p);
+        assert_eq!(walked.hits.iter().map(|h| h.shape).collect::<Vec<_>>(), shapes);
+        assert!((walked.hits[0].p - chain.hits[0].p).length() > 1e-3, "the first vertex moves");
+        // The re-traced chain scatters exactly at its hits, but each ray leaves its surface
+        // from a point moved off it by the ray epsilon: the constraints from the hits hold to
+        // a few times that.
+        let epsilon = crate::math::RAY_EPSILON as f64;
+        for c in constraints(&walked.vertices(scene).unwrap()) {
+            assert!(c.length() < 10.0 * epsilon, "{scatters:?}: constraint {c}");
+        }
+    }
+
+    #[test]
+    fn walks_reach_their_targets_through_reflections_and_refractions() {
+        use Scatter::*;
+        // One mirror reflection up to a ceiling.
+        let s = scene(&format!("{MIRROR_FLOOR}{CEILING}"));
+        check_walk(
+            &s,
+            Vec3::new(-1.0, 0.3, 1.0),
+            Vec3::new(0.0, 0.0, -2.0),
+            &[Reflect],
+            &[0, 1],
+            Vec3::new(0.2, -0.1, 0.0),
+        );
+        // Two refractions through a glass ball onto a floor.
+        let s = scene(&format!("{GLASS_BALL}{DIFFUSE_FLOOR}"));
+        check_walk(
+            &s,
+            Vec3::new(0.3, 0.2, 5.0),
+            Vec3::new(0.3, 0.2, 0.0),
+            &[Refract, Refract],
+            &[0, 0, 1],
+            Vec3::new(0.05, -0.03, 0.0),
+        );
+        // A mirror on a wall, then two refractions through the ball onto the floor.
+        let s = scene(&format!("{GLASS_BALL}{DIFFUSE_FLOOR}{MIRROR_WALL}"));
+        check_walk(
+            &s,
+            Vec3::new(-2.0, 0.1, 3.0),
+            Vec3::new(3.0, 0.1, 1.3),
+            &[Reflect, Refract, Refract],
+            &[2, 0, 0, 1],
+            Vec3::new(0.1, 0.05, 0.0),
+        );
+    }
+
+    #[test]
+    fn walks_to_unreachable_targets_fail() {
+        // Light refracted twice by the ball reaches the floor only near its axis.
+        let s = scene(&format!("{GLASS_BALL}{DIFFUSE_FLOOR}"));
+        let scatters = [Scatter::Refract, Scatter::Refract];
+        let chain = trace(&s, Vec3::new(0.3, 0.2, 5.0), Vec3::new(0.3, 0.2, 0.0), &scatters, &[0, 0, 1]).unwrap();
+        let w = walk(&s, &chain, Vec3::new(8.0, 8.0, -2.0), 1e-5);
+        assert!(w.chain.is_none() && w.iterations == MAX_ITERATIONS, "{} iterations", w.iterations);
     }
 
     #[test]
