@@ -9,8 +9,9 @@
 //! and `P`; the first sample of every pixel has no roulette. Every later iteration uses the
 //! means of all `P`. A chunk of a distributed render that starts at iteration `A` re-renders
 //! the pilot's iterations before `A` (at most `P` per pixel) and gets the thresholds one
-//! process has there. With `P = 0` the thresholds are renewed after every pass from every
-//! earlier one (a running mean): no bounded pilot, so such a render is not cut into chunks.
+//! process has there. With `P = 0` the thresholds are renewed after every iteration from
+//! every earlier one (a running mean; each iteration is a pass of its own): no bounded
+//! pilot, so such a render is not cut into chunks.
 
 use super::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
 use super::mis::{Counts, Heuristic};
@@ -48,9 +49,13 @@ impl Eorr {
 impl Iterative for Eorr {
     type Pass = ();
 
-    /// Passes in the pilot end where the thresholds are renewed: at powers of two and at `P`.
+    /// Passes in the pilot end where the thresholds are renewed: at powers of two and at `P`;
+    /// with a running mean (`P = 0`) after every iteration.
     fn pass_end(&self, first: u32, end: u32) -> u32 {
-        if self.pilot_spp == 0 || first >= self.pilot_spp {
+        if self.pilot_spp == 0 {
+            return first + 1;
+        }
+        if first >= self.pilot_spp {
             return end;
         }
         end.min((first + 1).next_power_of_two()).min(self.pilot_spp)
