@@ -135,6 +135,30 @@ pub fn square_to_uniform_cone_pdf(cos_max: f32) -> f32 {
     1.0 / (2.0 * PI * (1.0 - cos_max))
 }
 
+/// A direction about `+z` from the von Mises–Fisher distribution of concentration `kappa`
+/// (density `∝ e^{κ cos θ}`; uniform for `κ = 0`): the direction perturbation of Manifold
+/// Exploration (contract `memlt.md`, "Manifold perturbation", step 4). `cos θ` is inverted
+/// from its CDF in the form `1 + ln(u + (1 - u) e^{-2κ}) / κ`, which stays finite for large `κ`.
+pub fn square_to_von_mises_fisher(u: Vec2, kappa: f32) -> Vec3 {
+    if kappa <= 0.0 {
+        return square_to_uniform_sphere(u);
+    }
+    let (k, uy) = (kappa as f64, u.y as f64);
+    let cos = (1.0 + (uy + (1.0 - uy) * (-2.0 * k).exp()).ln() / k).clamp(-1.0, 1.0) as f32;
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let (s, c) = (2.0 * PI * u.x).sin_cos();
+    Vec3::new(sin * c, sin * s, cos)
+}
+
+/// The solid-angle density of [`square_to_von_mises_fisher`]: `κ e^{κ (cos θ - 1)} / (2π (1 - e^{-2κ}))`.
+pub fn square_to_von_mises_fisher_pdf(v: Vec3, kappa: f32) -> f32 {
+    if kappa <= 0.0 {
+        return UNIFORM_SPHERE_PDF;
+    }
+    let k = kappa as f64;
+    (k * (k * (v.z as f64 - 1.0)).exp() / (2.0 * std::f64::consts::PI * -(-2.0 * k).exp_m1())) as f32
+}
+
 /// Uniform barycentric coordinates `(b1, b2)` on a triangle.
 pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
     let t = (1.0 - u.x).max(0.0).sqrt();
@@ -202,6 +226,23 @@ mod tests {
             },
         )
         .assert_pass();
+    }
+
+    #[test]
+    fn von_mises_fisher_chi2() {
+        // From nearly uniform to a lobe a few degrees wide, and the uniform limit.
+        for kappa in [0.0, 0.3, 4.0, 60.0] {
+            let t = Chi2Test::new(SphereDomain::default());
+            t.run(|u| square_to_von_mises_fisher(u, kappa), |v| square_to_von_mises_fisher_pdf(v, kappa)).assert_pass();
+        }
+        // Negative control: the density of a lobe 10% sharper than the one sampled.
+        let t = Chi2Test::new(SphereDomain::default());
+        let r = t.run(|u| square_to_von_mises_fisher(u, 4.0), |v| square_to_von_mises_fisher_pdf(v, 4.4));
+        assert!(!r.passed(), "{r}");
+        // Very sharp lobes stay finite and normalised.
+        let v = square_to_von_mises_fisher(Vec2::new(0.3, 1e-30), 1e5);
+        assert!(v.is_finite() && (v.length() - 1.0).abs() < 1e-5, "{v}");
+        assert!(square_to_von_mises_fisher_pdf(Vec3::Z, 1e5).is_finite());
     }
 
     #[test]
