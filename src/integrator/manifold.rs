@@ -323,6 +323,32 @@ pub fn solid_angle_density(vertices: &[ChainVertex]) -> Option<f64> {
     Some(dw_du.cross(dw_dv).length() / end.dp_du.cross(end.dp_dv).length())
 }
 
+/// The half-angle `θ_d` around the normal that holds 90% of a microfacet distribution of
+/// roughness `alpha` (of its normals weighted by `cos θ`): `tan² θ_d = -α² ln 0.1` for
+/// Beckmann, `9 α²` for GGX.
+pub fn lobe_half_angle(kind: crate::bsdf::microfacet::MicrofacetType, alpha: f64) -> f64 {
+    use crate::bsdf::microfacet::MicrofacetType::*;
+    let tan2 = match kind {
+        Beckmann => -alpha * alpha * 0.1f64.ln(),
+        Ggx => 9.0 * alpha * alpha,
+    };
+    tan2.sqrt().atan()
+}
+
+/// The probability that the manifold perturbation treats a vertex as non-specular (contract
+/// `memlt.md`, step 2): 1 for a diffuse lobe, 0 for a Dirac one, and for a glossy one of
+/// 90% half-angle `θ_d` (see [`lobe_half_angle`]) `(1 - cos θ_d) / (1 - cos(θ_d + θ_diff))`,
+/// where `θ_diff` is the running average of the half-vector changes the perturbation has
+/// produced: a lobe much wider than the changes is walked over as if it were diffuse, one
+/// much narrower as if it were a mirror. The probability enters both proposal densities.
+pub fn nonspecular_probability(lobe_half_angle: Option<f64>, theta_diff: f64) -> f64 {
+    match lobe_half_angle {
+        None => 1.0,
+        Some(t) if t <= 0.0 => 0.0,
+        Some(t) => ((1.0 - t.cos()) / (1.0 - (t + theta_diff).min(std::f64::consts::PI).cos())).clamp(0.0, 1.0),
+    }
+}
+
 /// The result of a manifold walk.
 #[derive(Clone, Debug)]
 pub struct Walk {
@@ -661,6 +687,51 @@ mod tests {
             let straight = 1.0 / (chain.end().p - chain.start).length_squared() as f64;
             assert!((straight / analytic - 1.0).abs() > 0.1, "{scatters:?}");
         }
+    }
+
+    #[test]
+    fn lobe_half_angles_hold_ninety_percent_of_the_lobe() {
+        use crate::bsdf::microfacet::{Microfacet, MicrofacetType};
+        for kind in [MicrofacetType::Beckmann, MicrofacetType::Ggx] {
+            for alpha in [0.05f32, 0.2, 0.6] {
+                let m = Microfacet { kind, alpha_u: alpha, alpha_v: alpha, sample_visible: false };
+                // ∫ D(m) cos θ dω over the cap θ < θ_d, by the midpoint rule in θ (the
+                // distribution is isotropic: 2π sin θ dθ).
+                let theta_d = lobe_half_angle(kind, alpha as f64);
+                let cap = |limit: f64| {
+                    let n = 20_000;
+                    (0..n)
+                        .map(|i| {
+                            let t = (i as f64 + 0.5) / n as f64 * limit;
+                            let h = Vec3::new(t.sin() as f32, 0.0, t.cos() as f32);
+                            m.d(h) as f64 * t.cos() * 2.0 * std::f64::consts::PI * t.sin() * limit / n as f64
+                        })
+                        .sum::<f64>()
+                };
+                let (inside, all) = (cap(theta_d), cap(std::f64::consts::FRAC_PI_2));
+                assert!((all - 1.0).abs() < 2e-3, "{kind:?} α {alpha}: D cos integrates to {all}");
+                assert!((inside / all - 0.9).abs() < 2e-3, "{kind:?} α {alpha}: {inside} of {all}");
+            }
+        }
+    }
+
+    #[test]
+    fn nonspecular_probability_goes_from_mirror_to_diffuse() {
+        let diff = 1f64.to_radians();
+        assert_eq!(nonspecular_probability(None, diff), 1.0);
+        assert_eq!(nonspecular_probability(Some(0.0), diff), 0.0);
+        let p = |alpha: f64| {
+            nonspecular_probability(
+                Some(lobe_half_angle(crate::bsdf::microfacet::MicrofacetType::Beckmann, alpha)),
+                diff,
+            )
+        };
+        let ps: Vec<f64> = [1e-4, 1e-3, 0.01, 0.1, 0.5, 2.0].iter().map(|&a| p(a)).collect();
+        assert!(ps.windows(2).all(|w| w[0] < w[1]), "rougher lobes are walked over less often: {ps:?}");
+        assert!(ps[0] < 1e-3 && ps[5] > 0.9, "{ps:?}");
+        // (1 - cos θ_d) / (1 - cos 2θ_d) when the lobe is as wide as the changes: about ¼.
+        let q = nonspecular_probability(Some(diff), diff);
+        assert!((q - (1.0 - diff.cos()) / (1.0 - (2.0 * diff).cos())).abs() < 1e-12 && (q - 0.25).abs() < 1e-3);
     }
 
     #[test]
