@@ -323,6 +323,28 @@ pub fn solid_angle_density(vertices: &[ChainVertex]) -> Option<f64> {
     Some(dw_du.cross(dw_dv).length() / end.dp_du.cross(end.dp_dv).length())
 }
 
+/// Whether the walk back from `proposal` to `current`'s end returns to `current` (contract
+/// `memlt.md`, step 7): the walk back converges (its end within `tolerance` times the
+/// chain's length of `current`'s end) and every vertex lands on `current`'s shape within ten
+/// times that (the vertices before the end follow it to within the ray epsilons). A proposal whose walk back ends elsewhere (another branch of the manifold,
+/// another shape) has no reverse move, and the perturbation must reject it.
+pub fn returns_to(scene: &Scene, proposal: &TracedChain, current: &TracedChain, tolerance: f64) -> bool {
+    if proposal.hits.len() != current.hits.len() || proposal.start != current.start {
+        return false;
+    }
+    let Some(back) = walk(scene, proposal, current.end().p, tolerance).chain else { return false };
+    let mut length = 0.0;
+    let mut prev = current.start;
+    for h in &current.hits {
+        length += (h.p - prev).length() as f64;
+        prev = h.p;
+    }
+    back.hits
+        .iter()
+        .zip(&current.hits)
+        .all(|(a, b)| a.shape == b.shape && ((a.p - b.p).length() as f64) <= tolerance * length * 10.0)
+}
+
 /// The half-angle `θ_d` around the normal that holds 90% of a microfacet distribution of
 /// roughness `alpha` (of its normals weighted by `cos θ`): `tan² θ_d = -α² ln 0.1` for
 /// Beckmann, `9 α²` for GGX.
@@ -732,6 +754,25 @@ mod tests {
         // (1 - cos θ_d) / (1 - cos 2θ_d) when the lobe is as wide as the changes: about ¼.
         let q = nonspecular_probability(Some(diff), diff);
         assert!((q - (1.0 - diff.cos()) / (1.0 - (2.0 * diff).cos())).abs() < 1e-12 && (q - 0.25).abs() < 1e-3);
+    }
+
+    #[test]
+    fn walks_are_reversible() {
+        use Scatter::*;
+        let s = scene(&format!("{GLASS_BALL}{NEAR_FLOOR}{MIRROR_WALL}"));
+        for (start, aim, scatters, shapes) in [
+            (Vec3::new(0.3, 0.2, 5.0), Vec3::new(0.3, 0.2, 0.0), &[Refract, Refract][..], &[0, 0, 1][..]),
+            (Vec3::new(-2.0, 0.1, 3.0), Vec3::new(3.0, 0.1, 1.3), &[Reflect, Refract, Refract], &[2, 0, 0, 1]),
+        ] {
+            let current = trace(&s, start, aim, scatters, shapes).unwrap();
+            let proposal = walk(&s, &current, current.end().p + Vec3::new(0.05, -0.04, 0.0), 1e-5).chain.unwrap();
+            assert!(returns_to(&s, &proposal, &current, 1e-5), "{scatters:?}");
+            // A chain through other points is not where the walk back goes.
+            let other = trace(&s, start, aim + Vec3::new(0.0, 0.1, 0.0), scatters, shapes).unwrap();
+            let mut elsewhere = other.clone();
+            elsewhere.hits.last_mut().unwrap().p = current.end().p;
+            assert!(!returns_to(&s, &proposal, &elsewhere, 1e-5), "{scatters:?}");
+        }
     }
 
     #[test]
