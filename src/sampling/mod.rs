@@ -159,6 +159,21 @@ pub fn square_to_von_mises_fisher_pdf(v: Vec3, kappa: f32) -> f32 {
     (k * (k * (v.z as f64 - 1.0)).exp() / (2.0 * std::f64::consts::PI * -(-2.0 * k).exp_m1())) as f32
 }
 
+/// A point of the plane from an isotropic Gaussian of standard deviation `sigma` about the
+/// origin (Box–Muller): the position perturbation of a path's end in Manifold Exploration
+/// (contract `memlt.md`, "Manifold perturbation", step 4).
+pub fn square_to_gaussian_2d(u: Vec2, sigma: f32) -> Vec2 {
+    // 1 - u in (0, 1]: the radius stays finite.
+    let r = sigma * (-2.0 * (1.0 - u.y).ln()).max(0.0).sqrt();
+    let (s, c) = (2.0 * PI * u.x).sin_cos();
+    Vec2::new(r * c, r * s)
+}
+
+/// The density per unit area of [`square_to_gaussian_2d`]: `e^{-|p|² / 2σ²} / (2π σ²)`.
+pub fn square_to_gaussian_2d_pdf(p: Vec2, sigma: f32) -> f32 {
+    (-p.length_squared() / (2.0 * sigma * sigma)).exp() / (2.0 * PI * sigma * sigma)
+}
+
 /// Uniform barycentric coordinates `(b1, b2)` on a triangle.
 pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
     let t = (1.0 - u.x).max(0.0).sqrt();
@@ -243,6 +258,48 @@ mod tests {
         let v = square_to_von_mises_fisher(Vec2::new(0.3, 1e-30), 1e5);
         assert!(v.is_finite() && (v.length() - 1.0).abs() < 1e-5, "{v}");
         assert!(square_to_von_mises_fisher_pdf(Vec3::Z, 1e5).is_finite());
+    }
+
+    #[test]
+    fn gaussian_2d_chi2() {
+        // Cells of a 16 × 16 grid over ±3σ plus the outside, their expected counts from the
+        // density integrated by the midpoint rule (8 × 8 points a cell).
+        let counts_and_expected = |sigma_sampled: f32, sigma_claimed: f32| {
+            let (n, cells, half) = (200_000usize, 16usize, 3.0f32);
+            let cell = |p: Vec2| {
+                let q = (p / sigma_sampled + Vec2::splat(half)) / (2.0 * half) * cells as f32;
+                (q.cmpge(Vec2::ZERO).all() && q.cmplt(Vec2::splat(cells as f32)).all())
+                    .then(|| q.y as usize * cells + q.x as usize)
+            };
+            let mut counts = vec![0u64; cells * cells + 1];
+            let mut rng = Sampler::new(&[21]);
+            for _ in 0..n {
+                counts[cell(square_to_gaussian_2d(rng.next_2d(), sigma_sampled)).unwrap_or(cells * cells)] += 1;
+            }
+            let side = 2.0 * half * sigma_sampled / cells as f32;
+            let mut expected = vec![0.0f64; cells * cells + 1];
+            for (i, e) in expected.iter_mut().take(cells * cells).enumerate() {
+                let origin =
+                    Vec2::new((i % cells) as f32, (i / cells) as f32) * side - Vec2::splat(half * sigma_sampled);
+                let mut sum = 0.0;
+                for j in 0..64 {
+                    let p = origin + Vec2::new((j % 8) as f32 + 0.5, (j / 8) as f32 + 0.5) * (side / 8.0);
+                    sum += square_to_gaussian_2d_pdf(p, sigma_claimed) as f64;
+                }
+                *e = sum / 64.0 * (side * side) as f64 * n as f64;
+            }
+            let inside: f64 = expected.iter().sum();
+            expected[cells * cells] = n as f64 - inside;
+            (counts, expected)
+        };
+        let (counts, expected) = counts_and_expected(0.7, 0.7);
+        assert!(crate::sampling::chi2::discrete_chi2(&counts, &expected).passed());
+        // Negative control: a density 5% wider than what is sampled.
+        let (counts, expected) = counts_and_expected(0.7, 0.735);
+        assert!(!crate::sampling::chi2::discrete_chi2(&counts, &expected).passed());
+        // The radius stays finite at the edge of the unit square.
+        assert!(square_to_gaussian_2d(Vec2::new(0.2, 0.0), 1.0).is_finite());
+        assert!(square_to_gaussian_2d(Vec2::new(0.2, 1.0 - f32::EPSILON), 1.0).is_finite());
     }
 
     #[test]
