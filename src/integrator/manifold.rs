@@ -62,16 +62,16 @@ impl ChainVertex {
         Some(ChainVertex { p, dp_du, dp_dv, n, dn_du, dn_dv, s, eta })
     }
 
+    /// The position's first-order change for a step `(du, dv)` in the surface's parameters.
+    pub fn displacement(&self, d: DVec2) -> DVec3 {
+        self.dp_du * d.x + self.dp_dv * d.y
+    }
+
     /// The vertex moved by `(du, dv)` in its surface's parameters, to first order (the
     /// chain as a function of the parameters, which the Jacobian differentiates).
     pub fn moved(&self, d: DVec2) -> ChainVertex {
         let n = (self.n + self.dn_du * d.x + self.dn_dv * d.y).normalize();
-        ChainVertex {
-            p: self.p + self.dp_du * d.x + self.dp_dv * d.y,
-            n,
-            s: (self.s - n * n.dot(self.s)).normalize(),
-            ..*self
-        }
+        ChainVertex { p: self.p + self.displacement(d), n, s: (self.s - n * n.dot(self.s)).normalize(), ..*self }
     }
 
     fn t(&self) -> DVec3 {
@@ -229,6 +229,19 @@ impl TracedChain {
         self.hits.last().expect("a chain has an end")
     }
 
+    /// The chain's length, start to end (the scale of a walk's tolerance).
+    pub fn length(&self) -> f64 {
+        let mut prev = self.start;
+        self.hits
+            .iter()
+            .map(|h| {
+                let segment = (h.p - prev).length() as f64;
+                prev = h.p;
+                segment
+            })
+            .sum()
+    }
+
     /// How each specular vertex scatters: a reflection where its neighbours lie on one side
     /// of its shading normal.
     pub fn scatters(&self) -> Vec<Scatter> {
@@ -317,7 +330,7 @@ pub fn solid_angle_density(vertices: &[ChainVertex]) -> Option<f64> {
     let w = to_first / dist;
     let direction_step = |d: DVec2| -> Option<DVec3> {
         let step = jac.follow_end(d)?[0];
-        Some(unit_derivative(w, dist, first.dp_du * step.x + first.dp_dv * step.y))
+        Some(unit_derivative(w, dist, first.displacement(step)))
     };
     let (dw_du, dw_dv) = (direction_step(DVec2::X)?, direction_step(DVec2::Y)?);
     Some(dw_du.cross(dw_dv).length() / end.dp_du.cross(end.dp_dv).length())
@@ -326,19 +339,15 @@ pub fn solid_angle_density(vertices: &[ChainVertex]) -> Option<f64> {
 /// Whether the walk back from `proposal` to `current`'s end returns to `current` (contract
 /// `memlt.md`, step 7): the walk back converges (its end within `tolerance` times the
 /// chain's length of `current`'s end) and every vertex lands on `current`'s shape within ten
-/// times that (the vertices before the end follow it to within the ray epsilons). A proposal whose walk back ends elsewhere (another branch of the manifold,
-/// another shape) has no reverse move, and the perturbation must reject it.
+/// times that (the vertices before the end follow it to within the ray epsilons). A
+/// proposal whose walk back ends elsewhere (another branch of the manifold, another shape)
+/// has no reverse move, and the perturbation must reject it.
 pub fn returns_to(scene: &Scene, proposal: &TracedChain, current: &TracedChain, tolerance: f64) -> bool {
     if proposal.hits.len() != current.hits.len() || proposal.start != current.start {
         return false;
     }
     let Some(back) = walk(scene, proposal, current.end().p, tolerance).chain else { return false };
-    let mut length = 0.0;
-    let mut prev = current.start;
-    for h in &current.hits {
-        length += (h.p - prev).length() as f64;
-        prev = h.p;
-    }
+    let length = current.length();
     back.hits
         .iter()
         .zip(&current.hits)
@@ -396,12 +405,7 @@ pub fn walk(scene: &Scene, chain: &TracedChain, target: Vec3, tolerance: f64) ->
     let scatters = chain.scatters();
     let shapes: Vec<u32> = chain.hits.iter().map(|h| h.shape).collect();
     let target = target.as_dvec3();
-    let mut length = 0.0;
-    let mut prev = chain.start;
-    for h in &chain.hits {
-        length += (h.p - prev).length() as f64;
-        prev = h.p;
-    }
+    let length = chain.length();
     let mut current = chain.clone();
     let mut dist = (current.end().p.as_dvec3() - target).length();
     let mut step = 1.0;
@@ -413,10 +417,11 @@ pub fn walk(scene: &Scene, chain: &TracedChain, target: Vec3, tolerance: f64) ->
         let Some(offset) = parameter_offset(end, target - end.p) else { break };
         let Some(steps) = jacobian(&vertices).follow_end(offset * step) else { break };
         let first = &vertices[1];
-        let aim = first.p + first.dp_du * steps[0].x + first.dp_dv * steps[0].y;
-        match trace(scene, chain.start, aim.as_vec3(), &scatters, &shapes) {
-            Some(next) if (next.end().p.as_dvec3() - target).length() < dist => {
-                dist = (next.end().p.as_dvec3() - target).length();
+        let aim = first.p + first.displacement(steps[0]);
+        let next = trace(scene, chain.start, aim.as_vec3(), &scatters, &shapes);
+        match next.map(|n| ((n.end().p.as_dvec3() - target).length(), n)) {
+            Some((d, next)) if d < dist => {
+                dist = d;
                 current = next;
                 step = (step * 2.0).min(1.0);
             }
