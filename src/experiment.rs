@@ -97,6 +97,7 @@ pub struct MethodEntry {
     pub large_step_prob: Option<f32>,
     pub bootstrap: Option<usize>,
     pub mlt_path_integrator: Option<String>,
+    pub direct_samples: Option<i32>,
     pub pc_light_paths: Option<usize>,
     pub pc_pool_vertices: Option<usize>,
     pub pc_connections: Option<u32>,
@@ -229,6 +230,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.bootstrap {
         o.mlt.bootstrap = x;
+    }
+    if let Some(x) = m.direct_samples {
+        o.mlt.direct_samples = x;
     }
     if let Some(b) = &m.mlt_path_integrator {
         o.mlt.base = value_enum::<MltBase>(file, "mlt_path_integrator", b)?;

@@ -154,6 +154,10 @@ struct RenderArgs {
     /// PSSMLT: the estimator the Markov chains drive.
     #[arg(long, value_enum, default_value_t = MltBase::Bdpt)]
     mlt_path_integrator: MltBase,
+    /// MEMLT: samples per pixel of a separate direct-lighting estimate (paths of one or two
+    /// edges, by the path tracer); -1 leaves every path to the Markov chains.
+    #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
+    direct_samples: i32,
     /// Memory limit of a light pool (lvc, pcbpt), in MiB.
     #[arg(long, default_value_t = 4096)]
     max_pool_mb: usize,
@@ -400,10 +404,15 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             max_cache_mb: a.pc_max_cache_mb,
         },
     };
-    opts.mlt = MltOptions { large_step_prob: a.large_step_prob, bootstrap: a.bootstrap, base: a.mlt_path_integrator };
+    opts.mlt = MltOptions {
+        large_step_prob: a.large_step_prob,
+        bootstrap: a.bootstrap,
+        base: a.mlt_path_integrator,
+        direct_samples: a.direct_samples,
+    };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
-        if matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt) {
+        if matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt | IntegratorKind::Memlt) {
             return Err(Error::Usage("--strategy-images needs a bidirectional integrator".into()));
         }
         std::fs::create_dir_all(dir)
@@ -487,6 +496,24 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.mutations_per_second / 1e6,
             m.small_acceptance * 100.0,
             m.large_acceptance * 100.0,
+            m.bootstrap_seconds
+        );
+    } else if let (false, Some(m)) = (a.quiet, &s.memlt) {
+        let acceptance: Vec<String> = m
+            .mutators
+            .iter()
+            .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
+            .collect();
+        eprintln!(
+            "  MEMLT: b = {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}, bootstrap {:.2} s",
+            m.normalisation,
+            m.seed_normalisation,
+            m.chains,
+            m.mutations,
+            m.mutations_per_second / 1e6,
+            m.min_edges,
+            m.max_edges,
+            acceptance.join(", "),
             m.bootstrap_seconds
         );
     } else if !a.quiet && s.bidir.is_some() {

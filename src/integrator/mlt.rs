@@ -43,11 +43,15 @@ pub struct MltOptions {
     /// Independent samples that estimate the normalisation `b` and seed the chains.
     pub bootstrap: usize,
     pub base: MltBase,
+    /// MEMLT: samples per pixel of a separate direct-lighting estimate (paths of one or two
+    /// edges, by the path tracer), the chains rendering the longer paths; -1 leaves every
+    /// path to the chains.
+    pub direct_samples: i32,
 }
 
 impl Default for MltOptions {
     fn default() -> MltOptions {
-        MltOptions { large_step_prob: 0.3, bootstrap: 100_000, base: MltBase::Bdpt }
+        MltOptions { large_step_prob: 0.3, bootstrap: 100_000, base: MltBase::Bdpt, direct_samples: 16 }
     }
 }
 
@@ -203,17 +207,23 @@ struct Contributions {
     /// Camera-side contributions of the current sample, summed at its film position.
     pixel: Rgb,
     pos: Vec2,
+    /// Strategies of paths with fewer edges are left out.
+    min_edges: usize,
 }
 
 impl Sink for Contributions {
     #[inline]
-    fn add(&mut self, _s: usize, _t: usize, value: Rgb) {
-        self.pixel += value;
+    fn add(&mut self, s: usize, t: usize, value: Rgb) {
+        if s + t > self.min_edges {
+            self.pixel += value;
+        }
     }
 
     #[inline]
-    fn splat(&mut self, _s: usize, _t: usize, pos: Vec2, value: Rgb) {
-        self.splats.push(Splat { pos, value, layer: 0 });
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
+        if s + t > self.min_edges {
+            self.splats.push(Splat { pos, value, layer: 0 });
+        }
     }
 }
 
@@ -300,6 +310,79 @@ fn merge_chains(chains: &[Chain], film: &mut Film, b: f64, n_boot: usize) -> f64
     sum / count
 }
 
+/// Runs `n` independent samples of the estimator (large steps from the streams
+/// `key(BOOTSTRAP_STREAM, i)`), in parallel; their scalar contributions in order.
+fn bootstrap(
+    pool: &rayon::ThreadPool,
+    ev: &Evaluator,
+    n: usize,
+    large_step_prob: f32,
+    min_edges: usize,
+    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+) -> (Vec<f32>, Counters) {
+    let chunk = 1024usize;
+    let parts: Vec<(Vec<f32>, Counters)> = pool.install(|| {
+        (0..n.div_ceil(chunk))
+            .into_par_iter()
+            .map(|k| {
+                crate::accel::embree::set_flush_denormals();
+                let mut scratch = Scratch::default();
+                let mut out = Contributions { min_edges, ..Default::default() };
+                let mut c = Counters::default();
+                let fs = (k * chunk..((k + 1) * chunk).min(n))
+                    .map(|i| {
+                        let mut rng = PrimarySampler::new(&key(BOOTSTRAP_STREAM, i as u64), large_step_prob);
+                        rng.start_iteration(true);
+                        ev.eval(&mut rng, &mut scratch, &mut out, &mut c)
+                    })
+                    .collect();
+                (fs, c)
+            })
+            .collect()
+    });
+    let mut counters = Counters::default();
+    let mut weights = Vec::with_capacity(n);
+    for (fs, c) in parts {
+        weights.extend(fs);
+        counters += c;
+    }
+    (weights, counters)
+}
+
+/// The mean luminance of the image's paths of at least `min_edges` edges (Metropolis'
+/// normalisation `b`) estimated from `n` independent BDPT samples, each through a uniformly
+/// random film position, with the work they took.
+pub(crate) fn bdpt_normalisation(
+    scene: &Scene,
+    opts: &RenderOptions,
+    pool: &rayon::ThreadPool,
+    n: usize,
+    min_edges: usize,
+    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+) -> (f64, Counters) {
+    let ev = evaluator(scene, opts, MltBase::Bdpt);
+    let (weights, counters) = bootstrap(pool, &ev, n, 1.0, min_edges, key);
+    (weights.iter().map(|&f| f as f64).sum::<f64>() / n.max(1) as f64, counters)
+}
+
+/// The estimator the chains drive, with the scene's depth limits.
+fn evaluator<'a>(scene: &'a Scene, opts: &RenderOptions, base: MltBase) -> Evaluator<'a> {
+    let spec = &scene.integrator;
+    let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
+    Evaluator {
+        scene,
+        base,
+        bdpt: Bdpt {
+            limits: WalkLimits::new(max_depth, spec.rr_depth),
+            max_depth,
+            hide_emitters: spec.hide_emitters,
+            light_only: false,
+        },
+        path: super::path::PathTracer::new(spec),
+        heuristic: opts.bidir.heuristic,
+    }
+}
+
 const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 
@@ -326,20 +409,7 @@ pub fn render(
     }
     let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
-    let spec = &scene.integrator;
-    let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
-    let ev = Evaluator {
-        scene,
-        base: mo.base,
-        bdpt: Bdpt {
-            limits: WalkLimits::new(max_depth, spec.rr_depth),
-            max_depth,
-            hide_emitters: spec.hide_emitters,
-            light_only: false,
-        },
-        path: super::path::PathTracer::new(spec),
-        heuristic: opts.bidir.heuristic,
-    };
+    let ev = evaluator(scene, opts, mo.base);
     let (w, h) = (scene.film.width, scene.film.height);
     let pixels = w as u64 * h as u64;
     let start = Instant::now();
@@ -355,32 +425,7 @@ pub fn render(
     };
 
     // Bootstrap: independent samples estimate b and give the chains their start states.
-    let chunk = 1024usize;
-    let boot: Vec<(Vec<f32>, Counters)> = pool.install(|| {
-        (0..mo.bootstrap.div_ceil(chunk))
-            .into_par_iter()
-            .map(|k| {
-                crate::accel::embree::set_flush_denormals();
-                let mut scratch = Scratch::default();
-                let mut out = Contributions::default();
-                let mut c = Counters::default();
-                let fs = (k * chunk..((k + 1) * chunk).min(mo.bootstrap))
-                    .map(|i| {
-                        let mut rng = PrimarySampler::new(&key(BOOTSTRAP_STREAM, i as u64), mo.large_step_prob);
-                        rng.start_iteration(true);
-                        ev.eval(&mut rng, &mut scratch, &mut out, &mut c)
-                    })
-                    .collect();
-                (fs, c)
-            })
-            .collect()
-    });
-    let mut counters = Counters::default();
-    let mut weights = Vec::with_capacity(mo.bootstrap);
-    for (fs, c) in boot {
-        weights.extend(fs);
-        counters += c;
-    }
+    let (weights, mut counters) = bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, 0, &key);
     let b = weights.iter().map(|&f| f as f64).sum::<f64>() / weights.len() as f64;
     let bootstrap_seconds = start.elapsed().as_secs_f64();
     let mut film = Film::new(w, h, scene.film.filter);

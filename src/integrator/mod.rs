@@ -1,9 +1,10 @@
 //! Integrators, their options and statistics, and [`render`], which hands the chosen one to
 //! its render loop: [`render_loop`] for every integrator that renders iterations of one
-//! sample per pixel, [`mlt`]'s own for the Markov chains.
+//! sample per pixel, [`mlt`]'s and [`memlt`]'s own for the Markov chains.
 
 pub mod bidir;
 pub mod manifold;
+pub mod memlt;
 pub mod mlt;
 pub mod path;
 pub(crate) mod render_loop;
@@ -41,6 +42,8 @@ pub enum IntegratorKind {
     Pssmlt,
     /// Probabilistic connections: a shared pool, connections drawn from cached PMFs.
     Pcbpt,
+    /// Path-space Metropolis with Manifold Exploration's mutations.
+    Memlt,
 }
 
 impl IntegratorKind {
@@ -51,6 +54,7 @@ impl IntegratorKind {
             "ptracer" => Some(IntegratorKind::Lighttrace),
             "bdpt" => Some(IntegratorKind::Bdpt),
             "pssmlt" => Some(IntegratorKind::Pssmlt),
+            "mlt" => Some(IntegratorKind::Memlt),
             _ => None,
         }
     }
@@ -264,6 +268,9 @@ pub struct RenderStats {
     /// Metropolis statistics (PSSMLT).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mlt: Option<mlt::MltStats>,
+    /// Path-space Metropolis statistics (MEMLT).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memlt: Option<memlt::MemltStats>,
     /// Samples dropped because they were NaN or infinite.
     pub invalid_samples: u64,
     /// The render stopped early (interrupted).
@@ -306,6 +313,7 @@ impl RenderStats {
             bidir: None,
             pool: None,
             mlt: None,
+            memlt: None,
             invalid_samples,
             interrupted,
             iterations: None,
@@ -396,13 +404,14 @@ pub fn render_iterations(
         light_only,
     };
     let kind = opts.integrator;
-    if !matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt) {
+    if !matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt | IntegratorKind::Memlt) {
         bidir::bdpt::check_lights(scene, &format!("{kind:?}").to_lowercase()).map_err(Error::Usage)?;
     }
     let b = &opts.bidir;
     let heuristic = b.heuristic;
     match kind {
         IntegratorKind::Pssmlt => mlt::render(scene, opts, iterations),
+        IntegratorKind::Memlt => memlt::render(scene, opts, iterations),
         IntegratorKind::Path => render_loop::run(scene, opts, path::PathTracer::new(spec), false, iterations),
         IntegratorKind::Lighttrace | IntegratorKind::Bdpt => {
             let method = BdptRender { bdpt: bdpt(kind == IntegratorKind::Lighttrace), heuristic };

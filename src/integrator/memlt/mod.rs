@@ -1,0 +1,461 @@
+//! Path-space Metropolis light transport (Veach and Guibas 1997) with the mutations of
+//! Manifold Exploration Metropolis (Jakob and Marschner 2012; contract §6 and `memlt.md`).
+//!
+//! A chain's state is one full path ([`path`]). The normalisation `b`, the image's mean
+//! luminance, comes from `--bootstrap` independent BDPT samples. The start paths come from as
+//! many independent paths of the bidirectional generator (a length, then every vertex
+//! regenerated: [`bidirectional`]'s whole-path move), each chain's drawn in proportion to
+//! `f / p`; their mean is a second, independent estimate of `b` (`seed_normalisation` in the
+//! statistics). Each step proposes a mutation chosen uniformly among the mutators that suit
+//! the current path, accepts it with probability `min(1, f(y) T(y→x) / f(x) T(x→y))` on
+//! luminances, and splats both paths with their expected weights. One chain per worker
+//! thread with its own seed and film, merged in order: a fixed seed and thread count give the
+//! same image.
+
+pub mod bidirectional;
+pub mod lens;
+pub mod path;
+
+use super::{Budget, Counters, RenderOptions, RenderOutput, RenderStats, take_snapshots};
+use crate::film::{Film, Splat};
+use crate::integrator::bidir::Vertex;
+use crate::math::luminance;
+use crate::sampling::{Distribution1D, Random, Sampler};
+use crate::scene::Scene;
+use bidirectional::Lengths;
+use path::Measured;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
+
+/// Longest path (in edges) the chains visit when the scene's `max_depth` is unlimited.
+pub const MAX_EDGES: usize = 40;
+
+/// The mutators.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mutator {
+    Bidirectional,
+    Lens,
+}
+
+impl Mutator {
+    pub const ALL: [Mutator; 2] = [Mutator::Bidirectional, Mutator::Lens];
+}
+
+/// The mutators that suit a path (the bidirectional mutation suits every path), with what
+/// the lens perturbation re-traces.
+fn suitable(scene: &Scene, x: &[Vertex]) -> ([Option<Mutator>; Mutator::ALL.len()], usize, Option<usize>) {
+    let lens = lens::suits(scene, x);
+    let list = [Some(Mutator::Bidirectional), lens.map(|_| Mutator::Lens)];
+    let n = list.iter().flatten().count();
+    (list, n, lens)
+}
+
+/// Proposals and acceptances of one mutator.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct MutatorStats {
+    pub mutator: Mutator,
+    pub proposed: u64,
+    pub accepted: u64,
+    pub acceptance: f64,
+}
+
+/// Statistics of a MEMLT render.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct MemltStats {
+    /// `b` from the BDPT bootstrap.
+    pub normalisation: f64,
+    /// `b` from the start-path candidates (an independent check of the path densities).
+    pub seed_normalisation: f64,
+    pub bootstrap_samples: u64,
+    pub chains: usize,
+    pub mutations: u64,
+    pub mutators: Vec<MutatorStats>,
+    pub mutations_per_second: f64,
+    pub bootstrap_seconds: f64,
+    /// The path lengths (edges) the chains visit.
+    pub min_edges: usize,
+    pub max_edges: usize,
+}
+
+/// The path lengths a scene's integrator settings allow.
+pub fn lengths(scene: &Scene) -> Lengths {
+    let spec = &scene.integrator;
+    let max = if spec.max_depth < 0 { MAX_EDGES } else { (spec.max_depth as usize).min(MAX_EDGES) };
+    Lengths { min: if spec.hide_emitters { 2 } else { 1 }, max }
+}
+
+/// Probability of drawing a start path of `k` edges: `∝ 2^-(k - min)`.
+fn seed_length_pmf(lengths: Lengths, k: usize) -> f64 {
+    if !(lengths.min..=lengths.max).contains(&k) {
+        return 0.0;
+    }
+    let norm: f64 = (lengths.min..=lengths.max).map(|n| 0.5f64.powi((n - lengths.min) as i32)).sum();
+    0.5f64.powi((k - lengths.min) as i32) / norm
+}
+
+/// An independent path: a length, a split, every vertex regenerated from the light and the
+/// pinhole. The path, its contribution and its density.
+pub fn independent_path<R: Random>(
+    scene: &Scene,
+    lengths: Lengths,
+    rng: &mut R,
+    counters: &mut Counters,
+) -> Option<(Vec<Vertex>, Measured, f64)> {
+    let u = rng.next_1d() as f64;
+    let mut acc = 0.0;
+    let mut k = lengths.min;
+    for n in lengths.min..=lengths.max {
+        acc += seed_length_pmf(lengths, n);
+        k = n;
+        if u < acc {
+            break;
+        }
+    }
+    let s = ((rng.next_1d() * (k + 1) as f32) as usize).min(k);
+    let camera = Vertex::camera(scene.camera.position);
+    let y = path::regenerate(scene, &[], std::slice::from_ref(&camera), s, k - s, rng, counters)?;
+    let m = path::contribution(scene, &y)?;
+    let p = seed_length_pmf(lengths, k) * path::stretch_density(scene, &y, 0, k);
+    (p > 0.0).then_some((y, m, p))
+}
+
+/// Scalar contribution of a path: its luminance (zero when not positive and finite).
+#[inline]
+fn scalar(m: &Measured) -> f64 {
+    let l = luminance(m.f) as f64;
+    if l.is_finite() && l > 0.0 { l } else { 0.0 }
+}
+
+/// One Markov chain with its own film.
+struct Chain {
+    rng: Sampler,
+    path: Vec<Vertex>,
+    current: Measured,
+    f: f64,
+    film: Film,
+    counters: Counters,
+    proposed: [u64; Mutator::ALL.len()],
+    accepted: [u64; Mutator::ALL.len()],
+}
+
+impl Chain {
+    /// One step: a proposal, both paths splatted with their expected weights (each with
+    /// luminance `b`), the proposal accepted or not.
+    fn step(&mut self, scene: &Scene, lengths: Lengths, radii: lens::Radii, b: f32) {
+        self.counters.samples += 1;
+        // A mutator chosen uniformly among those that suit the current path; the proposal
+        // is accepted with the suitability of both paths in its densities.
+        let (list, n_x, lens_m) = suitable(scene, &self.path);
+        let pick = ((self.rng.next_1d() * n_x as f32) as usize).min(n_x - 1);
+        let Some(m) = list.iter().flatten().nth(pick).copied() else { return };
+        let proposal = match m {
+            Mutator::Bidirectional => {
+                bidirectional::propose(scene, &self.path, lengths, &mut self.rng, &mut self.counters)
+            }
+            Mutator::Lens => lens_m.and_then(|i| {
+                lens::propose(scene, &self.path, self.current.raster, i, radii, &mut self.rng, &mut self.counters)
+            }),
+        };
+        self.proposed[m as usize] += 1;
+        let (a, proposal) = match proposal {
+            Some(p) => {
+                let fy = scalar(&p.measured);
+                let n_y = suitable(scene, &p.path).1;
+                let num = fy * p.backward * n_x as f64;
+                let den = self.f * p.forward * n_y as f64;
+                let a = if fy > 0.0 && p.forward > 0.0 && num.is_finite() && den > 0.0 {
+                    (num / den).min(1.0)
+                } else {
+                    0.0
+                };
+                (a, Some((p, fy)))
+            }
+            None => (0.0, None),
+        };
+        let mut splats = [Splat {
+            pos: self.current.raster,
+            value: self.current.f * ((1.0 - a) * b as f64 / self.f) as f32,
+            layer: 0,
+        }; 2];
+        let mut n = usize::from(a < 1.0);
+        if let Some((p, fy)) = &proposal
+            && a > 0.0
+        {
+            splats[n] = Splat { pos: p.measured.raster, value: p.measured.f * (a * b as f64 / fy) as f32, layer: 0 };
+            n += 1;
+        }
+        self.film.add_splats(&splats[..n]);
+        if let Some((p, fy)) = proposal
+            && (self.rng.next_1d() as f64) < a
+        {
+            self.path = p.path;
+            self.current = p.measured;
+            self.f = fy;
+            self.accepted[m as usize] += 1;
+        }
+    }
+}
+
+const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
+const SEED_STREAM: u64 = 0x7365_6564;
+const CHAIN_STREAM: u64 = 0x6368_6169;
+const DIRECT_STREAM: u64 = 0x6469_7265;
+
+/// Renders with MEMLT: all of the budget, or for `iterations` `A..B` (a chunk of a
+/// distributed render) `B - A` mutations per pixel by chains of their own, with their own
+/// bootstrap (streams keyed by `A` as well).
+pub fn render(
+    scene: &Scene,
+    opts: &RenderOptions,
+    iterations: Option<std::ops::Range<u32>>,
+) -> Result<RenderOutput, crate::error::Error> {
+    use crate::error::Error;
+    let n_boot = opts.mlt.bootstrap;
+    if n_boot == 0 {
+        return Err(Error::Usage("--bootstrap must be at least 1".into()));
+    }
+    super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
+    if scene.lights.iter().any(|l| !matches!(l, crate::light::Light::Area { .. })) {
+        return Err(Error::Usage(format!(
+            "{}: the memlt integrator handles area lights only; this scene has a point, spot, directional or \
+             infinitely distant light",
+            scene.path.display()
+        )));
+    }
+    let direct = opts.mlt.direct_samples;
+    if direct == 0 || direct < -1 {
+        return Err(Error::Usage(format!(
+            "--direct-samples must be a positive sample count or -1 (direct light in the chains), got {direct}"
+        )));
+    }
+    let pool = super::thread_pool(opts.threads)?;
+    let threads = pool.current_num_threads();
+    let mut lengths = lengths(scene);
+    if direct > 0 {
+        lengths.min = 3;
+    }
+    let (w, h) = (scene.film.width, scene.film.height);
+    let pixels = w as u64 * h as u64;
+    let start = Instant::now();
+    let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+    let chunk_key = iterations.as_ref().map_or(0, |r| r.start as u64);
+    let key = |stream: u64, i: u64| {
+        let mut k = vec![opts.seed, stream, i];
+        if chunk_key > 0 {
+            k.push(chunk_key);
+        }
+        k
+    };
+    // The direct light (paths of one and two edges) by the path tracer, when asked for.
+    let mut base = Film::new(w, h, scene.film.filter);
+    let mut counters = Counters::default();
+    if direct > 0 {
+        let mut o = opts.clone();
+        o.budget = Budget::Spp(direct as u32);
+        o.seed = crate::sampling::hash_words(&key(DIRECT_STREAM, 0));
+        o.checkpoints.clear();
+        o.progress = false;
+        let spec = &scene.integrator;
+        let max_depth = if spec.max_depth < 0 { 2 } else { (spec.max_depth as u32).min(2) };
+        let pt = super::path::PathTracer { max_depth, ..super::path::PathTracer::new(spec) };
+        let out = super::render_loop::run(scene, &o, pt, false, None)?;
+        counters += out.stats.counters;
+        if let Some(f) = &out.film {
+            base.merge_film(f);
+        }
+    }
+    if lengths.min > lengths.max {
+        // No path is left to the chains.
+        return finish(
+            scene,
+            opts,
+            threads,
+            base,
+            MemltStats::default(),
+            counters,
+            start,
+            Vec::new(),
+            stopped(),
+            0,
+            iterations,
+        );
+    }
+    let (b, c) =
+        super::mlt::bdpt_normalisation(scene, opts, &pool, n_boot, lengths.min, &|s, i| key(s ^ BOOTSTRAP_STREAM, i));
+    counters += c;
+    // Start-path candidates and their weights f / p.
+    let chunk = 1024usize;
+    let parts: Vec<(Vec<f32>, Counters)> = pool.install(|| {
+        (0..n_boot.div_ceil(chunk))
+            .into_par_iter()
+            .map(|c| {
+                crate::accel::embree::set_flush_denormals();
+                let mut counters = Counters::default();
+                let ws = (c * chunk..((c + 1) * chunk).min(n_boot))
+                    .map(|i| {
+                        let mut rng = Sampler::new(&key(SEED_STREAM, i as u64));
+                        independent_path(scene, lengths, &mut rng, &mut counters)
+                            .map_or(0.0, |(_, m, p)| (scalar(&m) / p) as f32)
+                    })
+                    .collect();
+                (ws, counters)
+            })
+            .collect()
+    });
+    let mut weights = Vec::with_capacity(n_boot);
+    for (ws, c) in parts {
+        weights.extend(ws);
+        counters += c;
+    }
+    let seed_b = weights.iter().map(|&x| x as f64).sum::<f64>() / n_boot as f64;
+    let bootstrap_seconds = start.elapsed().as_secs_f64();
+    let mut stats = MemltStats {
+        normalisation: b,
+        seed_normalisation: seed_b,
+        bootstrap_samples: n_boot as u64,
+        chains: threads,
+        bootstrap_seconds,
+        min_edges: lengths.min,
+        max_edges: lengths.max,
+        ..Default::default()
+    };
+    let mut snapshots = Vec::new();
+    let mut interrupted = stopped();
+    let mut done = 0u64;
+    let mut chains: Vec<Chain> = Vec::new();
+    if b > 0.0 && seed_b > 0.0 && !interrupted {
+        let dist = Distribution1D::new(&weights);
+        for i in 0..threads as u64 {
+            let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
+            let (j, _) = dist.sample(pick.next_1d());
+            let mut rng = Sampler::new(&key(SEED_STREAM, j as u64));
+            let mut c = Counters::default();
+            let (path, current, _) = independent_path(scene, lengths, &mut rng, &mut c)
+                .ok_or_else(|| Error::Usage("a start path could not be regenerated".into()))?;
+            chains.push(Chain {
+                rng: Sampler::new(&key(CHAIN_STREAM ^ 1, i)),
+                f: scalar(&current),
+                path,
+                current,
+                film: Film::new(w, h, scene.film.filter),
+                counters: c,
+                proposed: [0; Mutator::ALL.len()],
+                accepted: [0; Mutator::ALL.len()],
+            });
+        }
+        let total = match opts.budget {
+            Budget::Spp(_) if let Some(r) = &iterations => r.len() as u64 * pixels,
+            Budget::Spp(spp) => spp as u64 * pixels,
+            Budget::Time(_) => u64::MAX,
+        };
+        let per_round = pixels.div_ceil(threads as u64);
+        let bf = b as f32;
+        let radii = lens::Radii::for_film(w, h);
+        pool.install(|| {
+            while done < total {
+                let n = per_round.min((total - done).div_ceil(threads as u64));
+                chains.par_iter_mut().for_each(|ch| {
+                    crate::accel::embree::set_flush_denormals();
+                    for _ in 0..n {
+                        ch.step(scene, lengths, radii, bf);
+                    }
+                });
+                done += n * threads as u64;
+                if !opts.checkpoints.is_empty() {
+                    let elapsed = start.elapsed().as_secs_f64();
+                    take_snapshots(&opts.checkpoints, &mut snapshots, elapsed, (done / pixels) as u32, || {
+                        let mut f = base.clone();
+                        for ch in &chains {
+                            f.add_film_splats(&ch.film);
+                        }
+                        f.light_paths = done;
+                        f.develop()
+                    });
+                }
+                if stopped() {
+                    interrupted = true;
+                    break;
+                }
+                if let Budget::Time(t) = opts.budget
+                    && start.elapsed().as_secs_f64() >= t
+                {
+                    break;
+                }
+            }
+        });
+    }
+    let mut proposed = [0u64; Mutator::ALL.len()];
+    let mut accepted = [0u64; Mutator::ALL.len()];
+    for ch in &chains {
+        base.add_film_splats(&ch.film);
+        base.invalid_samples += ch.film.invalid_samples;
+        counters += ch.counters;
+        for m in 0..Mutator::ALL.len() {
+            proposed[m] += ch.proposed[m];
+            accepted[m] += ch.accepted[m];
+        }
+    }
+    stats.mutators = Mutator::ALL
+        .iter()
+        .map(|&m| {
+            let (p, a) = (proposed[m as usize], accepted[m as usize]);
+            MutatorStats {
+                mutator: m,
+                proposed: p,
+                accepted: a,
+                acceptance: if p == 0 { 0.0 } else { a as f64 / p as f64 },
+            }
+        })
+        .collect();
+    let seconds = start.elapsed().as_secs_f64();
+    stats.mutations_per_second = done as f64 / (seconds - stats.bootstrap_seconds).max(1e-9);
+    finish(scene, opts, threads, base, stats, counters, start, snapshots, interrupted, done, iterations)
+}
+
+/// The render's output: the film (direct light and the chains' splats over `done`
+/// mutations) developed, with the statistics.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    scene: &Scene,
+    opts: &RenderOptions,
+    threads: usize,
+    mut film: Film,
+    mut stats: MemltStats,
+    counters: Counters,
+    start: Instant,
+    snapshots: Vec<super::Snapshot>,
+    interrupted: bool,
+    done: u64,
+    iterations: Option<std::ops::Range<u32>>,
+) -> Result<RenderOutput, crate::error::Error> {
+    let (w, h) = (scene.film.width, scene.film.height);
+    let pixels = w as u64 * h as u64;
+    film.light_paths = done;
+    stats.mutations = done;
+    let seconds = start.elapsed().as_secs_f64();
+    let spp = (done / pixels) as u32;
+    let render_stats = RenderStats {
+        memlt: Some(stats),
+        iterations: match opts.budget {
+            Budget::Spp(spp) => Some(iterations.clone().unwrap_or(0..spp)),
+            Budget::Time(_) => None,
+        },
+        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
+    };
+    let image = film.develop();
+    Ok(RenderOutput {
+        image,
+        strategy_images: Vec::new(),
+        snapshots,
+        width: w,
+        height: h,
+        stats: render_stats,
+        film: Some(film),
+    })
+}
+
+#[cfg(test)]
+mod tests;

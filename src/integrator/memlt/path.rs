@@ -1,0 +1,343 @@
+//! Paths of path space, as Manifold Exploration's Markov chains hold them (contract
+//! `memlt.md`, "The chain"): every vertex of one full path from a point on an area light
+//! (`x_0`) to the pinhole (`x_k`), its measurement contribution `f(x)`, the area densities
+//! with which a walk from either end generates each of its vertices, and the walks that
+//! regenerate a stretch of a path between two kept ends.
+//!
+//! A path scatters at a vertex either through a Dirac lobe (`Vertex::delta`: a mirror, glass,
+//! a smooth coating's reflection) or through the rest of its BSDF. Both `f` and the densities
+//! take a Dirac lobe by its coefficient and its discrete probability: the delta functions a
+//! path's contribution and its densities share cancel in every ratio the chains use.
+//!
+//! Contributions are in the units of a pixel's value: the pinhole's factor is
+//! `We cos θ = 1 / (A cos³θ)` (the density of its direction over the image), so the mean of
+//! `f / p` over paths sampled through uniform film positions is the image's mean.
+
+use crate::accel::Ray;
+use crate::bsdf::{At, Bsdf, TransportMode};
+use crate::integrator::Counters;
+use crate::integrator::bidir::{Vertex, VertexKind, light_origin_pdf, visible};
+use crate::math::{Rgb, offset_origin};
+use crate::sampling::{Random, square_to_cosine_hemisphere};
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+
+/// Unit direction from `a` to `b` and their squared distance.
+#[inline]
+fn towards(a: &Vertex, b: &Vertex) -> (Vec3, f32) {
+    let d = b.p - a.p;
+    let d2 = d.length_squared();
+    (d / d2.sqrt(), d2)
+}
+
+/// The Dirac lobe of `bsdf` that takes `lo` to the side of `li` (reflection or
+/// transmission): its coefficient and its discrete probability when sampled in `mode`.
+pub fn delta_lobe(bsdf: &Bsdf, lo: Vec3, li: Vec3, at: At, mode: TransportMode) -> Option<(Rgb, f32)> {
+    let reflection = lo.z * li.z > 0.0;
+    // The lobe is chosen by `u1` alone; these values reach every lobe a model has.
+    for u1 in [0.0, 0.26, 0.51, 0.76, 0.999_999] {
+        if let Some(s) = bsdf.sample(lo, at, u1, Vec2::splat(0.5), mode)
+            && s.delta
+            && (s.wi.z * lo.z > 0.0) == reflection
+        {
+            return Some((s.f, s.pdf));
+        }
+    }
+    None
+}
+
+/// The direction a Dirac lobe of `bsdf` takes `lo` to, reflecting or transmitting as asked.
+pub fn delta_direction(bsdf: &Bsdf, lo: Vec3, at: At, reflection: bool) -> Option<Vec3> {
+    for u1 in [0.0, 0.26, 0.51, 0.76, 0.999_999] {
+        if let Some(s) = bsdf.sample(lo, at, u1, Vec2::splat(0.5), TransportMode::Radiance)
+            && s.delta
+            && (s.wi.z * lo.z > 0.0) == reflection
+        {
+            return Some(s.wi);
+        }
+    }
+    None
+}
+
+/// Whether a deterministic connection can end at vertex `v` of a path: the light, the
+/// pinhole, or a surface scattering through a non-Dirac part of its BSDF.
+#[inline]
+pub fn connectible(scene: &Scene, v: &Vertex) -> bool {
+    match v.kind {
+        VertexKind::Surface => !v.delta && !v.bsdf(scene).is_delta(),
+        _ => true,
+    }
+}
+
+/// The BSDF value of interior vertex `i` for light arriving from `x_{i-1}` and leaving
+/// towards `x_{i+1}`, times `|cos|` with the shading normal over `|cos|` with the geometric
+/// one on the light's side (radiance transport's shading-normal factor).
+fn scatter(scene: &Scene, v: &[Vertex], i: usize) -> Rgb {
+    let x = &v[i];
+    let (to_camera, _) = towards(x, &v[i + 1]);
+    let (to_light, _) = towards(x, &v[i - 1]);
+    let bsdf = x.bsdf(scene);
+    let (lo, li) = (x.frame.to_local(to_camera), x.frame.to_local(to_light));
+    let f = if x.delta {
+        delta_lobe(bsdf, lo, li, x.at(), TransportMode::Radiance).map_or(Rgb::ZERO, |(f, _)| f)
+    } else {
+        bsdf.eval(lo, li, x.at(), TransportMode::Radiance)
+    };
+    let cos_g = x.ng.dot(to_light).abs();
+    if cos_g == 0.0 { Rgb::ZERO } else { f * (li.z.abs() / cos_g) }
+}
+
+/// A path's contribution and where on the film it lands.
+#[derive(Clone, Copy, Debug)]
+pub struct Measured {
+    pub f: Rgb,
+    /// Film position in pixel units.
+    pub raster: Vec2,
+}
+
+/// The measurement contribution `f(x)` of a path whose edges are known to be unoccluded,
+/// and its film position; `None` when it is zero or off the image.
+pub fn contribution(scene: &Scene, v: &[Vertex]) -> Option<Measured> {
+    let k = v.len().checked_sub(1)?;
+    if k < 1 {
+        return None;
+    }
+    let VertexKind::Light(l) = v[0].kind else { return None };
+    let conn = scene.camera.connect(v[k - 1].p)?;
+    let (w, _) = towards(&v[0], &v[1]);
+    let mut f = scene.lights[l as usize].emitted(v[0].ng, v[0].uv, w) * conn.pdf_dir;
+    let mut g = 1.0f64;
+    for i in 0..k {
+        let (w, d2) = towards(&v[i], &v[i + 1]);
+        g *= (v[i].cos_area(w) * v[i + 1].cos_area(w)) as f64 / d2 as f64;
+    }
+    for i in 1..k {
+        if f == Rgb::ZERO {
+            return None;
+        }
+        f *= scatter(scene, v, i);
+    }
+    let f = f * g as f32;
+    (f != Rgb::ZERO && f.is_finite()).then_some(Measured { f, raster: conn.raster })
+}
+
+/// Solid-angle density of `x` scattering from `wo` (its own side) into `wi`, in `mode`,
+/// through the part of its BSDF the path uses there.
+fn lobe_pdf(scene: &Scene, x: &Vertex, wo: Vec3, wi: Vec3, mode: TransportMode) -> f32 {
+    let bsdf = x.bsdf(scene);
+    let (lo, li) = (x.frame.to_local(wo), x.frame.to_local(wi));
+    if x.delta {
+        delta_lobe(bsdf, lo, li, x.at(), mode).map_or(0.0, |(_, p)| p)
+    } else {
+        bsdf.pdf(lo, li, x.at(), mode)
+    }
+}
+
+/// Solid-angle density of interior vertex `x_i` scattering from `x_{i+1}` towards
+/// `x_{i-1}` in a walk from the camera (a Dirac lobe's discrete probability where the path
+/// scatters through one).
+pub fn pdf_from_lobe(scene: &Scene, v: &[Vertex], i: usize) -> f64 {
+    let x = &v[i];
+    lobe_pdf(scene, x, towards(x, &v[i + 1]).0, towards(x, &v[i - 1]).0, TransportMode::Radiance) as f64
+}
+
+/// Area density of `x_j` generated by a walk from the light: for `j = 0` a light chosen by
+/// power and a point on it, else from `x_{j-1}` (emission or importance-mode BSDF sampling,
+/// given `x_{j-2}`).
+pub fn pdf_from_light(scene: &Scene, v: &[Vertex], j: usize) -> f64 {
+    if j == 0 {
+        return match v[0].kind {
+            VertexKind::Light(l) => light_origin_pdf(scene, l as usize) as f64,
+            _ => 0.0,
+        };
+    }
+    let x = &v[j - 1];
+    let (w, d2) = towards(x, &v[j]);
+    let solid = match x.kind {
+        VertexKind::Light(l) => scene.lights[l as usize].pdf_emission_direction(x.ng, w),
+        VertexKind::Surface => lobe_pdf(scene, x, towards(x, &v[j - 2]).0, w, TransportMode::Importance),
+        _ => 0.0,
+    };
+    solid as f64 * v[j].cos_area(w) as f64 / d2 as f64
+}
+
+/// Area density of `x_j` generated by a walk from the pinhole: from `x_{j+1}` (a uniform
+/// film position, or radiance-mode BSDF sampling given `x_{j+2}`).
+pub fn pdf_from_camera(scene: &Scene, v: &[Vertex], j: usize) -> f64 {
+    let x = &v[j + 1];
+    let (w, d2) = towards(x, &v[j]);
+    let solid = match x.kind {
+        VertexKind::Camera => scene.camera.pdf_direction(w),
+        VertexKind::Surface => lobe_pdf(scene, x, towards(x, &v[j + 2]).0, w, TransportMode::Radiance),
+        _ => 0.0,
+    };
+    solid as f64 * v[j].cos_area(w) as f64 / d2 as f64
+}
+
+/// Traces `n` vertices from `ray` into `out`, sampling each one's BSDF in `mode` (from the
+/// direction the walk arrived along) for the next ray, all but the last. `false` when a ray
+/// leaves the scene or a BSDF gives no direction.
+pub fn walk<R: Random>(
+    scene: &Scene,
+    mut ray: Ray,
+    n: usize,
+    mode: TransportMode,
+    rng: &mut R,
+    out: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) -> bool {
+    for i in 0..n {
+        counters.extension_rays += 1;
+        let Some(si) = scene.intersect(&ray) else { return false };
+        let b = scene.bsdf_index(&si);
+        let bsdf = &scene.bsdfs[b];
+        let mut v = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
+        if i + 1 < n {
+            let lo = si.shading.to_local(-ray.d);
+            let u1 = rng.next_1d();
+            let Some(s) = bsdf.sample(lo, si.at(), u1, rng.next_2d(), mode) else { return false };
+            v.delta = s.delta;
+            ray = si.spawn_ray(si.shading.to_world(s.wi));
+        }
+        out.push(v);
+    }
+    true
+}
+
+/// The ray leaving vertex `x` along `d` (offset off its surface).
+#[inline]
+pub fn ray_from(x: &Vertex, d: Vec3) -> Ray {
+    let o = if x.ng == Vec3::ZERO { x.p } else { offset_origin(x.p, x.ng, d) };
+    Ray::new(o, d)
+}
+
+/// Samples the direction a walk leaves the kept vertex `v[i]` along, away from the kept
+/// neighbour `v[j]` (`j = i ± 1`): emission from the light, a film position from the
+/// pinhole, BSDF sampling in `mode` from a surface (whose `delta` it sets). `None` when no
+/// direction comes out.
+pub fn leave<R: Random>(
+    scene: &Scene,
+    v: &mut [Vertex],
+    i: usize,
+    j: usize,
+    mode: TransportMode,
+    rng: &mut R,
+) -> Option<Ray> {
+    let u1 = rng.next_1d();
+    let u2 = rng.next_2d();
+    let x = &v[i];
+    match x.kind {
+        VertexKind::Camera => {
+            let res = Vec2::new(scene.film.width as f32, scene.film.height as f32);
+            Some(scene.camera.generate_ray(u2 * res))
+        }
+        VertexKind::Light(_) => {
+            let local = square_to_cosine_hemisphere(u2);
+            (local.z > 0.0).then(|| ray_from(x, crate::math::Frame::from_normal(x.ng).to_world(local)))
+        }
+        VertexKind::Surface => {
+            let (back, _) = towards(x, &v[j]);
+            let bsdf = x.bsdf(scene);
+            let s = bsdf.sample(x.frame.to_local(back), x.at(), u1, u2, mode)?;
+            let d = x.frame.to_world(s.wi);
+            v[i].delta = s.delta;
+            Some(ray_from(&v[i], d))
+        }
+        VertexKind::Sky => None,
+    }
+}
+
+/// Regenerates the stretch between `prefix` (kept light-side vertices, possibly none) and
+/// `suffix` (kept camera-side vertices, ending at the pinhole): `s` new vertices walked from
+/// the light side (a fresh light point first when `prefix` is empty), `t` from the camera
+/// side, joined by a shadow ray, or with `prefix` and `s` both empty, the camera walk's last
+/// vertex taken as the light it lies on. `None` when the walks or the join fail.
+#[allow(clippy::too_many_arguments)]
+pub fn regenerate<R: Random>(
+    scene: &Scene,
+    prefix: &[Vertex],
+    suffix: &[Vertex],
+    s: usize,
+    t: usize,
+    rng: &mut R,
+    counters: &mut Counters,
+) -> Option<Vec<Vertex>> {
+    let mut light: Vec<Vertex> = prefix.to_vec();
+    let a = prefix.len();
+    if s > 0 {
+        let ray = if a == 0 {
+            let (l, pmf, _) = scene.light_sampler.sample(rng.next_1d())?;
+            let u1 = rng.next_1d();
+            let (u_pos, u_dir) = (rng.next_2d(), rng.next_2d());
+            let es = scene.lights[l].sample_emission(&scene.shapes, u1, u_pos, u_dir)?;
+            if pmf <= 0.0 || es.pdf_dir <= 0.0 {
+                return None;
+            }
+            let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::ONE, 0.0);
+            let ray = ray_from(&y0, es.d);
+            light.push(y0);
+            ray
+        } else {
+            let j = if a >= 2 { a - 2 } else { a - 1 };
+            leave(scene, &mut light, a - 1, j, TransportMode::Importance, rng)?
+        };
+        let more = s - usize::from(a == 0);
+        if more > 0 && !walk(scene, ray, more, TransportMode::Importance, rng, &mut light, counters) {
+            return None;
+        }
+    }
+    let mut camera: Vec<Vertex> = suffix.iter().rev().copied().collect();
+    if t > 0 {
+        let c = camera.len();
+        let j = if c >= 2 { c - 2 } else { c - 1 };
+        let ray = leave(scene, &mut camera, c - 1, j, TransportMode::Radiance, rng)?;
+        if !walk(scene, ray, t, TransportMode::Radiance, rng, &mut camera, counters) {
+            return None;
+        }
+    }
+    if light.is_empty() {
+        // The camera walk ends on the light the path starts from.
+        let end = camera.last_mut()?;
+        let l = scene.shapes.get(end.shape as usize)?.light?;
+        *end = Vertex { kind: VertexKind::Light(l as u32), bsdf: u32::MAX, delta: false, ..*end };
+    } else {
+        let (n, m) = (light.len(), camera.len());
+        light[n - 1].delta = false;
+        camera[m - 1].delta = false;
+        if !connectible(scene, &light[n - 1]) || !connectible(scene, &camera[m - 1]) {
+            return None;
+        }
+        counters.connections += 1;
+        if !visible(scene, &light[n - 1], &camera[m - 1], counters) {
+            counters.connections_occluded += 1;
+            return None;
+        }
+    }
+    light.extend(camera.into_iter().rev());
+    Some(light)
+}
+
+/// The density of the regenerated stretch of `y` (its vertices `a .. a+n-1`, `n` of them,
+/// between kept ends) over every split of the `n + 1` edges it spans into light-side walk,
+/// join and camera-side walk, each split chosen with probability `1 / (n + 1)`: what
+/// [`regenerate`] with a uniformly chosen `s` produces `y` with.
+pub fn stretch_density(scene: &Scene, y: &[Vertex], a: usize, n: usize) -> f64 {
+    // Light-side densities of the new vertices (prefix products), camera-side (suffix).
+    let mut light = vec![1.0f64; n + 1];
+    for i in 0..n {
+        light[i + 1] = light[i] * pdf_from_light(scene, y, a + i);
+    }
+    let mut camera = vec![1.0f64; n + 1];
+    for i in (0..n).rev() {
+        camera[i] = camera[i + 1] * pdf_from_camera(scene, y, a + i);
+    }
+    let mut sum = 0.0;
+    for s in 0..=n {
+        // The join: between `y[a+s-1]` and `y[a+s]`, or the camera walk reaching the light.
+        let joins = if a + s == 0 { true } else { connectible(scene, &y[a + s - 1]) && connectible(scene, &y[a + s]) };
+        if joins {
+            sum += light[s] * camera[s];
+        }
+    }
+    sum / (n + 1) as f64
+}

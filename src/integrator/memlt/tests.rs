@@ -1,0 +1,149 @@
+//! The chains' densities against what they sample: the importance-sampling identity
+//! `E[f(y) / T(y)] = ∫ f` for the whole-path generator and for the bidirectional mutation
+//! from a fixed path, against BDPT's estimate of the same integral, each with a skewed
+//! density the check must reject.
+
+use super::*;
+use crate::integrator::bidir::VertexKind;
+
+fn cornell() -> Scene {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-ply/cornell_mi.xml");
+    let overrides = [("resx", "24"), ("resy", "24"), ("max_depth", "4")]
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    Scene::load(&path, &crate::scene::LoadOptions { overrides, ..Default::default() }).unwrap()
+}
+
+/// Mean and standard error of `n` values from `f(i)`.
+fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
+    let (s, s2) = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let v = f(i);
+            (v, v * v)
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let m = s / n as f64;
+    (m, ((s2 / n as f64 - m * m) / n as f64).sqrt())
+}
+
+/// BDPT's estimate of the luminance of paths of at least `min` edges, with its error.
+fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
+    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
+    let pool = super::super::thread_pool(2).unwrap();
+    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, min, &|s, i| vec![11, s, i]).0
+}
+
+/// `|a - b|` in standard errors.
+fn sigmas(a: (f64, f64), b: f64) -> f64 {
+    (a.0 - b).abs() / a.1
+}
+
+#[test]
+fn whole_path_density_is_what_the_generator_samples() {
+    let scene = cornell();
+    let lengths = lengths(&scene);
+    let b = bdpt_reference(&scene, lengths.min);
+    let n = 300_000;
+    let run = |skew: bool| {
+        mean_and_error(n, |i| {
+            let mut rng = Sampler::new(&[3, i as u64]);
+            let mut c = Counters::default();
+            let Some((y, m, p)) = independent_path(&scene, lengths, &mut rng, &mut c) else { return 0.0 };
+            let p = if skew {
+                // A density that forgets the other splits: the light walk's alone.
+                let k = y.len() - 1;
+                seed_length_pmf(lengths, k) * (0..k).map(|j| path::pdf_from_light(&scene, &y, j)).product::<f64>()
+            } else {
+                p
+            };
+            if p > 0.0 { scalar(&m) / p } else { 0.0 }
+        })
+    };
+    let good = run(false);
+    assert!(sigmas(good, b) < 4.0 && good.1 < 0.02 * b, "whole paths: {good:?} against BDPT's {b}");
+    let skewed = run(true);
+    assert!(sigmas(skewed, b) > 6.0, "a density without the other splits was not caught: {skewed:?} against {b}");
+}
+
+/// A current path of three edges (light, two surfaces, pinhole).
+fn three_edges(scene: &Scene, lengths: Lengths) -> Vec<Vertex> {
+    (0..)
+        .find_map(|i| {
+            let mut rng = Sampler::new(&[5, i]);
+            let (y, _, _) = independent_path(scene, lengths, &mut rng, &mut Counters::default())?;
+            (y.len() == 4 && y[1].kind == VertexKind::Surface).then_some(y)
+        })
+        .unwrap()
+}
+
+#[test]
+fn bidirectional_density_is_what_the_mutation_samples() {
+    // The proposals that replace every vertex but the pinhole sample all of path space:
+    // their `f / T(x → y)` averages (over all proposals, others counting zero) to BDPT's
+    // estimate of the image's luminance. The deletion's and the length's probabilities
+    // enter `T`; forgetting the place of the deletion must be caught.
+    let scene = cornell();
+    let lengths = lengths(&scene);
+    let b = bdpt_reference(&scene, lengths.min);
+    let x = three_edges(&scene, lengths);
+    let k = x.len() - 1;
+    let n = 400_000;
+    let run = |skew: bool| {
+        mean_and_error(n, |i| {
+            let mut rng = Sampler::new(&[7, i as u64]);
+            let Some(p) = bidirectional::propose(&scene, &x, lengths, &mut rng, &mut Counters::default()) else {
+                return 0.0;
+            };
+            let y = &p.path;
+            let whole = y[0].p != x[0].p && y[y.len() - 2].p != x[k - 1].p;
+            let t = if skew { p.forward * (k + 1) as f64 } else { p.forward };
+            if whole && t > 0.0 { scalar(&p.measured) / t } else { 0.0 }
+        })
+    };
+    let good = run(false);
+    assert!(sigmas(good, b) < 4.0 && good.1 < 0.03 * b, "bidirectional mutation: {good:?} against BDPT's {b}");
+    let skewed = run(true);
+    assert!(sigmas(skewed, b) > 6.0, "a skewed proposal density was not caught: {skewed:?} against {b}");
+}
+
+#[test]
+fn regenerated_stretch_density_sums_its_splits() {
+    // Between kept ends (the light point and the pinhole of a fixed path), the stretch of
+    // two vertices regenerated with a uniform split has density `stretch_density`; its
+    // `f / p` must average to what the light walk alone (one split, its own density)
+    // estimates of the same integral. A sum that leaves out the camera walk's split is
+    // caught.
+    let scene = cornell();
+    let lengths = lengths(&scene);
+    let x = three_edges(&scene, lengths);
+    let (prefix, suffix) = (&x[..1], &x[3..]);
+    let n = 400_000;
+    let estimate = |mode: u8| {
+        mean_and_error(n, |i| {
+            let mut rng = Sampler::new(&[9, i as u64]);
+            let mut c = Counters::default();
+            let s = if mode == 1 { 2 } else { ((rng.next_1d() * 3.0) as usize).min(2) };
+            let Some(y) = path::regenerate(&scene, prefix, suffix, s, 2 - s, &mut rng, &mut c) else { return 0.0 };
+            let Some(m) = path::contribution(&scene, &y) else { return 0.0 };
+            let p = match mode {
+                1 => path::pdf_from_light(&scene, &y, 1) * path::pdf_from_light(&scene, &y, 2),
+                2 => {
+                    // Skewed: the split `s = 0` (both vertices from the camera) left out.
+                    let full = path::stretch_density(&scene, &y, 1, 2) * 3.0;
+                    let camera_only = path::pdf_from_camera(&scene, &y, 1) * path::pdf_from_camera(&scene, &y, 2);
+                    (full - camera_only) / 3.0
+                }
+                _ => path::stretch_density(&scene, &y, 1, 2),
+            };
+            if p > 0.0 { scalar(&m) / p } else { 0.0 }
+        })
+    };
+    let light = estimate(1);
+    let mixed = estimate(0);
+    let skewed = estimate(2);
+    let sigma = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs() / (a.1 * a.1 + b.1 * b.1).sqrt();
+    assert!(sigma(mixed, light) < 4.0, "stretch density: {mixed:?} against the light walk's {light:?}");
+    assert!(sigma(skewed, light) > 6.0, "a sum without a split was not caught: {skewed:?} against {light:?}");
+}
