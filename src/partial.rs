@@ -124,7 +124,7 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         "film": [scene.film.width, scene.film.height],
         "backend": scene.accel.backend().to_string(),
         "bidir": (!unidirectional).then_some(&opts.bidir),
-        "mlt": (opts.integrator == IntegratorKind::Pssmlt).then_some(&opts.mlt),
+        "mlt": matches!(opts.integrator, IntegratorKind::Pssmlt | IntegratorKind::Memlt).then_some(&opts.mlt),
     })
 }
 

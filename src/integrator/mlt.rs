@@ -15,7 +15,7 @@
 use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};
 use super::bidir::{Sink, WalkLimits};
-use super::{Budget, Counters, RenderOptions, RenderOutput, RenderStats, take_snapshots};
+use super::{Budget, Counters, RenderOptions, RenderOutput, take_snapshots};
 use crate::film::{Film, Splat};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
@@ -554,27 +554,27 @@ pub fn render(
     stats.large_acceptance = ratio(stats.large_accepted, stats.large_proposed);
     stats.mutations_per_second = stats.mutations as f64 / (seconds - bootstrap_seconds).max(1e-9);
     let spp = (stats.mutations / pixels) as u32;
-    let render_stats = RenderStats {
-        bidir: (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone()),
-        mlt: Some(stats),
-        iterations: match opts.budget {
-            Budget::Spp(spp) => Some(iterations.clone().unwrap_or(0..spp)),
-            Budget::Time(_) => None,
-        },
-        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
-    };
     // The chains splatted with the bootstrap's b; the final b also counts the large steps.
     let rescale = if b > 0.0 { (stats.normalisation / b) as f32 } else { 0.0 };
     let image = film.develop().into_iter().map(|p| p * rescale).collect();
-    Ok(RenderOutput {
+    let bidir = (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone());
+    Ok(super::chains_output(
+        scene,
+        opts,
+        threads,
+        counters,
+        seconds,
+        spp,
+        film,
         image,
-        strategy_images: Vec::new(),
         snapshots,
-        width: w,
-        height: h,
-        stats: render_stats,
-        film: Some(film),
-    })
+        interrupted,
+        iterations,
+        |s| {
+            s.bidir = bidir;
+            s.mlt = Some(stats);
+        },
+    ))
 }
 
 #[cfg(test)]

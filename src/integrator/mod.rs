@@ -321,6 +321,35 @@ impl RenderStats {
     }
 }
 
+/// The output of a Markov-chain render (PSSMLT, MEMLT): its statistics, with the
+/// iterations (mutations per pixel) it rendered and what `set` adds, and its image.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn chains_output(
+    scene: &Scene,
+    opts: &RenderOptions,
+    threads: usize,
+    counters: Counters,
+    seconds: f64,
+    spp: u32,
+    film: Film,
+    image: Vec<Rgb>,
+    snapshots: Vec<Snapshot>,
+    interrupted: bool,
+    iterations: Option<Range<u32>>,
+    set: impl FnOnce(&mut RenderStats),
+) -> RenderOutput {
+    let mut stats = RenderStats {
+        iterations: match opts.budget {
+            Budget::Spp(spp) => Some(iterations.unwrap_or(0..spp)),
+            Budget::Time(_) => None,
+        },
+        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
+    };
+    set(&mut stats);
+    let (width, height) = (scene.film.width, scene.film.height);
+    RenderOutput { image, strategy_images: Vec::new(), snapshots, width, height, stats, film: Some(film) }
+}
+
 /// A worker pool of `threads` threads (0 = all cores).
 pub(crate) fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, crate::error::Error> {
     rayon::ThreadPoolBuilder::new()

@@ -16,7 +16,7 @@ pub mod bidirectional;
 pub mod lens;
 pub mod path;
 
-use super::{Budget, Counters, RenderOptions, RenderOutput, RenderStats, take_snapshots};
+use super::{Budget, Counters, RenderOptions, RenderOutput, take_snapshots};
 use crate::film::{Film, Splat};
 use crate::integrator::bidir::Vertex;
 use crate::math::luminance;
@@ -437,24 +437,21 @@ fn finish(
     stats.mutations = done;
     let seconds = start.elapsed().as_secs_f64();
     let spp = (done / pixels) as u32;
-    let render_stats = RenderStats {
-        memlt: Some(stats),
-        iterations: match opts.budget {
-            Budget::Spp(spp) => Some(iterations.clone().unwrap_or(0..spp)),
-            Budget::Time(_) => None,
-        },
-        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
-    };
     let image = film.develop();
-    Ok(RenderOutput {
+    Ok(super::chains_output(
+        scene,
+        opts,
+        threads,
+        counters,
+        seconds,
+        spp,
+        film,
         image,
-        strategy_images: Vec::new(),
         snapshots,
-        width: w,
-        height: h,
-        stats: render_stats,
-        film: Some(film),
-    })
+        interrupted,
+        iterations,
+        |s| s.memlt = Some(stats),
+    ))
 }
 
 #[cfg(test)]
