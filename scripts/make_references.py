@@ -50,6 +50,9 @@ REFERENCES = {
     # Shading normals perturbed by a bump map and by a normal map, under a grazing light.
     "bumpmap": ("scenes/bumpmap/scene.xml", {"resx": 160, "resy": 120}, 2048, None),
     "normalmap": ("scenes/bumpmap/normalmap.xml", {"resx": 160, "resy": 120}, 2048, None),
+    # A glass ball on a floor under a small spherical light: its caustic seen directly and
+    # through the ball (MEMLT's scene).
+    "glass-caustic": ("scenes/glass-caustic/scene.xml", {"resx": 160, "resy": 90}, 32768, None),
 }
 
 # Settings the scene file gives, recorded in the JSON beside the reference.

@@ -1,5 +1,5 @@
-//! MEMLT (path-space Metropolis with the bidirectional mutation and the lens perturbation)
-//! against the Mitsuba 3 references, with the direct light separate (the default) and in the
+//! MEMLT (path-space Metropolis with the bidirectional mutation and the lens and caustic
+//! perturbations) against the Mitsuba 3 references, with the direct light separate (the default) and in the
 //! chains, and its determinism.
 //!
 //! Two renders with different seeds (independent chains and bootstraps) are averaged; the
@@ -54,6 +54,15 @@ fn memlt_veach_ajar() {
         Backend::Embree,
     );
     check(&scene, "veach-ajar.exr", 4.5e-3, 256, 16, "veach-ajar, MEMLT, 2 × 256 spp");
+}
+
+#[test]
+fn memlt_glass_caustic() {
+    // A glass ball's caustic seen directly (the caustic perturbation's paths) and the floor
+    // through the ball (the lens perturbation's), at 160×90.
+    let scene =
+        load(&root().join("scenes/glass-caustic/scene.xml"), &[("resx", "160"), ("resy", "90")], Backend::Embree);
+    check(&scene, "glass-caustic.exr", 1.25e-3, 128, 16, "glass-caustic, MEMLT, 2 × 128 spp");
 }
 
 #[test]

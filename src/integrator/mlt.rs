@@ -15,7 +15,7 @@
 use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};
 use super::bidir::{Sink, WalkLimits};
-use super::{Budget, Counters, RenderOptions, RenderOutput, take_snapshots};
+use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
@@ -294,6 +294,45 @@ struct Chain {
     stats: MltStats,
     /// Sum of the contributions of large-step proposals.
     large_sum: f64,
+    /// Scratch: the proposal's contributions and the splats of a deposit.
+    proposed: Contributions,
+    buf: Vec<Splat>,
+}
+
+impl Chain {
+    /// One mutation: a proposal (large or small step), both states splatted with their
+    /// expected weights, the proposal accepted or not.
+    fn step(&mut self, ev: &Evaluator, b: f32) {
+        let (proposed, buf) = (&mut self.proposed, &mut self.buf);
+        self.rng.start_iteration(false);
+        let large = self.rng.is_large_step();
+        let fp = ev.eval(&mut self.rng, &mut self.scratch, proposed, &mut self.counters);
+        let a = if self.f > 0.0 { (fp / self.f).min(1.0) } else { 1.0 };
+        if fp > 0.0 {
+            deposit(&mut self.film, proposed, a * b / fp, buf);
+        }
+        if self.f > 0.0 {
+            deposit(&mut self.film, &self.current, (1.0 - a) * b / self.f, buf);
+        }
+        if large {
+            self.stats.large_proposed += 1;
+            self.large_sum += fp as f64;
+        } else {
+            self.stats.small_proposed += 1;
+        }
+        if self.decide.next_1d() < a {
+            self.rng.accept();
+            std::mem::swap(&mut self.current, proposed);
+            self.f = fp;
+            if large {
+                self.stats.large_accepted += 1;
+            } else {
+                self.stats.small_accepted += 1;
+            }
+        } else {
+            self.rng.reject();
+        }
+    }
 }
 
 /// The chains' films added in order (into `film`), and the normalisation refined with
@@ -446,9 +485,6 @@ pub fn render(
             Budget::Spp(spp) => spp as u64 * pixels,
             Budget::Time(_) => u64::MAX,
         };
-        // Rounds of about one mutation per pixel, so that time budgets and Ctrl-C are
-        // checked regularly; every chain runs the same number of mutations per round.
-        let per_round = pixels.div_ceil(threads as u64);
         let mut chains: Vec<Chain> = (0..threads as u64)
             .map(|i| {
                 let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
@@ -472,71 +508,31 @@ pub fn render(
                     counters,
                     stats: MltStats::default(),
                     large_sum: 0.0,
+                    proposed: Contributions::default(),
+                    buf: Vec::new(),
                 }
             })
             .collect();
-        let mut done = 0u64;
-        pool.install(|| {
-            while done < total {
-                let n = per_round.min((total - done).div_ceil(threads as u64));
-                chains.par_iter_mut().for_each(|ch| {
-                    crate::accel::embree::set_flush_denormals();
-                    let mut proposed = Contributions::default();
-                    let mut buf = Vec::new();
-                    let bf = b as f32;
-                    for _ in 0..n {
-                        ch.rng.start_iteration(false);
-                        let large = ch.rng.is_large_step();
-                        let fp = ev.eval(&mut ch.rng, &mut ch.scratch, &mut proposed, &mut ch.counters);
-                        let a = if ch.f > 0.0 { (fp / ch.f).min(1.0) } else { 1.0 };
-                        if fp > 0.0 {
-                            deposit(&mut ch.film, &proposed, a * bf / fp, &mut buf);
-                        }
-                        if ch.f > 0.0 {
-                            deposit(&mut ch.film, &ch.current, (1.0 - a) * bf / ch.f, &mut buf);
-                        }
-                        if large {
-                            ch.stats.large_proposed += 1;
-                            ch.large_sum += fp as f64;
-                        } else {
-                            ch.stats.small_proposed += 1;
-                        }
-                        if ch.decide.next_1d() < a {
-                            ch.rng.accept();
-                            std::mem::swap(&mut ch.current, &mut proposed);
-                            ch.f = fp;
-                            if large {
-                                ch.stats.large_accepted += 1;
-                            } else {
-                                ch.stats.small_accepted += 1;
-                            }
-                        } else {
-                            ch.rng.reject();
-                        }
-                    }
-                });
-                done += n * threads as u64;
-                if !opts.checkpoints.is_empty() {
-                    let elapsed = start.elapsed().as_secs_f64();
-                    take_snapshots(&opts.checkpoints, &mut snapshots, elapsed, (done / pixels) as u32, || {
-                        let mut f = Film::new(w, h, scene.film.filter);
-                        let refined = merge_chains(&chains, &mut f, b, weights.len());
-                        f.light_paths = done;
-                        let rescale = (refined / b) as f32;
-                        f.develop().into_iter().map(|p| p * rescale).collect()
-                    });
-                }
-                if stopped() {
-                    interrupted = true;
-                    break;
-                }
-                if let Budget::Time(t) = opts.budget
-                    && start.elapsed().as_secs_f64() >= t
-                {
-                    break;
-                }
-            }
-        });
+        let bf = b as f32;
+        let n_boot = weights.len();
+        let done;
+        (done, interrupted) = super::run_chains(
+            &pool,
+            opts,
+            start,
+            pixels,
+            total,
+            &mut chains,
+            |ch| ch.step(&ev, bf),
+            &mut snapshots,
+            |chains, done| {
+                let mut f = Film::new(w, h, scene.film.filter);
+                let refined = merge_chains(chains, &mut f, b, n_boot);
+                f.light_paths = done;
+                let rescale = (refined / b) as f32;
+                f.develop().into_iter().map(|p| p * rescale).collect()
+            },
+        );
         stats.normalisation = merge_chains(&chains, &mut film, b, weights.len());
         for ch in &chains {
             counters += ch.counters;

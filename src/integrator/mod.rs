@@ -321,6 +321,54 @@ impl RenderStats {
     }
 }
 
+/// Runs Markov chains (one per worker thread) for the budget: `total` mutations (or the
+/// time budget) in rounds of about one mutation per pixel, every chain running `step` the
+/// same number of times per round, so that time budgets and Ctrl-C are checked regularly.
+/// After each round the snapshots due are developed by `develop(chains, done)`. Returns the
+/// mutations done and whether the render was interrupted.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_chains<C: Send>(
+    pool: &rayon::ThreadPool,
+    opts: &RenderOptions,
+    start: std::time::Instant,
+    pixels: u64,
+    total: u64,
+    chains: &mut [C],
+    step: impl Fn(&mut C) + Sync,
+    snapshots: &mut Vec<Snapshot>,
+    develop: impl Fn(&[C], u64) -> Vec<Rgb>,
+) -> (u64, bool) {
+    use rayon::prelude::*;
+    let threads = chains.len() as u64;
+    let per_round = pixels.div_ceil(threads);
+    let mut done = 0u64;
+    while done < total {
+        let n = per_round.min((total - done).div_ceil(threads));
+        pool.install(|| {
+            chains.par_iter_mut().for_each(|ch| {
+                crate::accel::embree::set_flush_denormals();
+                for _ in 0..n {
+                    step(ch);
+                }
+            })
+        });
+        done += n * threads;
+        if !opts.checkpoints.is_empty() {
+            let elapsed = start.elapsed().as_secs_f64();
+            take_snapshots(&opts.checkpoints, snapshots, elapsed, (done / pixels) as u32, || develop(chains, done));
+        }
+        if opts.stop.as_ref().is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst)) {
+            return (done, true);
+        }
+        if let Budget::Time(t) = opts.budget
+            && start.elapsed().as_secs_f64() >= t
+        {
+            break;
+        }
+    }
+    (done, false)
+}
+
 /// The output of a Markov-chain render (PSSMLT, MEMLT): its statistics, with the
 /// iterations (mutations per pixel) it rendered and what `set` adds, and its image.
 #[allow(clippy::too_many_arguments)]

@@ -13,10 +13,11 @@
 //! same image.
 
 pub mod bidirectional;
+pub mod caustic;
 pub mod lens;
 pub mod path;
 
-use super::{Budget, Counters, RenderOptions, RenderOutput, take_snapshots};
+use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::integrator::bidir::Vertex;
 use crate::math::luminance;
@@ -38,19 +39,18 @@ pub const MAX_EDGES: usize = 40;
 pub enum Mutator {
     Bidirectional,
     Lens,
+    Caustic,
 }
 
 impl Mutator {
-    pub const ALL: [Mutator; 2] = [Mutator::Bidirectional, Mutator::Lens];
+    pub const ALL: [Mutator; 3] = [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic];
 }
 
-/// The mutators that suit a path (the bidirectional mutation suits every path), with what
-/// the lens perturbation re-traces.
-fn suitable(scene: &Scene, x: &[Vertex]) -> ([Option<Mutator>; Mutator::ALL.len()], usize, Option<usize>) {
-    let lens = lens::suits(scene, x);
-    let list = [Some(Mutator::Bidirectional), lens.map(|_| Mutator::Lens)];
-    let n = list.iter().flatten().count();
-    (list, n, lens)
+/// The mutators that suit a path (the bidirectional mutation suits every path): for each,
+/// `None` when it does not, else the vertex it works from (0 for the bidirectional
+/// mutation).
+fn suitable(scene: &Scene, x: &[Vertex]) -> [Option<usize>; Mutator::ALL.len()] {
+    [Some(0), lens::suits(scene, x), caustic::suits(scene, x)]
 }
 
 /// Proposals and acceptances of one mutator.
@@ -148,22 +148,23 @@ impl Chain {
         self.counters.samples += 1;
         // A mutator chosen uniformly among those that suit the current path; the proposal
         // is accepted with the suitability of both paths in its densities.
-        let (list, n_x, lens_m) = suitable(scene, &self.path);
+        let suits = suitable(scene, &self.path);
+        let n_x = suits.iter().flatten().count();
         let pick = ((self.rng.next_1d() * n_x as f32) as usize).min(n_x - 1);
-        let Some(m) = list.iter().flatten().nth(pick).copied() else { return };
+        let Some((m, at)) = Mutator::ALL.iter().zip(suits).filter_map(|(&m, s)| s.map(|i| (m, i))).nth(pick) else {
+            return;
+        };
+        let (x, rng, c) = (&self.path, &mut self.rng, &mut self.counters);
         let proposal = match m {
-            Mutator::Bidirectional => {
-                bidirectional::propose(scene, &self.path, lengths, &mut self.rng, &mut self.counters)
-            }
-            Mutator::Lens => lens_m.and_then(|i| {
-                lens::propose(scene, &self.path, self.current.raster, i, radii, &mut self.rng, &mut self.counters)
-            }),
+            Mutator::Bidirectional => bidirectional::propose(scene, x, lengths, rng, c),
+            Mutator::Lens => lens::propose(scene, x, self.current.raster, at, radii, rng, c),
+            Mutator::Caustic => caustic::propose(scene, x, at, radii, rng, c),
         };
         self.proposed[m as usize] += 1;
         let (a, proposal) = match proposal {
             Some(p) => {
                 let fy = scalar(&p.measured);
-                let n_y = suitable(scene, &p.path).1;
+                let n_y = suitable(scene, &p.path).iter().flatten().count();
                 let num = fy * p.backward * n_x as f64;
                 let den = self.f * p.forward * n_y as f64;
                 let a = if fy > 0.0 && p.forward > 0.0 && num.is_finite() && den > 0.0 {
@@ -351,41 +352,26 @@ pub fn render(
             Budget::Spp(spp) => spp as u64 * pixels,
             Budget::Time(_) => u64::MAX,
         };
-        let per_round = pixels.div_ceil(threads as u64);
         let bf = b as f32;
         let radii = lens::Radii::for_film(w, h);
-        pool.install(|| {
-            while done < total {
-                let n = per_round.min((total - done).div_ceil(threads as u64));
-                chains.par_iter_mut().for_each(|ch| {
-                    crate::accel::embree::set_flush_denormals();
-                    for _ in 0..n {
-                        ch.step(scene, lengths, radii, bf);
-                    }
-                });
-                done += n * threads as u64;
-                if !opts.checkpoints.is_empty() {
-                    let elapsed = start.elapsed().as_secs_f64();
-                    take_snapshots(&opts.checkpoints, &mut snapshots, elapsed, (done / pixels) as u32, || {
-                        let mut f = base.clone();
-                        for ch in &chains {
-                            f.add_film_splats(&ch.film);
-                        }
-                        f.light_paths = done;
-                        f.develop()
-                    });
+        (done, interrupted) = super::run_chains(
+            &pool,
+            opts,
+            start,
+            pixels,
+            total,
+            &mut chains,
+            |ch| ch.step(scene, lengths, radii, bf),
+            &mut snapshots,
+            |chains, done| {
+                let mut f = base.clone();
+                for ch in chains {
+                    f.add_film_splats(&ch.film);
                 }
-                if stopped() {
-                    interrupted = true;
-                    break;
-                }
-                if let Budget::Time(t) = opts.budget
-                    && start.elapsed().as_secs_f64() >= t
-                {
-                    break;
-                }
-            }
-        });
+                f.light_paths = done;
+                f.develop()
+            },
+        );
     }
     let mut proposed = [0u64; Mutator::ALL.len()];
     let mut accepted = [0u64; Mutator::ALL.len()];
