@@ -155,7 +155,7 @@ struct RenderArgs {
     #[arg(long, value_enum, default_value_t = MltBase::Bdpt)]
     mlt_path_integrator: MltBase,
     /// MEMLT: samples per pixel of a separate direct-lighting estimate (paths of one or two
-    /// edges, by the path tracer); -1 leaves every path to the Markov chains.
+    /// edges, by the path tracer); -1 (the default) leaves every path to the Markov chains.
     #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
     direct_samples: i32,
     /// Memory limit of a light pool (lvc, pcbpt), in MiB.
@@ -505,8 +505,9 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
             .collect();
         eprintln!(
-            "  MEMLT: b = {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}, bootstrap {:.2} s",
+            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}, bootstrap {:.2} s",
             m.normalisation,
+            m.normalisation_error,
             m.seed_normalisation,
             m.chains,
             m.mutations,

@@ -44,14 +44,14 @@ pub struct MltOptions {
     pub bootstrap: usize,
     pub base: MltBase,
     /// MEMLT: samples per pixel of a separate direct-lighting estimate (paths of one or two
-    /// edges, by the path tracer), the chains rendering the longer paths; -1 leaves every
-    /// path to the chains.
+    /// edges, by the path tracer), the chains rendering the longer paths; -1 (the default)
+    /// leaves every path to the chains.
     pub direct_samples: i32,
 }
 
 impl Default for MltOptions {
     fn default() -> MltOptions {
-        MltOptions { large_step_prob: 0.3, bootstrap: 100_000, base: MltBase::Bdpt, direct_samples: 16 }
+        MltOptions { large_step_prob: 0.3, bootstrap: 100_000, base: MltBase::Bdpt, direct_samples: -1 }
     }
 }
 
@@ -390,7 +390,7 @@ fn bootstrap(
 
 /// The mean luminance of the image's paths of at least `min_edges` edges (Metropolis'
 /// normalisation `b`) estimated from `n` independent BDPT samples, each through a uniformly
-/// random film position, with the work they took.
+/// random film position, with its standard error and the work the samples took.
 pub(crate) fn bdpt_normalisation(
     scene: &Scene,
     opts: &RenderOptions,
@@ -398,10 +398,13 @@ pub(crate) fn bdpt_normalisation(
     n: usize,
     min_edges: usize,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
-) -> (f64, Counters) {
+) -> (f64, f64, Counters) {
     let ev = evaluator(scene, opts, MltBase::Bdpt);
     let (weights, counters) = bootstrap(pool, &ev, n, 1.0, min_edges, key);
-    (weights.iter().map(|&f| f as f64).sum::<f64>() / n.max(1) as f64, counters)
+    let n = n.max(1) as f64;
+    let mean = weights.iter().map(|&f| f as f64).sum::<f64>() / n;
+    let square = weights.iter().map(|&f| f as f64 * f as f64).sum::<f64>() / n;
+    (mean, ((square - mean * mean).max(0.0) / n).sqrt(), counters)
 }
 
 /// The estimator the chains drive, with the scene's depth limits.

@@ -14,10 +14,10 @@
 
 use super::bidirectional::Proposal;
 use super::lens::Radii;
-use super::path::{connectible, contribution, delta_direction, ray_from};
+use super::path::{connectible, contribution, join, ray_from, retrace};
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind, visible};
-use crate::math::{Frame, Rgb};
+use crate::integrator::bidir::{Vertex, VertexKind};
+use crate::math::Frame;
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::Vec3;
@@ -94,27 +94,10 @@ pub fn propose<R: Random>(
     let local = Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
     let mut ray = ray_from(&x[m], Frame::from_normal(w).to_world(local));
     let mut y = x.to_vec();
-    for j in m + 1..k {
-        counters.extension_rays += 1;
-        let si = scene.intersect(&ray)?;
-        let b = scene.bsdf_index(&si);
-        let bsdf = &scene.bsdfs[b];
-        let mut v = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
-        v.delta = x[j].delta;
-        if j + 1 < k {
-            // The same Dirac lobe (reflection or transmission) as the current path's.
-            let reflection = (x[j + 1].p - x[j].p).dot(x[j].ng) * (x[j - 1].p - x[j].p).dot(x[j].ng) > 0.0;
-            let d = delta_direction(bsdf, si.shading.to_local(-ray.d), si.at(), reflection)?;
-            ray = si.spawn_ray(si.shading.to_world(d));
-        }
-        y[j] = v;
+    for (j, v) in y.iter_mut().enumerate().take(k).skip(m + 1) {
+        *v = retrace(scene, &mut ray, x, j, j + 1 < k, counters)?;
     }
-    if !connectible(scene, &y[k - 1]) {
-        return None;
-    }
-    counters.connections += 1;
-    if !visible(scene, &y[k - 1], &y[k], counters) {
-        counters.connections_occluded += 1;
+    if !join(scene, &y[k - 1], &y[k], counters) {
         return None;
     }
     let measured = contribution(scene, &y)?;

@@ -11,10 +11,9 @@
 //! lobes' discrete probabilities taken out. Only that Jacobian enters the acceptance.
 
 use super::bidirectional::Proposal;
-use super::path::{connectible, contribution, delta_direction, pdf_from_camera, pdf_from_lobe};
+use super::path::{connectible, contribution, join, pdf_from_camera, pdf_from_lobe, retrace};
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind, visible};
-use crate::math::Rgb;
+use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::Vec2;
@@ -87,31 +86,11 @@ pub fn propose<R: Random>(
         return None;
     }
     let mut ray = scene.camera.generate_ray(pos);
-    counters.camera_rays += 1;
     let mut y = x.to_vec();
     for i in (m..k).rev() {
-        if i + 1 < k {
-            counters.extension_rays += 1;
-        }
-        let si = scene.intersect(&ray)?;
-        let b = scene.bsdf_index(&si);
-        let bsdf = &scene.bsdfs[b];
-        let mut v = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
-        v.delta = x[i].delta;
-        if i > m {
-            // The same Dirac lobe (reflection or transmission) as the current path's.
-            let reflection = (x[i + 1].p - x[i].p).dot(x[i].ng) * (x[i - 1].p - x[i].p).dot(x[i].ng) > 0.0;
-            let d = delta_direction(bsdf, si.shading.to_local(-ray.d), si.at(), reflection)?;
-            ray = si.spawn_ray(si.shading.to_world(d));
-        }
-        y[i] = v;
+        y[i] = retrace(scene, &mut ray, x, i, i > m, counters)?;
     }
-    if !connectible(scene, &y[m]) {
-        return None;
-    }
-    counters.connections += 1;
-    if !visible(scene, &y[m - 1], &y[m], counters) {
-        counters.connections_occluded += 1;
+    if !join(scene, &y[m - 1], &y[m], counters) {
         return None;
     }
     let measured = contribution(scene, &y)?;

@@ -65,8 +65,10 @@ pub struct MutatorStats {
 /// Statistics of a MEMLT render.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct MemltStats {
-    /// `b` from the BDPT bootstrap.
+    /// `b` from the BDPT bootstrap, and its standard error (the image's brightness is
+    /// uncertain by as much).
     pub normalisation: f64,
+    pub normalisation_error: f64,
     /// `b` from the start-path candidates (an independent check of the path densities).
     pub seed_normalisation: f64,
     pub bootstrap_samples: u64,
@@ -284,7 +286,7 @@ pub fn render(
             iterations,
         );
     }
-    let (b, c) =
+    let (b, b_error, c) =
         super::mlt::bdpt_normalisation(scene, opts, &pool, n_boot, lengths.min, &|s, i| key(s ^ BOOTSTRAP_STREAM, i));
     counters += c;
     // Start-path candidates and their weights f / p.
@@ -315,6 +317,7 @@ pub fn render(
     let bootstrap_seconds = start.elapsed().as_secs_f64();
     let mut stats = MemltStats {
         normalisation: b,
+        normalisation_error: b_error,
         seed_normalisation: seed_b,
         bootstrap_samples: n_boot as u64,
         chains: threads,

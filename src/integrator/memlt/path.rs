@@ -247,6 +247,46 @@ pub fn leave<R: Random>(
     }
 }
 
+/// Re-traces vertex `i` of `x` along `ray` (a perturbation's): the surface the ray finds,
+/// scattering as `x_i` does (through a Dirac lobe or not). With `follow`, the ray is turned
+/// into the one leaving it through the same Dirac lobe (reflection or transmission) as
+/// `x_i`'s. `None` when the ray leaves the scene or the surface has no such lobe.
+pub fn retrace(
+    scene: &Scene,
+    ray: &mut Ray,
+    x: &[Vertex],
+    i: usize,
+    follow: bool,
+    counters: &mut Counters,
+) -> Option<Vertex> {
+    counters.extension_rays += 1;
+    let si = scene.intersect(ray)?;
+    let b = scene.bsdf_index(&si);
+    let bsdf = &scene.bsdfs[b];
+    let mut v = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
+    v.delta = x[i].delta;
+    if follow {
+        let reflection = (x[i + 1].p - x[i].p).dot(x[i].ng) * (x[i - 1].p - x[i].p).dot(x[i].ng) > 0.0;
+        let d = delta_direction(bsdf, si.shading.to_local(-ray.d), si.at(), reflection)?;
+        *ray = si.spawn_ray(si.shading.to_world(d));
+    }
+    Some(v)
+}
+
+/// Joins two vertices of a path by a shadow ray: `true` when both can take a connection
+/// and see each other.
+pub fn join(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
+    if !connectible(scene, a) || !connectible(scene, b) {
+        return false;
+    }
+    counters.connections += 1;
+    let seen = visible(scene, a, b, counters);
+    if !seen {
+        counters.connections_occluded += 1;
+    }
+    seen
+}
+
 /// Regenerates the stretch between `prefix` (kept light-side vertices, possibly none) and
 /// `suffix` (kept camera-side vertices, ending at the pinhole): `s` new vertices walked from
 /// the light side (a fresh light point first when `prefix` is empty), `t` from the camera
@@ -304,12 +344,7 @@ pub fn regenerate<R: Random>(
         let (n, m) = (light.len(), camera.len());
         light[n - 1].delta = false;
         camera[m - 1].delta = false;
-        if !connectible(scene, &light[n - 1]) || !connectible(scene, &camera[m - 1]) {
-            return None;
-        }
-        counters.connections += 1;
-        if !visible(scene, &light[n - 1], &camera[m - 1], counters) {
-            counters.connections_occluded += 1;
+        if !join(scene, &light[n - 1], &camera[m - 1], counters) {
             return None;
         }
     }
