@@ -14,7 +14,7 @@
 //! `f / p` over paths sampled through uniform film positions is the image's mean.
 
 use crate::accel::Ray;
-use crate::bsdf::{At, Bsdf, TransportMode};
+use crate::bsdf::{At, Bsdf, BsdfSample, TransportMode};
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind, light_origin_pdf, visible};
 use crate::math::{Rgb, offset_origin};
@@ -30,33 +30,24 @@ fn towards(a: &Vertex, b: &Vertex) -> (Vec3, f32) {
     (d / d2.sqrt(), d2)
 }
 
+/// A sample of the Dirac lobe of `bsdf` that takes `lo` to the reflected side (or the
+/// transmitted one) in `mode`.
+fn delta_sample(bsdf: &Bsdf, lo: Vec3, at: At, reflection: bool, mode: TransportMode) -> Option<BsdfSample> {
+    // The lobe is chosen by `u1` alone; these values reach every lobe a model has.
+    [0.0, 0.26, 0.51, 0.76, 0.999_999].into_iter().find_map(|u1| {
+        bsdf.sample(lo, at, u1, Vec2::splat(0.5), mode).filter(|s| s.delta && (s.wi.z * lo.z > 0.0) == reflection)
+    })
+}
+
 /// The Dirac lobe of `bsdf` that takes `lo` to the side of `li` (reflection or
 /// transmission): its coefficient and its discrete probability when sampled in `mode`.
 pub fn delta_lobe(bsdf: &Bsdf, lo: Vec3, li: Vec3, at: At, mode: TransportMode) -> Option<(Rgb, f32)> {
-    let reflection = lo.z * li.z > 0.0;
-    // The lobe is chosen by `u1` alone; these values reach every lobe a model has.
-    for u1 in [0.0, 0.26, 0.51, 0.76, 0.999_999] {
-        if let Some(s) = bsdf.sample(lo, at, u1, Vec2::splat(0.5), mode)
-            && s.delta
-            && (s.wi.z * lo.z > 0.0) == reflection
-        {
-            return Some((s.f, s.pdf));
-        }
-    }
-    None
+    delta_sample(bsdf, lo, at, lo.z * li.z > 0.0, mode).map(|s| (s.f, s.pdf))
 }
 
 /// The direction a Dirac lobe of `bsdf` takes `lo` to, reflecting or transmitting as asked.
 pub fn delta_direction(bsdf: &Bsdf, lo: Vec3, at: At, reflection: bool) -> Option<Vec3> {
-    for u1 in [0.0, 0.26, 0.51, 0.76, 0.999_999] {
-        if let Some(s) = bsdf.sample(lo, at, u1, Vec2::splat(0.5), TransportMode::Radiance)
-            && s.delta
-            && (s.wi.z * lo.z > 0.0) == reflection
-        {
-            return Some(s.wi);
-        }
-    }
-    None
+    delta_sample(bsdf, lo, at, reflection, TransportMode::Radiance).map(|s| s.wi)
 }
 
 /// Whether a deterministic connection can end at vertex `v` of a path: the light, the
