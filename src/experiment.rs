@@ -98,6 +98,8 @@ pub struct MethodEntry {
     pub bootstrap: Option<usize>,
     pub mlt_path_integrator: Option<String>,
     pub direct_samples: Option<i32>,
+    pub manifold_perturbation: Option<bool>,
+    pub lambda: Option<f64>,
     pub pc_light_paths: Option<usize>,
     pub pc_pool_vertices: Option<usize>,
     pub pc_connections: Option<u32>,
@@ -233,6 +235,12 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.direct_samples {
         o.mlt.direct_samples = x;
+    }
+    if let Some(x) = m.manifold_perturbation {
+        o.mlt.manifold_perturbation = x;
+    }
+    if let Some(x) = m.lambda {
+        o.mlt.lambda = x;
     }
     if let Some(b) = &m.mlt_path_integrator {
         o.mlt.base = value_enum::<MltBase>(file, "mlt_path_integrator", b)?;

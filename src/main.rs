@@ -158,6 +158,13 @@ struct RenderArgs {
     /// edges, by the path tracer); -1 (the default) leaves every path to the Markov chains.
     #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
     direct_samples: i32,
+    /// MEMLT: the manifold perturbation among the mutations (`false` gives Veach's MLT).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    manifold_perturbation: bool,
+    /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's
+    /// concentration is the current direction's scattering density times λ²).
+    #[arg(long, default_value_t = MltOptions::default().lambda)]
+    lambda: f64,
     /// Memory limit of a light pool (lvc, pcbpt), in MiB.
     #[arg(long, default_value_t = 4096)]
     max_pool_mb: usize,
@@ -409,6 +416,8 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         bootstrap: a.bootstrap,
         base: a.mlt_path_integrator,
         direct_samples: a.direct_samples,
+        manifold_perturbation: a.manifold_perturbation,
+        lambda: a.lambda,
     };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
@@ -505,7 +514,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
             .collect();
         eprintln!(
-            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}, bootstrap {:.2} s",
+            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; bootstrap {:.2} s",
             m.normalisation,
             m.normalisation_error,
             m.seed_normalisation,
@@ -515,6 +524,9 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.min_edges,
             m.max_edges,
             acceptance.join(", "),
+            m.manifold_walks.tried,
+            m.manifold_walks.converged,
+            m.manifold_walks.irreversible,
             m.bootstrap_seconds
         );
     } else if !a.quiet && s.bidir.is_some() {

@@ -220,6 +220,9 @@ pub enum Scatter {
 #[derive(Clone, Debug)]
 pub struct TracedChain {
     pub start: Vec3,
+    /// The geometric normal of the surface the start lies on (rays leave it offset off that
+    /// surface); zero for a point in space.
+    pub start_ng: Vec3,
     pub hits: Vec<SurfaceInteraction>,
 }
 
@@ -278,8 +281,17 @@ impl TracedChain {
 /// `scatters` says, and every hit must lie on the shape `shapes` names for it (a walk that
 /// lands on another shape is rejected, contract `memlt.md`, "Pitfalls"). `None` when a ray
 /// escapes, lands elsewhere, or a refraction is total internal reflection.
-pub fn trace(scene: &Scene, start: Vec3, aim: Vec3, scatters: &[Scatter], shapes: &[u32]) -> Option<TracedChain> {
-    let mut ray = Ray::new(start, (aim - start).try_normalize()?);
+pub fn trace(
+    scene: &Scene,
+    (start, start_ng): (Vec3, Vec3),
+    aim: Vec3,
+    scatters: &[Scatter],
+    shapes: &[u32],
+) -> Option<TracedChain> {
+    // The ray leaves from the start moved off its surface, and passes through `aim` exactly
+    // (a walk re-traces its chains through their first vertex's hit).
+    let o = if start_ng == Vec3::ZERO { start } else { crate::math::offset_origin(start, start_ng, aim - start) };
+    let mut ray = Ray::new(o, (aim - o).try_normalize()?);
     let mut hits = Vec::with_capacity(shapes.len());
     for (i, &shape) in shapes.iter().enumerate() {
         let si = scene.intersect(&ray)?;
@@ -296,7 +308,7 @@ pub fn trace(scene: &Scene, start: Vec3, aim: Vec3, scatters: &[Scatter], shapes
         }
         hits.push(si);
     }
-    Some(TracedChain { start, hits })
+    Some(TracedChain { start, start_ng, hits })
 }
 
 /// The parameter offset `(du, dv)` that moves a vertex by `delta` as nearly as its tangent
@@ -334,6 +346,44 @@ pub fn solid_angle_density(vertices: &[ChainVertex]) -> Option<f64> {
     };
     let (dw_du, dw_dv) = (direction_step(DVec2::X)?, direction_step(DVec2::Y)?);
     Some(dw_du.cross(dw_dv).length() / end.dp_du.cross(end.dp_dv).length())
+}
+
+/// `n_end / n_start`: the refractive index of the medium at the chain's end over that at its
+/// start, from the refractions on the way (entering a surface from its front multiplies by
+/// its relative index, leaving divides by it).
+pub fn index_ratio(vertices: &[ChainVertex], scatters: &[Scatter]) -> f64 {
+    let mut ratio = 1.0;
+    for (i, scatter) in scatters.iter().enumerate() {
+        let (prev, x) = (&vertices[i], &vertices[i + 1]);
+        if *scatter == Scatter::Refract && x.eta != 1.0 {
+            if (prev.p - x.p).dot(x.n) > 0.0 {
+                ratio *= x.eta;
+            } else {
+                ratio /= x.eta;
+            }
+        }
+    }
+    ratio
+}
+
+impl TracedChain {
+    /// The solid angle at the chain's end per unit area at its start, `dω_{k+1}/dA_0`: by
+    /// the reciprocity of the generalized geometric term (étendue `n² cos dA dω` is the same
+    /// at both ends of a bundle of rays), `(n_0 / n_{k+1})² (cos θ_0 / cos θ_{k+1})` times
+    /// [`solid_angle_density`]'s `dω_0/dA_{k+1}`, with the cosines to the geometric normals.
+    /// What a chain whose end moves and whose start stays needs to express the start's area
+    /// density. `None` where the tangent map is singular or the start has no surface.
+    pub fn end_solid_angle_density(&self, scene: &Scene) -> Option<f64> {
+        let vertices = self.vertices(scene)?;
+        let forward = solid_angle_density(&vertices)?;
+        let ratio = index_ratio(&vertices, &self.scatters());
+        let first = self.hits.first()?.p;
+        let before_end = if self.hits.len() >= 2 { self.hits[self.hits.len() - 2].p } else { self.start };
+        let end = self.end();
+        let cos_start = self.start_ng.dot((first - self.start).normalize()).abs() as f64;
+        let cos_end = end.ng.dot((before_end - end.p).normalize()).abs() as f64;
+        (cos_end > 0.0).then(|| forward * cos_start / cos_end / (ratio * ratio))
+    }
 }
 
 /// Whether the walk back from `proposal` to `current`'s end returns to `current` (contract
@@ -418,7 +468,7 @@ pub fn walk(scene: &Scene, chain: &TracedChain, target: Vec3, tolerance: f64) ->
         let Some(steps) = jacobian(&vertices).follow_end(offset * step) else { break };
         let first = &vertices[1];
         let aim = first.p + first.displacement(steps[0]);
-        let next = trace(scene, chain.start, aim.as_vec3(), &scatters, &shapes);
+        let next = trace(scene, (chain.start, chain.start_ng), aim.as_vec3(), &scatters, &shapes);
         match next.map(|n| ((n.end().p.as_dvec3() - target).length(), n)) {
             Some((d, next)) if d < dist => {
                 dist = d;
@@ -613,7 +663,7 @@ mod tests {
     /// Walks the chain traced from `start` towards `aim` to its end moved by `offset`, and
     /// checks the result: the end at the target, the shapes kept, the constraints met.
     fn check_walk(scene: &Scene, start: Vec3, aim: Vec3, scatters: &[Scatter], shapes: &[u32], offset: Vec3) {
-        let chain = trace(scene, start, aim, scatters, shapes).expect("the test chain traces");
+        let chain = trace(scene, (start, Vec3::ZERO), aim, scatters, shapes).expect("the test chain traces");
         assert_eq!(chain.scatters(), scatters);
         let target = chain.end().p + offset;
         let walk = walk(scene, &chain, target, 1e-5);
@@ -690,7 +740,8 @@ mod tests {
         use Scatter::*;
         // A flat mirror: the end seen in the mirror is at the unfolded distance.
         let s = scene(&format!("{MIRROR_FLOOR}{CEILING}"));
-        let chain = trace(&s, Vec3::new(-1.0, 0.3, 1.0), Vec3::new(0.0, 0.0, -2.0), &[Reflect], &[0, 1]).unwrap();
+        let chain =
+            trace(&s, (Vec3::new(-1.0, 0.3, 1.0), Vec3::ZERO), Vec3::new(0.0, 0.0, -2.0), &[Reflect], &[0, 1]).unwrap();
         let v = chain.vertices(&s).unwrap();
         let unfolded = (v[1].p - v[0].p).length() + (v[2].p - v[1].p).length();
         let cos_end = v[2].n.dot((v[1].p - v[2].p).normalize()).abs();
@@ -706,13 +757,83 @@ mod tests {
             (Vec3::new(0.3, 0.2, 5.0), Vec3::new(0.3, 0.2, 0.0), &[Refract, Refract][..], &[0, 0, 1][..]),
             (Vec3::new(-2.0, 0.1, 3.0), Vec3::new(3.0, 0.1, 1.3), &[Reflect, Refract, Refract], &[2, 0, 0, 1]),
         ] {
-            let chain = trace(&s, start, aim, scatters, shapes).unwrap();
+            let chain = trace(&s, (start, Vec3::ZERO), aim, scatters, shapes).unwrap();
             let analytic = solid_angle_density(&chain.vertices(&s).unwrap()).unwrap();
             let walked = walked_density(&s, &chain, 5e-4);
             assert!((walked / analytic - 1.0).abs() < 1e-2, "{scatters:?}: walks {walked} against {analytic}");
             // Without the refractions' bending the density is another: the test resolves it.
             let straight = 1.0 / (chain.end().p - chain.start).length_squared() as f64;
             assert!((straight / analytic - 1.0).abs() > 0.1, "{scatters:?}");
+        }
+    }
+
+    /// The chain traced back from `chain`'s end (on a surface) to its start's surface: the
+    /// same vertices in the other order, with the start's real tangent frame at its end.
+    fn reversed(scene: &Scene, chain: &TracedChain, start_shape: u32) -> TracedChain {
+        let end = chain.end();
+        let mut scatters = chain.scatters();
+        scatters.reverse();
+        let mut shapes: Vec<u32> = chain.hits[..chain.hits.len() - 1].iter().rev().map(|h| h.shape).collect();
+        shapes.push(start_shape);
+        let aim = chain.hits[chain.hits.len() - 2].p;
+        trace(scene, (end.p, end.ng), aim, &scatters, &shapes).expect("the reversed chain traces")
+    }
+
+    #[test]
+    fn end_solid_angle_density_is_the_reversed_chains() {
+        use Scatter::*;
+        // A dielectric half-space below z = 0 over a floor inside it: the chain's two ends lie
+        // in media of different indices (the étendue's n² enters).
+        const WATER: &str = r#"<shape type="rectangle"><transform name="to_world"><scale value="10"/></transform><bsdf type="dielectric"><float name="int_ior" value="1.33"/></bsdf></shape>"#;
+        const SUNK_FLOOR: &str = r#"<shape type="rectangle"><transform name="to_world"><scale value="10"/><translate z="-1"/></transform><bsdf type="diffuse"/></shape>"#;
+        let cases = [
+            (
+                format!("{GLASS_BALL}{NEAR_FLOOR}{CEILING}"),
+                2u32,
+                Vec3::new(2.5, 0.5, 4.0),
+                Vec3::new(0.3, 0.2, 0.0),
+                vec![Refract, Refract],
+                vec![0u32, 0, 1],
+                true,
+            ),
+            (
+                format!("{MIRROR_FLOOR}{CEILING}"),
+                1,
+                Vec3::new(-1.0, 0.3, 4.0),
+                Vec3::new(0.0, 0.0, -2.0),
+                vec![Reflect],
+                vec![0, 1],
+                false,
+            ),
+            (
+                format!("{WATER}{SUNK_FLOOR}{CEILING}"),
+                2,
+                Vec3::new(-0.7, 0.3, 4.0),
+                Vec3::new(0.0, 0.0, 0.0),
+                vec![Refract],
+                vec![0, 1],
+                true,
+            ),
+        ];
+        for (shapes_xml, start_shape, start, aim, scatters, shapes, asymmetric) in cases {
+            let s = scene(&shapes_xml);
+            let ng = Vec3::new(0.0, 0.0, -1.0);
+            let chain = trace(&s, (start, ng), aim, &scatters, &shapes).expect("the test chain traces");
+            let back = reversed(&s, &chain, start_shape);
+            assert!((back.end().p - start).length() < 1e-3, "{scatters:?}: the reversed chain returns");
+            let expected = solid_angle_density(&back.vertices(&s).unwrap()).unwrap();
+            let got = chain.end_solid_angle_density(&s).unwrap();
+            // The walks work from either end.
+            let walked = walked_density(&s, &back, 5e-4);
+            assert!((walked / expected - 1.0).abs() < 1e-2, "{scatters:?}: reversed walks {walked} against {expected}");
+            assert!((got / expected - 1.0).abs() < 1e-3, "{scatters:?}: {got} against {expected}");
+            // Without the cosines' ratio (or the indices', in the water) it would be another
+            // (a mirror between two points of one plane gives both ends the same cosine).
+            if !asymmetric {
+                continue;
+            }
+            let forward = solid_angle_density(&chain.vertices(&s).unwrap()).unwrap();
+            assert!((forward / expected - 1.0).abs() > 0.05, "{scatters:?}: {forward} against {expected}");
         }
     }
 
@@ -769,11 +890,11 @@ mod tests {
             (Vec3::new(0.3, 0.2, 5.0), Vec3::new(0.3, 0.2, 0.0), &[Refract, Refract][..], &[0, 0, 1][..]),
             (Vec3::new(-2.0, 0.1, 3.0), Vec3::new(3.0, 0.1, 1.3), &[Reflect, Refract, Refract], &[2, 0, 0, 1]),
         ] {
-            let current = trace(&s, start, aim, scatters, shapes).unwrap();
+            let current = trace(&s, (start, Vec3::ZERO), aim, scatters, shapes).unwrap();
             let proposal = walk(&s, &current, current.end().p + Vec3::new(0.05, -0.04, 0.0), 1e-5).chain.unwrap();
             assert!(returns_to(&s, &proposal, &current, 1e-5), "{scatters:?}");
             // A chain through other points is not where the walk back goes.
-            let other = trace(&s, start, aim + Vec3::new(0.0, 0.1, 0.0), scatters, shapes).unwrap();
+            let other = trace(&s, (start, Vec3::ZERO), aim + Vec3::new(0.0, 0.1, 0.0), scatters, shapes).unwrap();
             let mut elsewhere = other.clone();
             elsewhere.hits.last_mut().unwrap().p = current.end().p;
             assert!(!returns_to(&s, &proposal, &elsewhere, 1e-5), "{scatters:?}");
@@ -785,7 +906,8 @@ mod tests {
         // Light refracted twice by the ball reaches the floor only near its axis.
         let s = scene(&format!("{GLASS_BALL}{DIFFUSE_FLOOR}"));
         let scatters = [Scatter::Refract, Scatter::Refract];
-        let chain = trace(&s, Vec3::new(0.3, 0.2, 5.0), Vec3::new(0.3, 0.2, 0.0), &scatters, &[0, 0, 1]).unwrap();
+        let chain =
+            trace(&s, (Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO), Vec3::new(0.3, 0.2, 0.0), &scatters, &[0, 0, 1]).unwrap();
         let w = walk(&s, &chain, Vec3::new(8.0, 8.0, -2.0), 1e-5);
         assert!(w.chain.is_none() && w.iterations == MAX_ITERATIONS, "{} iterations", w.iterations);
     }

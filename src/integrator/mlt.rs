@@ -47,11 +47,24 @@ pub struct MltOptions {
     /// edges, by the path tracer), the chains rendering the longer paths; -1 (the default)
     /// leaves every path to the chains.
     pub direct_samples: i32,
+    /// MEMLT: the manifold perturbation among the mutations (false gives Veach's MLT).
+    pub manifold_perturbation: bool,
+    /// MEMLT: how much sharper than the current direction's scattering density the manifold
+    /// perturbation's von Mises–Fisher lobe is (its concentration is that density times
+    /// `λ²`).
+    pub lambda: f64,
 }
 
 impl Default for MltOptions {
     fn default() -> MltOptions {
-        MltOptions { large_step_prob: 0.3, bootstrap: 100_000, base: MltBase::Bdpt, direct_samples: -1 }
+        MltOptions {
+            large_step_prob: 0.3,
+            bootstrap: 100_000,
+            base: MltBase::Bdpt,
+            direct_samples: -1,
+            manifold_perturbation: true,
+            lambda: 50.0,
+        }
     }
 }
 

@@ -14,7 +14,7 @@
 
 use super::bidirectional::Proposal;
 use super::lens::Radii;
-use super::path::{connectible, contribution, join, ray_from, retrace};
+use super::path::{area_factor, connectible, contribution, join, ray_from, retrace};
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::math::Frame;
@@ -59,16 +59,10 @@ fn angle_density(theta: f32, (t1, t2): (f32, f32)) -> f64 {
 }
 
 /// The re-traced vertices' area densities per unit solid angle at `x_m`: the chain's
-/// `|cos| / d²` factors.
+/// `|cos| / d²` factors ([`area_factor`]).
 fn jacobian(x: &[Vertex], m: usize) -> f64 {
     let k = x.len() - 1;
-    (m + 1..k)
-        .map(|j| {
-            let d = x[j].p - x[j - 1].p;
-            let d2 = d.length_squared();
-            x[j].cos_area(d / d2.sqrt()) as f64 / d2 as f64
-        })
-        .product()
+    (m + 1..k).map(|j| area_factor(x, j, j - 1)).product()
 }
 
 /// The direction leaving `x_m` towards `x_{m+1}`.

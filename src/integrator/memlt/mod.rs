@@ -15,6 +15,7 @@
 pub mod bidirectional;
 pub mod caustic;
 pub mod lens;
+pub mod manifold_perturbation;
 pub mod path;
 
 use super::{Budget, Counters, RenderOptions, RenderOutput};
@@ -40,17 +41,19 @@ pub enum Mutator {
     Bidirectional,
     Lens,
     Caustic,
+    Manifold,
 }
 
 impl Mutator {
-    pub const ALL: [Mutator; 3] = [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic];
+    pub const ALL: [Mutator; 4] = [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::Manifold];
 }
 
 /// The mutators that suit a path (the bidirectional mutation suits every path): for each,
-/// `None` when it does not, else the vertex it works from (0 for the bidirectional
-/// mutation).
-fn suitable(scene: &Scene, x: &[Vertex]) -> [Option<usize>; Mutator::ALL.len()] {
-    [Some(0), lens::suits(scene, x), caustic::suits(scene, x)]
+/// `None` when it does not, else the vertex it works from (0 for the bidirectional and
+/// manifold ones). The manifold perturbation only where `manifold` asks for it.
+fn suitable(scene: &Scene, x: &[Vertex], manifold: bool) -> [Option<usize>; Mutator::ALL.len()] {
+    let m = (manifold && manifold_perturbation::suits(scene, x)).then_some(0);
+    [Some(0), lens::suits(scene, x), caustic::suits(scene, x), m]
 }
 
 /// Proposals and acceptances of one mutator.
@@ -75,6 +78,8 @@ pub struct MemltStats {
     pub chains: usize,
     pub mutations: u64,
     pub mutators: Vec<MutatorStats>,
+    /// The manifold perturbation's walks.
+    pub manifold_walks: manifold_perturbation::WalkStats,
     pub mutations_per_second: f64,
     pub bootstrap_seconds: f64,
     /// The path lengths (edges) the chains visit.
@@ -141,16 +146,29 @@ struct Chain {
     counters: Counters,
     proposed: [u64; Mutator::ALL.len()],
     accepted: [u64; Mutator::ALL.len()],
+    walks: manifold_perturbation::WalkStats,
+}
+
+/// What a chain's steps need besides the scene.
+#[derive(Clone, Copy)]
+struct StepSettings {
+    lengths: Lengths,
+    radii: lens::Radii,
+    /// `b`, the luminance each splat carries.
+    b: f32,
+    manifold: bool,
+    lambda: f64,
 }
 
 impl Chain {
     /// One step: a proposal, both paths splatted with their expected weights (each with
     /// luminance `b`), the proposal accepted or not.
-    fn step(&mut self, scene: &Scene, lengths: Lengths, radii: lens::Radii, b: f32) {
+    fn step(&mut self, scene: &Scene, set: &StepSettings) {
+        let StepSettings { lengths, radii, b, .. } = *set;
         self.counters.samples += 1;
         // A mutator chosen uniformly among those that suit the current path; the proposal
         // is accepted with the suitability of both paths in its densities.
-        let suits = suitable(scene, &self.path);
+        let suits = suitable(scene, &self.path, set.manifold);
         let n_x = suits.iter().flatten().count();
         let pick = ((self.rng.next_1d() * n_x as f32) as usize).min(n_x - 1);
         let Some((m, at)) = Mutator::ALL.iter().zip(suits).filter_map(|(&m, s)| s.map(|i| (m, i))).nth(pick) else {
@@ -161,12 +179,13 @@ impl Chain {
             Mutator::Bidirectional => bidirectional::propose(scene, x, lengths, rng, c),
             Mutator::Lens => lens::propose(scene, x, self.current.raster, at, radii, rng, c),
             Mutator::Caustic => caustic::propose(scene, x, at, radii, rng, c),
+            Mutator::Manifold => manifold_perturbation::propose(scene, x, set.lambda, rng, c, &mut self.walks),
         };
         self.proposed[m as usize] += 1;
         let (a, proposal) = match proposal {
             Some(p) => {
                 let fy = scalar(&p.measured);
-                let n_y = suitable(scene, &p.path).iter().flatten().count();
+                let n_y = suitable(scene, &p.path, set.manifold).iter().flatten().count();
                 let num = fy * p.backward * n_x as f64;
                 let den = self.f * p.forward * n_y as f64;
                 let a = if fy > 0.0 && p.forward > 0.0 && num.is_finite() && den > 0.0 {
@@ -233,6 +252,10 @@ pub fn render(
         return Err(Error::Usage(format!(
             "--direct-samples must be a positive sample count or -1 (direct light in the chains), got {direct}"
         )));
+    }
+    let lambda = opts.mlt.lambda;
+    if !(lambda.is_finite() && lambda > 0.0) {
+        return Err(Error::Usage(format!("--lambda must be a positive number, got {lambda}")));
     }
     let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
@@ -348,6 +371,7 @@ pub fn render(
                 counters: c,
                 proposed: [0; Mutator::ALL.len()],
                 accepted: [0; Mutator::ALL.len()],
+                walks: Default::default(),
             });
         }
         let total = match opts.budget {
@@ -355,8 +379,13 @@ pub fn render(
             Budget::Spp(spp) => spp as u64 * pixels,
             Budget::Time(_) => u64::MAX,
         };
-        let bf = b as f32;
-        let radii = lens::Radii::for_film(w, h);
+        let set = StepSettings {
+            lengths,
+            radii: lens::Radii::for_film(w, h),
+            b: b as f32,
+            manifold: opts.mlt.manifold_perturbation,
+            lambda: opts.mlt.lambda,
+        };
         (done, interrupted) = super::run_chains(
             &pool,
             opts,
@@ -364,7 +393,7 @@ pub fn render(
             pixels,
             total,
             &mut chains,
-            |ch| ch.step(scene, lengths, radii, bf),
+            |ch| ch.step(scene, &set),
             &mut snapshots,
             |chains, done| {
                 let mut f = base.clone();
@@ -382,6 +411,7 @@ pub fn render(
         base.add_film_splats(&ch.film);
         base.invalid_samples += ch.film.invalid_samples;
         counters += ch.counters;
+        stats.manifold_walks += ch.walks;
         for m in 0..Mutator::ALL.len() {
             proposed[m] += ch.proposed[m];
             accepted[m] += ch.accepted[m];
