@@ -1,5 +1,5 @@
-//! MEMLT (path-space Metropolis with the bidirectional mutation and the lens and caustic
-//! perturbations) against the Mitsuba 3 references, with the direct light separate (the default) and in the
+//! MEMLT (path-space Metropolis with the bidirectional mutation and the lens, caustic and
+//! manifold perturbations) against the Mitsuba 3 references, with the direct light separate (the default) and in the
 //! chains, and its determinism.
 //!
 //! Two renders with different seeds (independent chains and bootstraps) are averaged; the
@@ -58,8 +58,9 @@ fn memlt_veach_ajar() {
 
 #[test]
 fn memlt_glass_caustic() {
-    // A glass ball's caustic seen directly (the caustic perturbation's paths) and the floor
-    // through the ball (the lens perturbation's), at 160×90, the direct light in the chains.
+    // A glass ball's caustic seen directly (the caustic perturbation's paths), the floor
+    // through the ball (the lens perturbation's) and the caustic through the ball (the
+    // manifold perturbation's), at 160×90, the direct light in the chains.
     // This checks where the chains put the light: each render is scaled to the reference's
     // mean first. The mean itself is the normalisation `b` from BDPT's bootstrap, whose
     // error here (about ±1% at 10⁶ samples: the caustic seen through the ball, and the
@@ -71,7 +72,15 @@ fn memlt_glass_caustic() {
     let reference = reference("glass-caustic.exr");
     let mean = |i: &pcbpt::image_io::Image| i.pixels.iter().map(|p| (p.x + p.y + p.z) as f64).sum::<f64>();
     let scaled = |seed| {
-        let i = image(memlt(&scene, 128, seed, -1));
+        let out = memlt(&scene, 128, seed, -1);
+        // The manifold perturbation moves the paths the others cannot (the caustic seen
+        // through the ball): its walks must mostly converge and return.
+        let s = out.stats.memlt.clone().unwrap();
+        let manifold = s.mutators.iter().find(|m| m.mutator == pcbpt::integrator::memlt::Mutator::Manifold).unwrap();
+        let w = s.manifold_walks;
+        assert!(manifold.acceptance > 0.2, "manifold perturbation accepted {}", manifold.acceptance);
+        assert!(w.tried > 1000 && w.converged * 4 > w.tried && w.irreversible * 4 < w.converged, "walks: {w:?}");
+        let i = image(out);
         let k = (mean(&reference) / mean(&i)) as f32;
         pcbpt::image_io::Image::new(i.width, i.height, i.pixels.iter().map(|p| *p * k).collect())
     };
