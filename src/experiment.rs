@@ -99,6 +99,9 @@ pub struct MethodEntry {
     pub mlt_path_integrator: Option<String>,
     pub direct_samples: Option<i32>,
     pub manifold_perturbation: Option<bool>,
+    pub bidirectional_mutation: Option<bool>,
+    pub lens_perturbation: Option<bool>,
+    pub caustic_perturbation: Option<bool>,
     pub lambda: Option<f64>,
     pub pc_light_paths: Option<usize>,
     pub pc_pool_vertices: Option<usize>,
@@ -238,6 +241,15 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.manifold_perturbation {
         o.mlt.manifold_perturbation = x;
+    }
+    if let Some(x) = m.bidirectional_mutation {
+        o.mlt.bidirectional_mutation = x;
+    }
+    if let Some(x) = m.lens_perturbation {
+        o.mlt.lens_perturbation = x;
+    }
+    if let Some(x) = m.caustic_perturbation {
+        o.mlt.caustic_perturbation = x;
     }
     if let Some(x) = m.lambda {
         o.mlt.lambda = x;

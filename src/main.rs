@@ -161,6 +161,15 @@ struct RenderArgs {
     /// MEMLT: the manifold perturbation among the mutations (`false` gives Veach's MLT).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     manifold_perturbation: bool,
+    /// MEMLT: the bidirectional mutation among the mutations.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    bidirectional_mutation: bool,
+    /// MEMLT: Veach's lens perturbation among the mutations.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    lens_perturbation: bool,
+    /// MEMLT: Veach's caustic perturbation among the mutations.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    caustic_perturbation: bool,
     /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's
     /// concentration is the current direction's scattering density times λ²).
     #[arg(long, default_value_t = MltOptions::default().lambda)]
@@ -416,6 +425,9 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         bootstrap: a.bootstrap,
         base: a.mlt_path_integrator,
         direct_samples: a.direct_samples,
+        bidirectional_mutation: a.bidirectional_mutation,
+        lens_perturbation: a.lens_perturbation,
+        caustic_perturbation: a.caustic_perturbation,
         manifold_perturbation: a.manifold_perturbation,
         lambda: a.lambda,
     };

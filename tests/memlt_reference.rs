@@ -116,3 +116,19 @@ fn memlt_refuses_lights_it_does_not_handle() {
     let e = integrator::render(&scene, &o).err().expect("lights at infinity must be refused").to_string();
     assert!(e.contains("area lights only") && e.contains("sunlit-room"), "{e}");
 }
+
+#[test]
+fn memlt_refuses_options_that_leave_no_chain() {
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "16"), ("resy", "16")], Backend::Embree);
+    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));
+    o.mlt.bidirectional_mutation = false;
+    o.mlt.lens_perturbation = false;
+    o.mlt.caustic_perturbation = false;
+    o.mlt.manifold_perturbation = false;
+    let e = integrator::render(&scene, &o).err().expect("no mutation must be refused").to_string();
+    assert!(e.contains("at least one mutation"), "{e}");
+    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));
+    o.mlt.lambda = 0.0;
+    let e = integrator::render(&scene, &o).err().expect("λ = 0 must be refused").to_string();
+    assert!(e.contains("--lambda"), "{e}");
+}

@@ -442,6 +442,9 @@ pub struct Walk {
 /// Newton iterations a walk may take (Mitsuba 0.6's limit).
 pub const MAX_ITERATIONS: u32 = 20;
 
+/// The smallest fraction of the Newton step a walk tries before it gives up.
+pub const MIN_STEP: f64 = 1.0 / 256.0;
+
 /// Walks `chain` on its specular manifold until its end reaches `target` (a point on the
 /// end's surface), keeping the start fixed (contract `memlt.md`, "Manifold perturbation",
 /// step 6): each Newton step moves the end towards the target in its tangent plane, takes
@@ -475,7 +478,13 @@ pub fn walk(scene: &Scene, chain: &TracedChain, target: Vec3, tolerance: f64) ->
                 current = next;
                 step = (step * 2.0).min(1.0);
             }
-            _ => step *= 0.5,
+            _ => {
+                step *= 0.5;
+                // Eight halvings in a row: the Newton direction no longer leads to the target.
+                if step < MIN_STEP {
+                    break;
+                }
+            }
         }
     }
     Walk { chain: (dist <= tolerance * length).then_some(current), iterations }
@@ -909,7 +918,7 @@ mod tests {
         let chain =
             trace(&s, (Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO), Vec3::new(0.3, 0.2, 0.0), &scatters, &[0, 0, 1]).unwrap();
         let w = walk(&s, &chain, Vec3::new(8.0, 8.0, -2.0), 1e-5);
-        assert!(w.chain.is_none() && w.iterations == MAX_ITERATIONS, "{} iterations", w.iterations);
+        assert!(w.chain.is_none() && w.iterations > 5, "{} iterations", w.iterations);
     }
 
     #[test]

@@ -47,7 +47,12 @@ pub struct MltOptions {
     /// edges, by the path tracer), the chains rendering the longer paths; -1 (the default)
     /// leaves every path to the chains.
     pub direct_samples: i32,
-    /// MEMLT: the manifold perturbation among the mutations (false gives Veach's MLT).
+    /// MEMLT: which mutations the chains use (Mitsuba 0.6's switches): the bidirectional
+    /// mutation, Veach's lens and caustic perturbations, and the manifold perturbation
+    /// (without it, Veach's MLT).
+    pub bidirectional_mutation: bool,
+    pub lens_perturbation: bool,
+    pub caustic_perturbation: bool,
     pub manifold_perturbation: bool,
     /// MEMLT: how much sharper than the current direction's scattering density the manifold
     /// perturbation's von Mises–Fisher lobe is (its concentration is that density times
@@ -62,6 +67,9 @@ impl Default for MltOptions {
             bootstrap: 100_000,
             base: MltBase::Bdpt,
             direct_samples: -1,
+            bidirectional_mutation: true,
+            lens_perturbation: true,
+            caustic_perturbation: true,
             manifold_perturbation: true,
             lambda: 50.0,
         }

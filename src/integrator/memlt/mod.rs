@@ -48,12 +48,22 @@ impl Mutator {
     pub const ALL: [Mutator; 4] = [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::Manifold];
 }
 
-/// The mutators that suit a path (the bidirectional mutation suits every path): for each,
-/// `None` when it does not, else the vertex it works from (0 for the bidirectional and
-/// manifold ones). The manifold perturbation only where `manifold` asks for it.
-fn suitable(scene: &Scene, x: &[Vertex], manifold: bool) -> [Option<usize>; Mutator::ALL.len()] {
-    let m = (manifold && manifold_perturbation::suits(scene, x)).then_some(0);
-    [Some(0), lens::suits(scene, x), caustic::suits(scene, x), m]
+/// The mutators that suit a path (the bidirectional mutation suits every path) among those
+/// `enabled`: for each, `None` when it does not, else the vertex it works from (0 for the
+/// bidirectional and manifold ones).
+fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) -> [Option<usize>; Mutator::ALL.len()] {
+    let on = |m: Mutator| enabled[m as usize];
+    [
+        on(Mutator::Bidirectional).then_some(0),
+        if on(Mutator::Lens) { lens::suits(scene, x) } else { None },
+        if on(Mutator::Caustic) { caustic::suits(scene, x) } else { None },
+        (on(Mutator::Manifold) && manifold_perturbation::suits(scene, x)).then_some(0),
+    ]
+}
+
+/// The mutators the options enable, in [`Mutator::ALL`]'s order.
+pub fn enabled(o: &super::mlt::MltOptions) -> [bool; Mutator::ALL.len()] {
+    [o.bidirectional_mutation, o.lens_perturbation, o.caustic_perturbation, o.manifold_perturbation]
 }
 
 /// Proposals and acceptances of one mutator.
@@ -156,7 +166,7 @@ struct StepSettings {
     radii: lens::Radii,
     /// `b`, the luminance each splat carries.
     b: f32,
-    manifold: bool,
+    enabled: [bool; Mutator::ALL.len()],
     lambda: f64,
 }
 
@@ -168,8 +178,18 @@ impl Chain {
         self.counters.samples += 1;
         // A mutator chosen uniformly among those that suit the current path; the proposal
         // is accepted with the suitability of both paths in its densities.
-        let suits = suitable(scene, &self.path, set.manifold);
+        let suits = suitable(scene, &self.path, set.enabled);
         let n_x = suits.iter().flatten().count();
+        if n_x == 0 {
+            // No enabled mutator suits the path: the chain stays (its splat is the current
+            // path's, with weight one).
+            self.film.add_splats(&[Splat {
+                pos: self.current.raster,
+                value: self.current.f * (b as f64 / self.f) as f32,
+                layer: 0,
+            }]);
+            return;
+        }
         let pick = ((self.rng.next_1d() * n_x as f32) as usize).min(n_x - 1);
         let Some((m, at)) = Mutator::ALL.iter().zip(suits).filter_map(|(&m, s)| s.map(|i| (m, i))).nth(pick) else {
             return;
@@ -185,7 +205,7 @@ impl Chain {
         let (a, proposal) = match proposal {
             Some(p) => {
                 let fy = scalar(&p.measured);
-                let n_y = suitable(scene, &p.path, set.manifold).iter().flatten().count();
+                let n_y = suitable(scene, &p.path, set.enabled).iter().flatten().count();
                 let num = fy * p.backward * n_x as f64;
                 let den = self.f * p.forward * n_y as f64;
                 let a = if fy > 0.0 && p.forward > 0.0 && num.is_finite() && den > 0.0 {
@@ -252,6 +272,9 @@ pub fn render(
         return Err(Error::Usage(format!(
             "--direct-samples must be a positive sample count or -1 (direct light in the chains), got {direct}"
         )));
+    }
+    if !enabled(&opts.mlt).iter().any(|&e| e) {
+        return Err(Error::Usage("memlt needs at least one mutation (all four are switched off)".into()));
     }
     let lambda = opts.mlt.lambda;
     if !(lambda.is_finite() && lambda > 0.0) {
@@ -383,7 +406,7 @@ pub fn render(
             lengths,
             radii: lens::Radii::for_film(w, h),
             b: b as f32,
-            manifold: opts.mlt.manifold_perturbation,
+            enabled: enabled(&opts.mlt),
             lambda: opts.mlt.lambda,
         };
         (done, interrupted) = super::run_chains(

@@ -176,7 +176,7 @@ fn balance(scene: &Scene, mutator: Mutator, skew: bool) -> (f64, f64) {
             let mut rng = Sampler::new(&[21, mutator as u64, i as u64]);
             let mut c = Counters::default();
             let Some((x, mx, p)) = independent_path(scene, lengths, &mut rng, &mut c) else { return (0.0, 0.0, 0.0) };
-            let at = suitable(scene, &x, true)[mutator as usize];
+            let at = suitable(scene, &x, [true; 4])[mutator as usize];
             let (fx, Some(at)) = (scalar(&mx), at) else { return (0.0, 0.0, 0.0) };
             let w = fx / p;
             let mut walks = manifold_perturbation::WalkStats::default();
@@ -188,7 +188,7 @@ fn balance(scene: &Scene, mutator: Mutator, skew: bool) -> (f64, f64) {
             };
             let r = proposal.map_or(0.0, |q| {
                 let fy = scalar(&q.measured);
-                let suits = suitable(scene, &q.path, true)[mutator as usize].is_some();
+                let suits = suitable(scene, &q.path, [true; 4])[mutator as usize].is_some();
                 let k = if skew { 1.0 + 2.0 * q.measured.raster.x as f64 / scene.film.width as f64 } else { 1.0 };
                 let r = fy * q.backward / (fx * q.forward * k);
                 if suits && r.is_finite() && r > 0.0 { r } else { 0.0 }
