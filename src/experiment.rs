@@ -102,6 +102,7 @@ pub struct MethodEntry {
     pub bidirectional_mutation: Option<bool>,
     pub lens_perturbation: Option<bool>,
     pub caustic_perturbation: Option<bool>,
+    pub multichain_perturbation: Option<bool>,
     pub lambda: Option<f64>,
     pub pc_light_paths: Option<usize>,
     pub pc_pool_vertices: Option<usize>,
@@ -250,6 +251,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.caustic_perturbation {
         o.mlt.caustic_perturbation = x;
+    }
+    if let Some(x) = m.multichain_perturbation {
+        o.mlt.multichain_perturbation = x;
     }
     if let Some(x) = m.lambda {
         o.mlt.lambda = x;

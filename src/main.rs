@@ -170,6 +170,9 @@ struct RenderArgs {
     /// MEMLT: Veach's caustic perturbation among the mutations.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     caustic_perturbation: bool,
+    /// MEMLT: Veach's multi-chain perturbation among the mutations.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    multichain_perturbation: bool,
     /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's
     /// concentration is the current direction's scattering density times λ²).
     #[arg(long, default_value_t = MltOptions::default().lambda)]
@@ -428,6 +431,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         bidirectional_mutation: a.bidirectional_mutation,
         lens_perturbation: a.lens_perturbation,
         caustic_perturbation: a.caustic_perturbation,
+        multichain_perturbation: a.multichain_perturbation,
         manifold_perturbation: a.manifold_perturbation,
         lambda: a.lambda,
     };

@@ -124,6 +124,7 @@ fn memlt_refuses_options_that_leave_no_chain() {
     o.mlt.bidirectional_mutation = false;
     o.mlt.lens_perturbation = false;
     o.mlt.caustic_perturbation = false;
+    o.mlt.multichain_perturbation = false;
     o.mlt.manifold_perturbation = false;
     let e = integrator::render(&scene, &o).err().expect("no mutation must be refused").to_string();
     assert!(e.contains("at least one mutation"), "{e}");

@@ -53,6 +53,7 @@ pub struct MltOptions {
     pub bidirectional_mutation: bool,
     pub lens_perturbation: bool,
     pub caustic_perturbation: bool,
+    pub multichain_perturbation: bool,
     pub manifold_perturbation: bool,
     /// MEMLT: how much sharper than the current direction's scattering density the manifold
     /// perturbation's von Mises–Fisher lobe is (its concentration is that density times
@@ -70,6 +71,7 @@ impl Default for MltOptions {
             bidirectional_mutation: true,
             lens_perturbation: true,
             caustic_perturbation: true,
+            multichain_perturbation: true,
             manifold_perturbation: true,
             lambda: 50.0,
         }

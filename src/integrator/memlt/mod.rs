@@ -16,6 +16,7 @@ pub mod bidirectional;
 pub mod caustic;
 pub mod lens;
 pub mod manifold_perturbation;
+pub mod multichain;
 pub mod path;
 
 use super::{Budget, Counters, RenderOptions, RenderOutput};
@@ -41,11 +42,13 @@ pub enum Mutator {
     Bidirectional,
     Lens,
     Caustic,
+    MultiChain,
     Manifold,
 }
 
 impl Mutator {
-    pub const ALL: [Mutator; 4] = [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::Manifold];
+    pub const ALL: [Mutator; 5] =
+        [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::Manifold];
 }
 
 /// The mutators that suit a path (the bidirectional mutation suits every path) among those
@@ -57,13 +60,20 @@ fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) ->
         on(Mutator::Bidirectional).then_some(0),
         if on(Mutator::Lens) { lens::suits(scene, x) } else { None },
         if on(Mutator::Caustic) { caustic::suits(scene, x) } else { None },
+        if on(Mutator::MultiChain) { multichain::suits(scene, x) } else { None },
         (on(Mutator::Manifold) && manifold_perturbation::suits(scene, x)).then_some(0),
     ]
 }
 
 /// The mutators the options enable, in [`Mutator::ALL`]'s order.
 pub fn enabled(o: &super::mlt::MltOptions) -> [bool; Mutator::ALL.len()] {
-    [o.bidirectional_mutation, o.lens_perturbation, o.caustic_perturbation, o.manifold_perturbation]
+    [
+        o.bidirectional_mutation,
+        o.lens_perturbation,
+        o.caustic_perturbation,
+        o.multichain_perturbation,
+        o.manifold_perturbation,
+    ]
 }
 
 /// Proposals and acceptances of one mutator.
@@ -199,6 +209,7 @@ impl Chain {
             Mutator::Bidirectional => bidirectional::propose(scene, x, lengths, rng, c),
             Mutator::Lens => lens::propose(scene, x, self.current.raster, at, radii, rng, c),
             Mutator::Caustic => caustic::propose(scene, x, at, radii, rng, c),
+            Mutator::MultiChain => multichain::propose(scene, x, self.current.raster, at, radii, rng, c),
             Mutator::Manifold => manifold_perturbation::propose(scene, x, set.lambda, rng, c, &mut self.walks),
         };
         self.proposed[m as usize] += 1;
@@ -274,7 +285,7 @@ pub fn render(
         )));
     }
     if !enabled(&opts.mlt).iter().any(|&e| e) {
-        return Err(Error::Usage("memlt needs at least one mutation (all four are switched off)".into()));
+        return Err(Error::Usage("memlt needs at least one mutation (all five are switched off)".into()));
     }
     let lambda = opts.mlt.lambda;
     if !(lambda.is_finite() && lambda > 0.0) {

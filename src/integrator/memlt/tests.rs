@@ -168,15 +168,20 @@ fn glass_caustic() -> Scene {
 fn balance(scene: &Scene, mutator: Mutator, skew: bool) -> (f64, f64) {
     let lengths = lengths(scene);
     let radii = lens::Radii::for_film(scene.film.width, scene.film.height);
-    // The bidirectional mutation's ratios spread widest.
-    let n = if mutator == Mutator::Bidirectional { 1_200_000 } else { 300_000 };
+    // The bidirectional mutation's ratios spread widest; few paths suit the multi-chain
+    // perturbation.
+    let n = match mutator {
+        Mutator::Bidirectional => 1_200_000,
+        Mutator::MultiChain => 4_000_000,
+        _ => 300_000,
+    };
     let (d, d2, valid) = (0..n)
         .into_par_iter()
         .map(|i| {
             let mut rng = Sampler::new(&[21, mutator as u64, i as u64]);
             let mut c = Counters::default();
             let Some((x, mx, p)) = independent_path(scene, lengths, &mut rng, &mut c) else { return (0.0, 0.0, 0.0) };
-            let at = suitable(scene, &x, [true; 4])[mutator as usize];
+            let at = suitable(scene, &x, [true; Mutator::ALL.len()])[mutator as usize];
             let (fx, Some(at)) = (scalar(&mx), at) else { return (0.0, 0.0, 0.0) };
             let w = fx / p;
             let mut walks = manifold_perturbation::WalkStats::default();
@@ -184,11 +189,12 @@ fn balance(scene: &Scene, mutator: Mutator, skew: bool) -> (f64, f64) {
                 Mutator::Bidirectional => bidirectional::propose(scene, &x, lengths, &mut rng, &mut c),
                 Mutator::Lens => lens::propose(scene, &x, mx.raster, at, radii, &mut rng, &mut c),
                 Mutator::Caustic => caustic::propose(scene, &x, at, radii, &mut rng, &mut c),
+                Mutator::MultiChain => multichain::propose(scene, &x, mx.raster, at, radii, &mut rng, &mut c),
                 Mutator::Manifold => manifold_perturbation::propose(scene, &x, 50.0, &mut rng, &mut c, &mut walks),
             };
             let r = proposal.map_or(0.0, |q| {
                 let fy = scalar(&q.measured);
-                let suits = suitable(scene, &q.path, [true; 4])[mutator as usize].is_some();
+                let suits = suitable(scene, &q.path, [true; Mutator::ALL.len()])[mutator as usize].is_some();
                 let k = if skew { 1.0 + 2.0 * q.measured.raster.x as f64 / scene.film.width as f64 } else { 1.0 };
                 let r = fy * q.backward / (fx * q.forward * k);
                 if suits && r.is_finite() && r > 0.0 { r } else { 0.0 }
@@ -207,11 +213,12 @@ fn balance(scene: &Scene, mutator: Mutator, skew: bool) -> (f64, f64) {
 fn every_mutator_is_in_detailed_balance() {
     // On the glass ball's scene the lens perturbation has the floor seen directly and
     // through the ball to work on, the caustic perturbation the caustic seen directly, the
-    // manifold perturbation the caustic through the ball too. The bidirectional mutation's
+    // multi-chain perturbation the floor seen directly and lit through the ball by another
+    // floor point, the manifold perturbation the caustic through the ball too. The bidirectional mutation's
     // ratios are too heavy-tailed there (whole new paths through the ball) for a tight
     // check: it is checked on the Cornell box, with the perturbations again.
     let checks = [
-        (glass_caustic(), &[Mutator::Lens, Mutator::Caustic, Mutator::Manifold][..]),
+        (glass_caustic(), &[Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::Manifold][..]),
         (cornell(), &[Mutator::Bidirectional, Mutator::Lens, Mutator::Manifold][..]),
     ];
     for (scene, mutators) in &checks {
