@@ -98,6 +98,7 @@ pub struct MethodEntry {
     pub bootstrap: Option<usize>,
     pub mlt_path_integrator: Option<String>,
     pub direct_samples: Option<i32>,
+    pub bootstrap_fraction: Option<f64>,
     pub manifold_perturbation: Option<bool>,
     pub bidirectional_mutation: Option<bool>,
     pub lens_perturbation: Option<bool>,
@@ -239,6 +240,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.direct_samples {
         o.mlt.direct_samples = x;
+    }
+    if let Some(x) = m.bootstrap_fraction {
+        o.mlt.bootstrap_fraction = x;
     }
     if let Some(x) = m.manifold_perturbation {
         o.mlt.manifold_perturbation = x;

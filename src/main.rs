@@ -158,6 +158,10 @@ struct RenderArgs {
     /// edges, by the path tracer); -1 (the default) leaves every path to the Markov chains.
     #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
     direct_samples: i32,
+    /// MEMLT with --time: the BDPT bootstrap goes on in batches of --bootstrap samples until
+    /// this fraction of the time is spent (`b`, the image's brightness, is its estimate).
+    #[arg(long, default_value_t = MltOptions::default().bootstrap_fraction)]
+    bootstrap_fraction: f64,
     /// MEMLT: the manifold perturbation among the mutations (`false` gives Veach's MLT).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     manifold_perturbation: bool,
@@ -428,6 +432,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         bootstrap: a.bootstrap,
         base: a.mlt_path_integrator,
         direct_samples: a.direct_samples,
+        bootstrap_fraction: a.bootstrap_fraction,
         bidirectional_mutation: a.bidirectional_mutation,
         lens_perturbation: a.lens_perturbation,
         caustic_perturbation: a.caustic_perturbation,

@@ -132,4 +132,23 @@ fn memlt_refuses_options_that_leave_no_chain() {
     o.mlt.lambda = 0.0;
     let e = integrator::render(&scene, &o).err().expect("λ = 0 must be refused").to_string();
     assert!(e.contains("--lambda"), "{e}");
+    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Time(1.0));
+    o.mlt.bootstrap_fraction = 1.0;
+    let e = integrator::render(&scene, &o).err().expect("the whole time on the bootstrap must be refused").to_string();
+    assert!(e.contains("--bootstrap-fraction"), "{e}");
+}
+
+#[test]
+fn memlt_bootstrap_takes_its_share_of_a_time_budget() {
+    // With a time budget the bootstrap goes on in batches until its fraction of the time
+    // has passed: more than one batch of a small `--bootstrap` in a quarter of a second.
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "16"), ("resy", "16")], Backend::Embree);
+    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Time(1.0));
+    o.mlt.bootstrap = 1000;
+    o.mlt.bootstrap_fraction = 0.25;
+    o.threads = 2;
+    let out = integrator::render(&scene, &o).unwrap();
+    let s = out.stats.memlt.as_ref().unwrap();
+    assert!(s.bootstrap_samples > 1000 && s.bootstrap_samples.is_multiple_of(1000), "{} samples", s.bootstrap_samples);
+    assert!(s.bootstrap_seconds >= 0.25 && s.normalisation > 0.0, "{} s", s.bootstrap_seconds);
 }

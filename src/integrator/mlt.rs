@@ -47,6 +47,9 @@ pub struct MltOptions {
     /// edges, by the path tracer), the chains rendering the longer paths; -1 (the default)
     /// leaves every path to the chains.
     pub direct_samples: i32,
+    /// MEMLT with a time budget: the bootstrap goes on in batches of `bootstrap` samples
+    /// until this fraction of the time is spent (the image's brightness is its estimate).
+    pub bootstrap_fraction: f64,
     /// MEMLT: which mutations the chains use (Mitsuba 0.6's switches): the bidirectional
     /// mutation, Veach's lens and caustic perturbations, and the manifold perturbation
     /// (without it, Veach's MLT).
@@ -68,6 +71,7 @@ impl Default for MltOptions {
             bootstrap: 100_000,
             base: MltBase::Bdpt,
             direct_samples: -1,
+            bootstrap_fraction: 0.1,
             bidirectional_mutation: true,
             lens_perturbation: true,
             caustic_perturbation: true,

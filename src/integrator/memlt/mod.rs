@@ -253,6 +253,39 @@ impl Chain {
 }
 
 const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
+
+/// `b` and its standard error from the BDPT bootstrap: `--bootstrap` samples, and with a
+/// time budget (of a whole render) more batches of as many until `--bootstrap-fraction` of
+/// the time has passed since `start`. Also the number of batches.
+fn normalisation(
+    scene: &Scene,
+    opts: &RenderOptions,
+    pool: &rayon::ThreadPool,
+    min_edges: usize,
+    start: Instant,
+    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+    counters: &mut Counters,
+) -> (f64, f64, usize) {
+    let n = opts.mlt.bootstrap;
+    let until = match opts.budget {
+        Budget::Time(t) => t * opts.mlt.bootstrap_fraction,
+        Budget::Spp(_) => 0.0,
+    };
+    let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+    let (mut sum, mut variance, mut batches) = (0.0, 0.0, 0usize);
+    while batches == 0 || (start.elapsed().as_secs_f64() < until && !stopped()) {
+        let offset = (batches * n) as u64;
+        let (b, e, c) = super::mlt::bdpt_normalisation(scene, opts, pool, n, min_edges, &|s, i| {
+            key(s ^ BOOTSTRAP_STREAM, i + offset)
+        });
+        *counters += c;
+        sum += b;
+        variance += e * e;
+        batches += 1;
+    }
+    let k = batches as f64;
+    (sum / k, variance.sqrt() / k, batches)
+}
 const SEED_STREAM: u64 = 0x7365_6564;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 const DIRECT_STREAM: u64 = 0x6469_7265;
@@ -286,6 +319,10 @@ pub fn render(
     }
     if !enabled(&opts.mlt).iter().any(|&e| e) {
         return Err(Error::Usage("memlt needs at least one mutation (all five are switched off)".into()));
+    }
+    let fraction = opts.mlt.bootstrap_fraction;
+    if !(0.0..1.0).contains(&fraction) {
+        return Err(Error::Usage(format!("--bootstrap-fraction must be at least 0 and below 1, got {fraction}")));
     }
     let lambda = opts.mlt.lambda;
     if !(lambda.is_finite() && lambda > 0.0) {
@@ -343,9 +380,7 @@ pub fn render(
             iterations,
         );
     }
-    let (b, b_error, c) =
-        super::mlt::bdpt_normalisation(scene, opts, &pool, n_boot, lengths.min, &|s, i| key(s ^ BOOTSTRAP_STREAM, i));
-    counters += c;
+    let (b, b_error, boot_batches) = normalisation(scene, opts, &pool, lengths.min, start, &key, &mut counters);
     // Start-path candidates and their weights f / p.
     let chunk = 1024usize;
     let parts: Vec<(Vec<f32>, Counters)> = pool.install(|| {
@@ -376,7 +411,7 @@ pub fn render(
         normalisation: b,
         normalisation_error: b_error,
         seed_normalisation: seed_b,
-        bootstrap_samples: n_boot as u64,
+        bootstrap_samples: (n_boot * boot_batches) as u64,
         chains: threads,
         bootstrap_seconds,
         min_edges: lengths.min,
