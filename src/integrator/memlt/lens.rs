@@ -38,6 +38,14 @@ impl Radii {
         let phi = 2.0 * std::f32::consts::PI * u.y;
         Vec2::new(r * phi.cos(), r * phi.sin())
     }
+
+    /// The camera ray through film position `raster` moved by an offset from `u`; `None`
+    /// when the offset leaves the image.
+    pub fn camera_ray(&self, scene: &Scene, raster: Vec2, u: Vec2) -> Option<crate::accel::Ray> {
+        let pos = raster + self.sample(u);
+        let res = Vec2::new(scene.film.width as f32, scene.film.height as f32);
+        (pos.x >= 0.0 && pos.y >= 0.0 && pos.x < res.x && pos.y < res.y).then(|| scene.camera.generate_ray(pos))
+    }
 }
 
 /// Where the lens perturbation re-traces to: the index `m` of the first vertex from the
@@ -80,12 +88,7 @@ pub fn propose<R: Random>(
     counters: &mut Counters,
 ) -> Option<Proposal> {
     let k = x.len() - 1;
-    let pos = raster + radii.sample(rng.next_2d());
-    let res = Vec2::new(scene.film.width as f32, scene.film.height as f32);
-    if pos.x < 0.0 || pos.y < 0.0 || pos.x >= res.x || pos.y >= res.y {
-        return None;
-    }
-    let mut ray = scene.camera.generate_ray(pos);
+    let mut ray = radii.camera_ray(scene, raster, rng.next_2d())?;
     let mut y = x.to_vec();
     for i in (m..k).rev() {
         y[i] = retrace(scene, &mut ray, x, i, i > m, counters)?;

@@ -68,12 +68,7 @@ pub fn propose<R: Random>(
     counters: &mut Counters,
 ) -> Option<Proposal> {
     let k = x.len() - 1;
-    let pos = raster + radii.sample(rng.next_2d());
-    let res = Vec2::new(scene.film.width as f32, scene.film.height as f32);
-    if pos.x < 0.0 || pos.y < 0.0 || pos.x >= res.x || pos.y >= res.y {
-        return None;
-    }
-    let mut ray = scene.camera.generate_ray(pos);
+    let mut ray = radii.camera_ray(scene, raster, rng.next_2d())?;
     let mut y = x.to_vec();
     for i in (l + 1..k).rev() {
         let specular = x[i].delta;
