@@ -23,7 +23,7 @@
 
 use super::bidirectional::Proposal;
 use super::path::{
-    area_factor, as_light, connectible, contribution, join, lobe_pdf, ray_from, retrace, surface_vertex,
+    area_factor, as_light, connectible, contribution, join, lobe_pdf, ray_from, reflects, retrace, surface_vertex,
 };
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
@@ -52,6 +52,16 @@ impl Plan {
     /// The next index in the direction of travel.
     fn next(&self, i: usize) -> usize {
         if self.toward_light { i - 1 } else { i + 1 }
+    }
+
+    /// The previous index in the direction of travel.
+    fn prev(&self, i: usize) -> usize {
+        if self.toward_light { i + 1 } else { i - 1 }
+    }
+
+    /// The same plan travelling the other way (from `c` back to `b`).
+    fn reversed(&self) -> Plan {
+        Plan { toward_light: !self.toward_light, ..*self }
     }
 
     /// The indices from `from` (excluded) to `to` (included) in the direction of travel.
@@ -140,8 +150,7 @@ fn direction_density(scene: &Scene, x: &[Vertex], plan: &Plan) -> f64 {
         VertexKind::Camera => scene.camera.pdf_direction(w),
         VertexKind::Light(l) => scene.lights[l as usize].pdf_emission_direction(a.ng, w),
         VertexKind::Surface => {
-            let other = if plan.toward_light { plan.a + 1 } else { plan.a - 1 };
-            let back = (x[other].p - a.p).normalize();
+            let back = (x[plan.prev(plan.a)].p - a.p).normalize();
             let mode = if plan.toward_light { TransportMode::Radiance } else { TransportMode::Importance };
             lobe_pdf(scene, a, back, w, mode)
         }
@@ -166,11 +175,11 @@ fn vmf_density(d2: f64, kappa: f64) -> f64 {
 /// direction of travel) as the plan produces them; `chain` is its specular chain from `c` to
 /// `b` where `b` and `c` are not neighbours.
 fn jacobian(scene: &Scene, v: &[Vertex], plan: &Plan, chain: Option<&TracedChain>) -> Option<f64> {
-    let mut j: f64 =
-        plan.span(plan.a, plan.b).map(|i| area_factor(v, i, if plan.toward_light { i + 1 } else { i - 1 })).product();
+    let factors =
+        |from: usize, to: usize| plan.span(from, to).map(|i| area_factor(v, i, plan.prev(i))).product::<f64>();
+    let mut j = factors(plan.a, plan.b);
     if let (Some(c), Some(chain)) = (plan.c, chain) {
-        let along: f64 =
-            plan.span(plan.b, c).map(|i| area_factor(v, i, if plan.toward_light { i + 1 } else { i - 1 })).product();
+        let along = factors(plan.b, c);
         let solid = chain.end_solid_angle_density(scene)?;
         j *= along / solid;
     }
@@ -182,18 +191,10 @@ fn jacobian(scene: &Scene, v: &[Vertex], plan: &Plan, chain: Option<&TracedChain
 /// chain misses `x_b` by more than a thousandth of its length.
 fn chain_of(scene: &Scene, x: &[Vertex], plan: &Plan) -> Option<TracedChain> {
     let (b, c) = (plan.b, plan.c?);
-    let back = Plan { toward_light: !plan.toward_light, ..*plan };
-    let indices: Vec<usize> = back.span(c, b).collect();
+    let indices: Vec<usize> = plan.reversed().span(c, b).collect();
     let scatters: Vec<Scatter> = indices[..indices.len() - 1]
         .iter()
-        .map(|&i| {
-            let n = x[i].ng;
-            if (x[i - 1].p - x[i].p).dot(n) * (x[i + 1].p - x[i].p).dot(n) > 0.0 {
-                Scatter::Reflect
-            } else {
-                Scatter::Refract
-            }
-        })
+        .map(|&i| if reflects(x, i) { Scatter::Reflect } else { Scatter::Refract })
         .collect();
     let shapes: Vec<u32> = indices.iter().map(|&i| x[i].shape).collect();
     let chain = manifold::trace(scene, (x[c].p, x[c].ng), x[indices[0]].p, &scatters, &shapes)?;
@@ -245,8 +246,7 @@ pub fn propose<R: Random>(
                 walks.irreversible += 1;
                 return None;
             }
-            let back = Plan { toward_light: !plan.toward_light, ..plan };
-            for (si, i) in walked.hits.iter().zip(back.span(c, b)).filter(|&(_, i)| i != b) {
+            for (si, i) in walked.hits.iter().zip(plan.reversed().span(c, b)).filter(|&(_, i)| i != b) {
                 y[i] = surface_vertex(scene, si, true);
             }
             chains = Some((current, walked));
@@ -261,12 +261,8 @@ pub fn propose<R: Random>(
     let wy = (y[next].p - y[a].p).normalize();
     let d2 = (wy - wx).length_squared() as f64;
     let kappa_y = concentration(scene, &y, &plan, lambda);
-    let (cx, cy) = match &chains {
-        Some((current, walked)) => (Some(current), Some(walked)),
-        None => (None, None),
-    };
-    let forward = vmf_density(d2, kappa_x) * jacobian(scene, &y, &plan, cy)? / n_x as f64;
-    let backward = vmf_density(d2, kappa_y) * jacobian(scene, x, &plan, cx)? / n_y as f64;
+    let forward = vmf_density(d2, kappa_x) * jacobian(scene, &y, &plan, chains.as_ref().map(|c| &c.1))? / n_x as f64;
+    let backward = vmf_density(d2, kappa_y) * jacobian(scene, x, &plan, chains.as_ref().map(|c| &c.0))? / n_y as f64;
     Some(Proposal { path: y, measured, forward, backward })
 }
 

@@ -271,11 +271,17 @@ pub fn retrace(
     let si = scene.intersect(ray)?;
     let v = surface_vertex(scene, &si, x[i].delta);
     if follow {
-        let reflection = (x[i + 1].p - x[i].p).dot(x[i].ng) * (x[i - 1].p - x[i].p).dot(x[i].ng) > 0.0;
-        let d = delta_direction(v.bsdf(scene), si.shading.to_local(-ray.d), si.at(), reflection)?;
+        let d = delta_direction(v.bsdf(scene), si.shading.to_local(-ray.d), si.at(), reflects(x, i))?;
         *ray = si.spawn_ray(si.shading.to_world(d));
     }
     Some(v)
+}
+
+/// Whether interior vertex `x_i` reflects (its neighbours on one side of its geometric
+/// normal) rather than transmits.
+pub fn reflects(x: &[Vertex], i: usize) -> bool {
+    let n = x[i].ng;
+    (x[i + 1].p - x[i].p).dot(n) * (x[i - 1].p - x[i].p).dot(n) > 0.0
 }
 
 /// The path vertex at hit `si`, scattering through a Dirac lobe or not as `delta` says.
