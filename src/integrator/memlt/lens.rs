@@ -39,12 +39,22 @@ impl Radii {
         Vec2::new(r * phi.cos(), r * phi.sin())
     }
 
-    /// The camera ray through film position `raster` moved by an offset from `u`; `None`
-    /// when the offset leaves the image.
-    pub fn camera_ray(&self, scene: &Scene, raster: Vec2, u: Vec2) -> Option<crate::accel::Ray> {
+    /// The camera ray through film position `raster` moved by an offset from `u` (counted
+    /// in `counters`); `None` when the offset leaves the image.
+    pub fn camera_ray(
+        &self,
+        scene: &Scene,
+        raster: Vec2,
+        u: Vec2,
+        counters: &mut Counters,
+    ) -> Option<crate::accel::Ray> {
         let pos = raster + self.sample(u);
         let res = Vec2::new(scene.film.width as f32, scene.film.height as f32);
-        (pos.x >= 0.0 && pos.y >= 0.0 && pos.x < res.x && pos.y < res.y).then(|| scene.camera.generate_ray(pos))
+        if pos.x < 0.0 || pos.y < 0.0 || pos.x >= res.x || pos.y >= res.y {
+            return None;
+        }
+        counters.camera_rays += 1;
+        Some(scene.camera.generate_ray(pos))
     }
 }
 
@@ -88,7 +98,7 @@ pub fn propose<R: Random>(
     counters: &mut Counters,
 ) -> Option<Proposal> {
     let k = x.len() - 1;
-    let mut ray = radii.camera_ray(scene, raster, rng.next_2d())?;
+    let mut ray = radii.camera_ray(scene, raster, rng.next_2d(), counters)?;
     let mut y = x.to_vec();
     for i in (m..k).rev() {
         y[i] = retrace(scene, &mut ray, x, i, i > m, counters)?;

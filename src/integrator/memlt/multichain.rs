@@ -68,7 +68,7 @@ pub fn propose<R: Random>(
     counters: &mut Counters,
 ) -> Option<Proposal> {
     let k = x.len() - 1;
-    let mut ray = radii.camera_ray(scene, raster, rng.next_2d())?;
+    let mut ray = radii.camera_ray(scene, raster, rng.next_2d(), counters)?;
     let mut y = x.to_vec();
     for i in (l + 1..k).rev() {
         let specular = x[i].delta;
