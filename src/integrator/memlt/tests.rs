@@ -7,13 +7,15 @@
 use super::*;
 use crate::integrator::bidir::VertexKind;
 
-fn cornell() -> Scene {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-ply/cornell_mi.xml");
-    let overrides = [("resx", "24"), ("resy", "24"), ("max_depth", "4")]
-        .iter()
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
+/// A scene of the repository with `-D` style overrides.
+fn scene(file: &str, overrides: &[(&str, &str)]) -> Scene {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
+    let overrides = overrides.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
     Scene::load(&path, &crate::scene::LoadOptions { overrides, ..Default::default() }).unwrap()
+}
+
+fn cornell() -> Scene {
+    scene("scenes/cornell-ply/cornell_mi.xml", &[("resx", "24"), ("resy", "24"), ("max_depth", "4")])
 }
 
 /// Mean and standard error of `n` values from `f(i)`.
@@ -150,12 +152,7 @@ fn regenerated_stretch_density_sums_its_splits() {
 }
 
 fn glass_caustic() -> Scene {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/glass-caustic/scene.xml");
-    let overrides = [("resx", "64"), ("resy", "36"), ("max_depth", "7")]
-        .iter()
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
-    Scene::load(&path, &crate::scene::LoadOptions { overrides, ..Default::default() }).unwrap()
+    scene("scenes/glass-caustic/scene.xml", &[("resx", "64"), ("resy", "36"), ("max_depth", "7")])
 }
 
 /// Detailed balance of one mutator against its reported densities: for `x ∼ π ∝ f` and
