@@ -105,6 +105,7 @@ pub struct MethodEntry {
     pub caustic_perturbation: Option<bool>,
     pub multichain_perturbation: Option<bool>,
     pub lambda: Option<f64>,
+    pub theta_diff: Option<f64>,
     pub pc_light_paths: Option<usize>,
     pub pc_pool_vertices: Option<usize>,
     pub pc_connections: Option<u32>,
@@ -261,6 +262,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.lambda {
         o.mlt.lambda = x;
+    }
+    if let Some(x) = m.theta_diff {
+        o.mlt.theta_diff = x;
     }
     if let Some(b) = &m.mlt_path_integrator {
         o.mlt.base = value_enum::<MltBase>(file, "mlt_path_integrator", b)?;

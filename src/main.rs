@@ -181,6 +181,11 @@ struct RenderArgs {
     /// concentration is the current direction's scattering density times λ²).
     #[arg(long, default_value_t = MltOptions::default().lambda)]
     lambda: f64,
+    /// MEMLT: the half-vector change, in degrees, against which the manifold perturbation
+    /// judges a glossy lobe (a lobe much wider than it is treated as diffuse, one much
+    /// narrower as specular; 0: glossy vertices are never treated as specular).
+    #[arg(long, default_value_t = MltOptions::default().theta_diff)]
+    theta_diff: f64,
     /// Memory limit of a light pool (lvc, pcbpt), in MiB.
     #[arg(long, default_value_t = 4096)]
     max_pool_mb: usize,
@@ -439,6 +444,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         multichain_perturbation: a.multichain_perturbation,
         manifold_perturbation: a.manifold_perturbation,
         lambda: a.lambda,
+        theta_diff: a.theta_diff,
     };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
@@ -535,7 +541,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
             .collect();
         eprintln!(
-            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; bootstrap {:.2} s",
+            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors; bootstrap {:.2} s",
             m.normalisation,
             m.normalisation_error,
             m.seed_normalisation,
@@ -548,6 +554,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.manifold_walks.tried,
             m.manifold_walks.converged,
             m.manifold_walks.irreversible,
+            m.manifold_walks.glossy,
             m.bootstrap_seconds
         );
     } else if !a.quiet && s.bidir.is_some() {

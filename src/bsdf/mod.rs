@@ -96,6 +96,8 @@ pub struct Lobe {
     /// where they differ, as Mitsuba 0.6's `getRoughness`), [`DIFFUSE_ROUGHNESS`] for a
     /// diffuse one.
     pub roughness: f32,
+    /// The microfacet distribution of a glossy lobe.
+    pub microfacet: Option<microfacet::MicrofacetType>,
 }
 
 /// The roughness of a diffuse lobe.
@@ -134,18 +136,22 @@ impl Bsdf {
     /// The lobes of the model at texture coordinates `uv` (where a textured roughness is
     /// looked up): a smooth coating's Dirac reflection over a diffuse base counts as two.
     pub fn lobes(&self, uv: Vec2) -> impl Iterator<Item = Lobe> {
-        let reflection = |roughness| Some(Lobe { transmission: false, roughness });
-        let both = |roughness| [reflection(roughness), Some(Lobe { transmission: true, roughness })];
-        let alpha = |m: microfacet::Microfacet| 0.5 * (m.alpha_u + m.alpha_v);
+        let lobe = |transmission, roughness, microfacet| Some(Lobe { transmission, roughness, microfacet });
+        let reflection = |roughness| lobe(false, roughness, None);
+        let both = |roughness| [reflection(roughness), lobe(true, roughness, None)];
+        let glossy =
+            |m: microfacet::Microfacet, transmission| lobe(transmission, 0.5 * (m.alpha_u + m.alpha_v), Some(m.kind));
         let lobes = match &self.model {
             BsdfModel::Diffuse { .. } => [reflection(DIFFUSE_ROUGHNESS), None],
             BsdfModel::Conductor { .. } => [reflection(0.0), None],
-            BsdfModel::RoughConductor { distribution, .. } => [reflection(alpha(distribution.at(uv))), None],
+            BsdfModel::RoughConductor { distribution, .. } => [glossy(distribution.at(uv), false), None],
             BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => both(0.0),
-            BsdfModel::RoughDielectric { distribution, .. } => both(alpha(distribution.at(uv))),
+            BsdfModel::RoughDielectric { distribution, .. } => {
+                [glossy(distribution.at(uv), false), glossy(distribution.at(uv), true)]
+            }
             BsdfModel::Plastic { .. } => [reflection(0.0), reflection(DIFFUSE_ROUGHNESS)],
             BsdfModel::RoughPlastic { params, .. } => {
-                [reflection(alpha(params.distribution)), reflection(DIFFUSE_ROUGHNESS)]
+                [glossy(params.distribution, false), reflection(DIFFUSE_ROUGHNESS)]
             }
         };
         lobes.into_iter().flatten()

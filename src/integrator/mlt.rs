@@ -62,6 +62,10 @@ pub struct MltOptions {
     /// perturbation's von Mises–Fisher lobe is (its concentration is that density times
     /// `λ²`).
     pub lambda: f64,
+    /// MEMLT: the half-vector change (degrees) against which the manifold perturbation
+    /// judges a glossy lobe: the wider the lobe against it, the more often the vertex is
+    /// treated as diffuse rather than specular (0: glossy vertices are never specular).
+    pub theta_diff: f64,
 }
 
 impl Default for MltOptions {
@@ -78,6 +82,7 @@ impl Default for MltOptions {
             multichain_perturbation: true,
             manifold_perturbation: true,
             lambda: 50.0,
+            theta_diff: 1.0,
         }
     }
 }

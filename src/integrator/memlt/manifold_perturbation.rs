@@ -11,27 +11,40 @@
 //! `max(1/4π, p) λ²` with `p` the scattering density of the current direction at `a`; the
 //! ray is followed through the same Dirac lobes to the new `b`. Between `b` and `c` the
 //! specular chain is walked onto its manifold, `c` fixed, until it ends at the new `b`; the
-//! walk back from the proposal must return to the current path. Glossy vertices are never
-//! treated as specular here: only Dirac lobes are.
+//! walk back from the proposal must return to the current path.
+//!
+//! Which vertices count as specular is drawn before the plan ([`Treatment`]): Dirac ones
+//! always, diffuse ones never, a glossy one with a probability set by its lobe's width
+//! against `--theta-diff` ([`manifold::nonspecular_probability`]); the probability of the
+//! draw enters both densities. A glossy vertex treated as specular keeps its half-vector in
+//! its frame (the offset manifold of its constraint): followed from `a` by
+//! [`manifold::scatter_about`], walked between `b` and `c` by the walk's re-traces.
 //!
 //! Densities are in the convention of the walks of [`super::path`] (each vertex reached
 //! along a ray has area density `|cos| / d²` per unit solid angle behind it, the Dirac lobes'
 //! coefficients left to `f`). From `a` to `b` they are those of a walk in the direction of
 //! travel; from `b` to `c` those of a walk continuing past `b` whose direction at `b` is the
 //! one that reaches `c`: the chain's `|cos| / d²` factors over `dω_b / dA_c`, the solid angle
-//! at `b` per unit area at `c` through the chain (1 when `b` and `c` are neighbours).
+//! at `b` per unit area at `c` through the chain (1 when `b` and `c` are neighbours). A
+//! glossy vertex treated as specular adds the density its kept half-vector gives the
+//! direction leaving it in the direction of travel ([`manifold::half_vector_density`]): with
+//! the half-vectors as the coordinates of those vertices, the map from `a`'s direction and
+//! the half-vectors to the positions is triangular along the direction of travel, and from
+//! `b` to `c` the chain's `dω_b / dA_c` is that of the whole offset chain.
 
 use super::bidirectional::Proposal;
 use super::path::{
     area_factor, as_light, connectible, contribution, join, lobe_pdf, ray_from, reflects, retrace, surface_vertex,
 };
+use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
-use crate::integrator::manifold::{self, Scatter, TracedChain};
+use crate::integrator::manifold::{self, Half, Scatter, TracedChain};
 use crate::math::Frame;
 use crate::sampling::{Random, square_to_von_mises_fisher};
 use crate::scene::Scene;
+use glam::DVec3;
 use serde::Serialize;
 
 /// A walk's end must lie within this fraction of its chain's length of its target.
@@ -81,6 +94,8 @@ pub struct WalkStats {
     pub converged: u64,
     /// Converged walks whose walk back did not return to the current path.
     pub irreversible: u64,
+    /// Perturbations that treated a glossy vertex as specular.
+    pub glossy: u64,
 }
 
 impl std::ops::AddAssign for WalkStats {
@@ -88,22 +103,96 @@ impl std::ops::AddAssign for WalkStats {
         self.tried += o.tried;
         self.converged += o.converged;
         self.irreversible += o.irreversible;
+        self.glossy += o.glossy;
     }
 }
 
-/// Whether `x_i` is a specular vertex: a surface scattering through a Dirac lobe.
+/// Whether `x_i` scatters through a Dirac lobe.
 #[inline]
-fn specular(x: &Vertex) -> bool {
+fn dirac(x: &Vertex) -> bool {
     x.kind == VertexKind::Surface && x.delta
 }
 
-/// The plan from `a` in the given direction, when the path's structure admits one.
-pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool) -> Option<Plan> {
+/// The 90% half-angle of the glossy lobe through which interior vertex `x_i` scatters (by
+/// reflection or transmission, as it does; the narrowest where there are several); `None`
+/// for endpoints, Dirac and diffuse scattering.
+fn glossy_half_angle(scene: &Scene, x: &[Vertex], i: usize) -> Option<f64> {
+    let v = &x[i];
+    if v.kind != VertexKind::Surface || v.delta || i == 0 || i + 1 >= x.len() {
+        return None;
+    }
+    let transmission = !reflects(x, i);
+    v.bsdf(scene)
+        .lobes(v.uv)
+        .filter(|l| l.transmission == transmission && l.roughness > 0.0 && l.roughness.is_finite())
+        .filter_map(|l| Some(manifold::lobe_half_angle(l.microfacet?, l.roughness as f64)))
+        .min_by(f64::total_cmp)
+}
+
+/// Which vertices of a path a manifold perturbation treats as specular (contract
+/// `memlt.md`, "Manifold perturbation", step 2).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Treatment(Vec<bool>);
+
+impl Treatment {
+    /// Dirac vertices only: what decides whether the perturbation suits a path.
+    fn dirac(x: &[Vertex]) -> Treatment {
+        Treatment(x.iter().map(dirac).collect())
+    }
+
+    /// A draw: Dirac vertices specular, diffuse ones not, each glossy one specular with
+    /// probability `1 - nonspecular_probability(θ_d, theta_diff)` (never at `theta_diff` 0).
+    fn draw<R: Random>(scene: &Scene, x: &[Vertex], theta_diff: f64, rng: &mut R) -> Treatment {
+        if theta_diff <= 0.0 {
+            return Treatment::dirac(x);
+        }
+        Treatment(
+            (0..x.len())
+                .map(|i| match glossy_half_angle(scene, x, i) {
+                    Some(t) => (rng.next_1d() as f64) >= manifold::nonspecular_probability(Some(t), theta_diff),
+                    None => dirac(&x[i]),
+                })
+                .collect(),
+        )
+    }
+
+    /// The probability of this treatment of path `x`'s vertices `indices` (a move's changed
+    /// vertices: the others are the same in both paths, and so are their probabilities).
+    fn probability(&self, scene: &Scene, x: &[Vertex], theta_diff: f64, indices: impl Iterator<Item = usize>) -> f64 {
+        if theta_diff <= 0.0 {
+            return f64::from(u8::from(*self == Treatment::dirac(x)));
+        }
+        indices
+            .map(|i| match glossy_half_angle(scene, x, i) {
+                Some(t) => {
+                    let p = manifold::nonspecular_probability(Some(t), theta_diff);
+                    if self.0[i] { 1.0 - p } else { p }
+                }
+                None => f64::from(u8::from(self.0[i] == dirac(&x[i]))),
+            })
+            .product()
+    }
+
+    /// Whether `x_i` is treated as specular.
+    fn specular(&self, i: usize) -> bool {
+        self.0[i]
+    }
+
+    /// Whether `x_i` is a glossy vertex treated as specular.
+    fn glossy(&self, x: &[Vertex], i: usize) -> bool {
+        self.0[i] && !x[i].delta
+    }
+}
+
+/// The plan from `a` in the given direction, when the path's structure and the treatment of
+/// its vertices admit one.
+pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment: &Treatment) -> Option<Plan> {
     let k = x.len() - 1;
+    let specular = |i: usize| treatment.specular(i);
     let ok_start = match x[a].kind {
         VertexKind::Camera => toward_light,
         VertexKind::Light(_) => !toward_light,
-        VertexKind::Surface => connectible(scene, &x[a]),
+        VertexKind::Surface => connectible(scene, &x[a]) && !specular(a),
         VertexKind::Sky => false,
     };
     if !ok_start || (toward_light && a == 0) || (!toward_light && a == k) {
@@ -111,7 +200,7 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool) -> Option
     }
     let step = |i: usize| if toward_light { i.checked_sub(1) } else { (i < k).then_some(i + 1) };
     let mut b = step(a)?;
-    while specular(&x[b]) {
+    while specular(b) {
         b = step(b)?;
     }
     if b == 0 {
@@ -121,7 +210,7 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool) -> Option
         return None;
     }
     let mut c = step(b)?;
-    while specular(&x[c]) {
+    while specular(c) {
         c = step(c)?;
     }
     // A specular chain cannot end at the pinhole: it has no area to find it on.
@@ -131,14 +220,15 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool) -> Option
     (x[c].kind != VertexKind::Surface || connectible(scene, &x[c])).then_some(Plan { a, toward_light, b, c: Some(c) })
 }
 
-/// Every plan a path admits, in a fixed order.
-pub fn plans<'a>(scene: &'a Scene, x: &'a [Vertex]) -> impl Iterator<Item = Plan> + 'a {
-    (0..x.len()).flat_map(move |a| [true, false].into_iter().filter_map(move |t| plan(scene, x, a, t)))
+/// Every plan a path admits under a treatment, in a fixed order.
+pub fn plans<'a>(scene: &'a Scene, x: &'a [Vertex], treatment: &'a Treatment) -> impl Iterator<Item = Plan> + 'a {
+    (0..x.len()).flat_map(move |a| [true, false].into_iter().filter_map(move |t| plan(scene, x, a, t, treatment)))
 }
 
-/// Whether the manifold perturbation suits `x`.
+/// Whether the manifold perturbation suits `x`: a plan with its Dirac vertices alone
+/// specular. (Other treatments may admit none; the perturbation then keeps the path.)
 pub fn suits(scene: &Scene, x: &[Vertex]) -> bool {
-    plans(scene, x).next().is_some()
+    plans(scene, x, &Treatment::dirac(x)).next().is_some()
 }
 
 /// The solid-angle density at `a` of scattering towards its neighbour in the direction of
@@ -171,12 +261,36 @@ fn vmf_density(d2: f64, kappa: f64) -> f64 {
     kappa / (2.0 * std::f64::consts::PI * -(-2.0 * kappa).exp_m1()) * (-kappa * d2 * 0.5).exp()
 }
 
+/// The density its kept half-vector gives the direction leaving `v_i` (a glossy vertex
+/// treated as specular) in the direction of travel.
+fn kept_half_density(scene: &Scene, v: &[Vertex], plan: &Plan, i: usize) -> f64 {
+    let d = |j: usize| (v[j].p - v[i].p).normalize().as_dvec3();
+    manifold::half_vector_density(
+        d(plan.prev(i)),
+        d(plan.next(i)),
+        v[i].frame.n.as_dvec3(),
+        v[i].bsdf(scene).eta() as f64,
+    )
+}
+
 /// The density, up to the direction's, of a path's vertices `a+1 ..= b ..= c` (in the
 /// direction of travel) as the plan produces them; `chain` is its specular chain from `c` to
 /// `b` where `b` and `c` are not neighbours.
-fn jacobian(scene: &Scene, v: &[Vertex], plan: &Plan, chain: Option<&TracedChain>) -> Option<f64> {
-    let factors =
-        |from: usize, to: usize| plan.span(from, to).map(|i| area_factor(v, i, plan.prev(i))).product::<f64>();
+fn jacobian(
+    scene: &Scene,
+    v: &[Vertex],
+    plan: &Plan,
+    treatment: &Treatment,
+    chain: Option<&TracedChain>,
+) -> Option<f64> {
+    let factors = |from: usize, to: usize| {
+        plan.span(from, to)
+            .map(|i| {
+                let kept = if treatment.glossy(v, i) { kept_half_density(scene, v, plan, i) } else { 1.0 };
+                area_factor(v, i, plan.prev(i)) * kept
+            })
+            .product::<f64>()
+    };
     let mut j = factors(plan.a, plan.b);
     if let (Some(c), Some(chain)) = (plan.c, chain) {
         let along = factors(plan.b, c);
@@ -186,44 +300,81 @@ fn jacobian(scene: &Scene, v: &[Vertex], plan: &Plan, chain: Option<&TracedChain
     (j > 0.0 && j.is_finite()).then_some(j)
 }
 
+/// The half-vector vertex `x_i` keeps: the shading normal for a Dirac vertex, its current
+/// generalized half-vector in the world for a glossy one treated as specular.
+fn kept_half(scene: &Scene, x: &[Vertex], i: usize, treatment: &Treatment) -> Half {
+    if !treatment.glossy(x, i) {
+        return Half::Normal;
+    }
+    let d = |j: usize| (x[j].p - x[i].p).normalize().as_dvec3();
+    Half::World(manifold::half_vector(d(i - 1), d(i + 1), x[i].frame.n.as_dvec3(), x[i].bsdf(scene).eta() as f64))
+}
+
 /// The specular chain of `x` from `c` to `b` as a traced chain: how its vertices scatter,
-/// their shapes, and the chain re-traced from `c` through them. `None` when the re-traced
-/// chain misses `x_b` by more than a thousandth of its length.
-fn chain_of(scene: &Scene, x: &[Vertex], plan: &Plan) -> Option<TracedChain> {
+/// the half-vectors they keep, their shapes, and the chain re-traced from `c` through them.
+/// `None` when the re-traced chain misses `x_b` by more than a thousandth of its length.
+fn chain_of(scene: &Scene, x: &[Vertex], plan: &Plan, treatment: &Treatment) -> Option<TracedChain> {
     let (b, c) = (plan.b, plan.c?);
     let indices: Vec<usize> = plan.reversed().span(c, b).collect();
-    let scatters: Vec<Scatter> = indices[..indices.len() - 1]
-        .iter()
-        .map(|&i| if reflects(x, i) { Scatter::Reflect } else { Scatter::Refract })
-        .collect();
+    let interior = &indices[..indices.len() - 1];
+    let scatters: Vec<Scatter> =
+        interior.iter().map(|&i| if reflects(x, i) { Scatter::Reflect } else { Scatter::Refract }).collect();
+    let halves: Vec<Half> = interior.iter().map(|&i| kept_half(scene, x, i, treatment)).collect();
     let shapes: Vec<u32> = indices.iter().map(|&i| x[i].shape).collect();
-    let chain = manifold::trace(scene, (x[c].p, x[c].ng), x[indices[0]].p, &scatters, &shapes)?;
+    let chain = manifold::trace(scene, (x[c].p, x[c].ng), x[indices[0]].p, (&scatters, &halves), &shapes)?;
     ((chain.end().p - x[b].p).length() as f64 <= 1e-3 * chain.length()).then_some(chain)
 }
 
-/// Proposes a manifold perturbation of `x`, with `lambda` the lobe's sharpness.
+/// Re-traces glossy vertex `x_i` along `ray` keeping its half-vector: the hit's vertex, and
+/// the ray turned into the one leaving it with `x_i`'s half-vector in the hit's shading
+/// frame. `None` when the ray leaves the scene or the half-vector cannot be kept there.
+fn retrace_glossy(scene: &Scene, ray: &mut Ray, x: &[Vertex], i: usize, counters: &mut Counters) -> Option<Vertex> {
+    let Half::World(h) = kept_half(scene, x, i, &Treatment(vec![true; x.len()])) else { return None };
+    let f = &x[i].frame;
+    let local = DVec3::new(h.dot(f.s.as_dvec3()), h.dot(f.t.as_dvec3()), h.dot(f.n.as_dvec3()));
+    counters.extension_rays += 1;
+    let si = scene.intersect(ray)?;
+    let v = surface_vertex(scene, &si, false);
+    let g = &v.frame;
+    let m = g.s.as_dvec3() * local.x + g.t.as_dvec3() * local.y + g.n.as_dvec3() * local.z;
+    let scatter = if reflects(x, i) { Scatter::Reflect } else { Scatter::Refract };
+    let eta = v.bsdf(scene).eta() as f64;
+    let wo = manifold::scatter_about(si.wo.as_dvec3().normalize(), m, g.n.as_dvec3(), eta, scatter)?;
+    *ray = si.spawn_ray(wo.as_vec3());
+    Some(v)
+}
+
+/// Proposes a manifold perturbation of `x`, with `lambda` the lobe's sharpness and
+/// `theta_diff` (radians) the half-vector change glossy lobes are judged against.
 pub fn propose<R: Random>(
     scene: &Scene,
     x: &[Vertex],
-    lambda: f64,
+    (lambda, theta_diff): (f64, f64),
     rng: &mut R,
     counters: &mut Counters,
     walks: &mut WalkStats,
 ) -> Option<Proposal> {
-    let n_x = plans(scene, x).count();
+    let treatment = Treatment::draw(scene, x, theta_diff, rng);
+    let n_x = plans(scene, x, &treatment).count();
     let pick = ((rng.next_1d() * n_x as f32) as usize).min(n_x.checked_sub(1)?);
-    let plan = plans(scene, x).nth(pick)?;
+    let plan = plans(scene, x, &treatment).nth(pick)?;
     let (a, b) = (plan.a, plan.b);
+    if plan.span(a, plan.c.unwrap_or(b)).any(|i| treatment.glossy(x, i)) {
+        walks.glossy += 1;
+    }
     let next = plan.next(a);
     let wx = (x[next].p - x[a].p).normalize();
     let kappa_x = concentration(scene, x, &plan, lambda);
     let local = square_to_von_mises_fisher(rng.next_2d(), kappa_x as f32);
     let mut ray = ray_from(&x[a], Frame::from_normal(wx).to_world(local));
-    // From `a` through the same Dirac lobes to the new `b`.
+    // From `a` through the same Dirac lobes and kept half-vectors to the new `b`.
     let mut y = x.to_vec();
     for i in plan.span(a, b) {
-        let follow = i != b;
-        y[i] = retrace(scene, &mut ray, x, i, follow, counters)?;
+        y[i] = if treatment.glossy(x, i) {
+            retrace_glossy(scene, &mut ray, x, i, counters)?
+        } else {
+            retrace(scene, &mut ray, x, i, i != b, counters)?
+        };
     }
     if b == 0 {
         y[0] = as_light(scene, &y[0])?;
@@ -238,7 +389,7 @@ pub fn propose<R: Random>(
                 return None;
             }
         } else {
-            let current = chain_of(scene, x, &plan)?;
+            let current = chain_of(scene, x, &plan, &treatment)?;
             walks.tried += 1;
             let walked = manifold::walk(scene, &current, y[b].p, TOLERANCE).chain?;
             walks.converged += 1;
@@ -247,22 +398,28 @@ pub fn propose<R: Random>(
                 return None;
             }
             for (si, i) in walked.hits.iter().zip(plan.reversed().span(c, b)).filter(|&(_, i)| i != b) {
-                y[i] = surface_vertex(scene, si, true);
+                y[i] = surface_vertex(scene, si, x[i].delta);
             }
             chains = Some((current, walked));
         }
     }
     // The reverse move must be planned the same way.
-    if self::plan(scene, &y, a, plan.toward_light) != Some(plan) {
+    if self::plan(scene, &y, a, plan.toward_light, &treatment) != Some(plan) {
         return None;
     }
-    let n_y = plans(scene, &y).count();
+    let n_y = plans(scene, &y, &treatment).count();
     let measured = contribution(scene, &y)?;
     let wy = (y[next].p - y[a].p).normalize();
     let d2 = (wy - wx).length_squared() as f64;
     let kappa_y = concentration(scene, &y, &plan, lambda);
-    let forward = vmf_density(d2, kappa_x) * jacobian(scene, &y, &plan, chains.as_ref().map(|c| &c.1))? / n_x as f64;
-    let backward = vmf_density(d2, kappa_y) * jacobian(scene, x, &plan, chains.as_ref().map(|c| &c.0))? / n_y as f64;
+    let changed = || plan.span(a, plan.c.unwrap_or(b));
+    let (t_x, t_y) = (
+        treatment.probability(scene, x, theta_diff, changed()),
+        treatment.probability(scene, &y, theta_diff, changed()),
+    );
+    let jacobian = |v: &[Vertex], chain: Option<&TracedChain>| jacobian(scene, v, &plan, &treatment, chain);
+    let forward = vmf_density(d2, kappa_x) * jacobian(&y, chains.as_ref().map(|c| &c.1))? * t_x / n_x as f64;
+    let backward = vmf_density(d2, kappa_y) * jacobian(x, chains.as_ref().map(|c| &c.0))? * t_y / n_y as f64;
     Some(Proposal { path: y, measured, forward, backward })
 }
 

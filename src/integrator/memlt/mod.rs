@@ -178,6 +178,8 @@ struct StepSettings {
     b: f32,
     enabled: [bool; Mutator::ALL.len()],
     lambda: f64,
+    /// The manifold perturbation's `θ_diff`, in radians.
+    theta_diff: f64,
 }
 
 impl Chain {
@@ -210,7 +212,9 @@ impl Chain {
             Mutator::Lens => lens::propose(scene, x, self.current.raster, at, radii, rng, c),
             Mutator::Caustic => caustic::propose(scene, x, at, radii, rng, c),
             Mutator::MultiChain => multichain::propose(scene, x, self.current.raster, at, radii, rng, c),
-            Mutator::Manifold => manifold_perturbation::propose(scene, x, set.lambda, rng, c, &mut self.walks),
+            Mutator::Manifold => {
+                manifold_perturbation::propose(scene, x, (set.lambda, set.theta_diff), rng, c, &mut self.walks)
+            }
         };
         self.proposed[m as usize] += 1;
         let (a, proposal) = match proposal {
@@ -327,6 +331,10 @@ pub fn render(
     let lambda = opts.mlt.lambda;
     if !(lambda.is_finite() && lambda > 0.0) {
         return Err(Error::Usage(format!("--lambda must be a positive number, got {lambda}")));
+    }
+    let theta_diff = opts.mlt.theta_diff;
+    if !(0.0..=180.0).contains(&theta_diff) {
+        return Err(Error::Usage(format!("--theta-diff must be an angle from 0 to 180 degrees, got {theta_diff}")));
     }
     let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
@@ -454,6 +462,7 @@ pub fn render(
             b: b as f32,
             enabled: enabled(&opts.mlt),
             lambda: opts.mlt.lambda,
+            theta_diff: opts.mlt.theta_diff.to_radians(),
         };
         (done, interrupted) = super::run_chains(
             &pool,

@@ -212,12 +212,27 @@ pub fn walk<R: Random>(
     true
 }
 
-/// The ray leaving vertex `x` along `d` (offset off its surface).
+/// The ray leaving vertex `x` along unit `d`, on the line through `x`: its origin is moved
+/// along `d` until it lies off the surface by the usual offset ([`offset_origin`]'s), so
+/// that the vertex the ray finds lies exactly in direction `d` from `x` (a perturbation's
+/// densities are of the directions between the path's vertices: an origin moved along the
+/// normal would bend short edges, near corners, by up to tens of degrees). Within
+/// [`GRAZING`] of the tangent plane the origin takes the rest of the offset along the normal.
 #[inline]
 pub fn ray_from(x: &Vertex, d: Vec3) -> Ray {
-    let o = if x.ng == Vec3::ZERO { x.p } else { offset_origin(x.p, x.ng, d) };
-    Ray::new(o, d)
+    if x.ng == Vec3::ZERO {
+        return Ray::new(x.p, d);
+    }
+    let normal = offset_origin(x.p, x.ng, d) - x.p;
+    let mag = normal.length();
+    let cos = d.dot(x.ng).abs();
+    let along = mag / cos.max(GRAZING);
+    let rest = (mag - along * cos).max(0.0);
+    Ray::new(x.p + d * along + normal * (rest / mag), d)
 }
+
+/// The cosine below which [`ray_from`] leaves the line through its vertex.
+pub const GRAZING: f32 = 0.05;
 
 /// Samples the direction a walk leaves the kept vertex `v[i]` along, away from the kept
 /// neighbour `v[j]` (`j = i ± 1`): emission from the light, a film position from the
