@@ -240,18 +240,34 @@ fn every_mutator_is_in_detailed_balance() {
 /// refracts into one face and out of another at different angles (a sphere's two crossings
 /// would mirror each other).
 fn glass_cube() -> Scene {
-    let text = r#"<scene version="3.0.0">
-<integrator type="path"><integer name="max_depth" value="4"/></integrator>
-<sensor type="perspective"><float name="fov" value="50"/>
-  <transform name="to_world"><lookat origin="0, -4, 3" target="0, 0, 0" up="0, 0, 1"/></transform>
-  <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="24"/></film></sensor>
-<shape type="cube"><transform name="to_world"><scale value="0.6"/><rotate y="1" angle="35"/><rotate x="1" angle="20"/><translate z="1.2"/></transform>
+    let shapes = r#"<shape type="cube"><transform name="to_world"><scale value="0.6"/><rotate y="1" angle="35"/><rotate x="1" angle="20"/><translate z="1.2"/></transform>
   <bsdf type="dielectric"><float name="int_ior" value="1.5"/></bsdf></shape>
 <shape type="rectangle"><transform name="to_world"><scale value="4"/></transform><bsdf type="diffuse"/></shape>
 <shape type="rectangle"><transform name="to_world"><scale value="0.5"/><rotate x="1" angle="180"/><translate x="0.5" z="3"/></transform>
-  <emitter type="area"><rgb name="radiance" value="5"/></emitter></shape>
-</scene>"#;
-    Scene::load_str(text, std::path::Path::new("glass-cube.xml"), &crate::scene::LoadOptions::default()).unwrap()
+  <emitter type="area"><rgb name="radiance" value="5"/></emitter></shape>"#;
+    inline_scene("glass-cube.xml", (4, 50.0), ("0, -4, 3", "0, 0, 0"), (24, 24), shapes)
+}
+
+/// A scene of `shapes` seen by a pinhole (`lookat` origin and target, `z` up) through a film
+/// of `size`, paths of at most `max_depth` edges.
+fn inline_scene(
+    name: &str,
+    (max_depth, fov): (i32, f32),
+    lookat: (&str, &str),
+    size: (u32, u32),
+    shapes: &str,
+) -> Scene {
+    let text = format!(
+        r#"<scene version="3.0.0">
+<integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
+<sensor type="perspective"><float name="fov" value="{fov}"/>
+  <transform name="to_world"><lookat origin="{}" target="{}" up="0, 0, 1"/></transform>
+  <film type="hdrfilm"><integer name="width" value="{}"/><integer name="height" value="{}"/></film></sensor>
+{shapes}
+</scene>"#,
+        lookat.0, lookat.1, size.0, size.1
+    );
+    Scene::load_str(&text, std::path::Path::new(name), &crate::scene::LoadOptions::default()).unwrap()
 }
 
 #[test]
@@ -279,20 +295,14 @@ fn whole_path_density_holds_through_flat_refractions() {
 /// generator's `f / p` too heavy-tailed for the balance check's sample means; refractions
 /// keeping their half-vectors are checked in `integrator::manifold`'s tests.)
 fn glossy() -> Scene {
-    let text = r#"<scene version="3.0.0">
-<integrator type="path"><integer name="max_depth" value="5"/></integrator>
-<sensor type="perspective"><float name="fov" value="45"/>
-  <transform name="to_world"><lookat origin="0, -4, 1.6" target="0, 0, 0.5" up="0, 0, 1"/></transform>
-  <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="24"/></film></sensor>
-<shape type="rectangle"><transform name="to_world"><scale value="4"/></transform>
+    let shapes = r#"<shape type="rectangle"><transform name="to_world"><scale value="4"/></transform>
   <bsdf type="roughconductor"><string name="distribution" value="ggx"/><float name="alpha" value="0.08"/></bsdf></shape>
 <shape type="sphere"><point name="center" x="0.3" y="0" z="0.6"/><float name="radius" value="0.6"/>
   <bsdf type="roughconductor"><string name="distribution" value="beckmann"/><float name="alpha" value="0.1"/></bsdf></shape>
 <shape type="rectangle"><transform name="to_world"><scale value="4"/><rotate x="1" angle="90"/><translate y="2" z="2"/></transform><bsdf type="diffuse"/></shape>
 <shape type="rectangle"><transform name="to_world"><scale value="0.3"/><rotate x="1" angle="180"/><translate x="-0.8" y="0.5" z="2.5"/></transform>
-  <emitter type="area"><rgb name="radiance" value="20"/></emitter></shape>
-</scene>"#;
-    Scene::load_str(text, std::path::Path::new("glossy.xml"), &crate::scene::LoadOptions::default()).unwrap()
+  <emitter type="area"><rgb name="radiance" value="20"/></emitter></shape>"#;
+    inline_scene("glossy.xml", (5, 45.0), ("0, -4, 1.6", "0, 0, 0.5"), (32, 24), shapes)
 }
 
 #[test]
