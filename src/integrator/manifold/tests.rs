@@ -601,16 +601,16 @@ fn offset_chains_walk_keeping_their_half_vectors_and_their_densities_hold() {
     assert!((etendue / expected - 1.0).abs() > 1e-2, "étendue {etendue} against {expected}");
 }
 
-/// `|det ∂(x_1 … x_k) / ∂(C_1 … C_k)|` of a chain whose specular vertices all keep offset
-/// half-vectors, its start and end fixed, by central differences: each offset moved, the
-/// chain re-traced and walked back to its end, the vertices' moves measured in their tangent
-/// planes (area).
+/// `|det ∂(x_g …) / ∂(C_g …)|` over a chain's specular vertices `x_g` that keep offset
+/// half-vectors, its start and end fixed (and its other specular vertices on their
+/// constraints), by central differences: each offset moved, the chain re-traced and walked
+/// back to its end, those vertices' moves measured in their tangent planes (area).
 fn offset_jacobian(s: &Scene, chain: &TracedChain, d: f64) -> f64 {
-    let k = chain.halves.len();
-    let positions = |c: &TracedChain| -> Vec<DVec3> { c.hits[..k].iter().map(|h| h.p.as_dvec3()).collect() };
+    let offsets: Vec<usize> = (0..chain.halves.len()).filter(|&j| matches!(chain.halves[j], Half::Local(_))).collect();
+    let positions = |c: &TracedChain| -> Vec<DVec3> { offsets.iter().map(|&j| c.hits[j].p.as_dvec3()).collect() };
     let moved = |j: usize, axis: usize, e: f64| -> Vec<DVec3> {
         let mut halves = chain.halves.clone();
-        let Half::Local(m) = halves[j] else { panic!("all offset") };
+        let Half::Local(m) = halves[j] else { unreachable!("an offset vertex") };
         let mut t = DVec2::new(m.x, m.y);
         t[axis] += e;
         halves[j] = Half::Local(DVec3::new(t.x, t.y, m.z.signum() * (1.0 - t.length_squared()).sqrt()));
@@ -619,16 +619,17 @@ fn offset_jacobian(s: &Scene, chain: &TracedChain, d: f64) -> f64 {
             .expect("the moved chain traces");
         positions(&walk(s, &first, chain.end().p, 2e-6).chain.expect("the moved chain walks back"))
     };
-    let bases: Vec<(DVec3, DVec3)> = chain.hits[..k].iter().map(|h| h.ng.as_dvec3().any_orthonormal_pair()).collect();
-    let n = 2 * k;
+    let bases: Vec<(DVec3, DVec3)> =
+        offsets.iter().map(|&j| chain.hits[j].ng.as_dvec3().any_orthonormal_pair()).collect();
+    let n = 2 * offsets.len();
     let mut m = vec![vec![0.0; n]; n];
-    for j in 0..k {
+    for (c, &j) in offsets.iter().enumerate() {
         for axis in 0..2 {
             let (plus, minus) = (moved(j, axis, d), moved(j, axis, -d));
             for (i, (u, v)) in bases.iter().enumerate() {
                 let dp = (plus[i] - minus[i]) / (2.0 * d);
-                m[2 * i][2 * j + axis] = dp.dot(*u);
-                m[2 * i + 1][2 * j + axis] = dp.dot(*v);
+                m[2 * i][2 * c + axis] = dp.dot(*u);
+                m[2 * i + 1][2 * c + axis] = dp.dot(*v);
             }
         }
     }
@@ -743,4 +744,37 @@ fn kept_half_vectors_followed_from_a_point_give_the_density_the_perturbation_rep
     assert!((numeric / expected - 1.0).abs() < 3e-3, "{numeric} against {expected}");
     // Without the kept half-vectors' densities it would be another.
     assert!((numeric * product - 1.0).abs() > 0.1, "{} against 1", numeric * product);
+}
+
+#[test]
+fn a_chain_of_dirac_and_offset_vertices_gives_the_density_the_perturbation_reports() {
+    // The glass ball's chain with its first crossing keeping an offset half-vector and its
+    // second a Dirac refraction. Travelling from the end `b` (on the floor) to the start `c`,
+    // the offset vertex's position per unit of its half-vector's coordinates is
+    // `dω_b/dA_c` over `dω_b/dA_g` through the Dirac crossing, the area factor of `c` from
+    // `g`, and the kept half-vector's density of the direction leaving `g` towards `c`.
+    let s = scene(&format!("{GLASS_BALL}{NEAR_FLOOR}{CEILING}"));
+    let offset = offset_chain(&s);
+    let mut halves = offset.halves.clone();
+    halves[1] = Half::Normal;
+    let shapes: Vec<u32> = offset.hits.iter().map(|h| h.shape).collect();
+    let chain = trace(&s, (offset.start, offset.start_ng), offset.hits[0].p, (&offset.scatters(), &halves), &shapes)
+        .expect("the mixed chain traces");
+    let v = chain.vertices(&s).unwrap();
+    let (c, g) = (v[0].p, v[1].p);
+    // `dω_b/dA_g` through the Dirac crossing: the sub-chain from the end to `g`.
+    let through_dirac = solid_angle_density(&[v[3], v[2], v[1]]).unwrap();
+    let to_c = c - g;
+    let area_c = chain.start_ng.as_dvec3().dot(to_c).abs() / to_c.length_squared() / to_c.length();
+    let si = &chain.hits[0];
+    let kept = half_vector_density((v[2].p - g).normalize(), to_c.normalize(), v[1].n, s.bsdf(si).eta() as f64);
+    let expected = chain.end_solid_angle_density(&s).unwrap() / (through_dirac * area_c * kept);
+    let numeric = offset_jacobian(&s, &chain, 1e-3);
+    assert!((numeric / expected - 1.0).abs() < 3e-3, "{numeric} against {expected}");
+    // The area factors along the Dirac crossing in place of its generalized geometric term
+    // would give another density (the ball's curvature focuses the chain).
+    let factor = |a: DVec3, b: DVec3, n: DVec3| n.dot(a - b).abs() / (a - b).length_squared() / (a - b).length();
+    let along = factor(v[3].p, v[2].p, v[2].n) * factor(v[2].p, v[1].p, si.ng.as_dvec3());
+    let naive = expected * through_dirac / along;
+    assert!((naive / numeric - 1.0).abs() > 0.05, "{naive} against {numeric}");
 }
