@@ -132,6 +132,10 @@ fn memlt_refuses_options_that_leave_no_chain() {
     o.mlt.lambda = 0.0;
     let e = integrator::render(&scene, &o).err().expect("λ = 0 must be refused").to_string();
     assert!(e.contains("--lambda"), "{e}");
+    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));
+    o.mlt.theta_diff = -1.0;
+    let e = integrator::render(&scene, &o).err().expect("a negative θ_diff must be refused").to_string();
+    assert!(e.contains("--theta-diff"), "{e}");
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Time(1.0));
     o.mlt.bootstrap_fraction = 1.0;
     let e = integrator::render(&scene, &o).err().expect("the whole time on the bootstrap must be refused").to_string();
