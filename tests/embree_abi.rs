@@ -45,9 +45,12 @@ fn batches_of_hits_equal_single_queries() {
         Geometry::Triangles { positions: &near, indices: &indices },
     ];
     let accel = Accel::build(Backend::Embree, &geometry, BuildOptions::default()).unwrap();
+    // No ray meets the quads' shared diagonal (x = y), where the two triangles' hits tie
+    // and which one Embree reports may differ between a batch and a single query (it does
+    // on AVX-512).
     let rays: Vec<Ray> = (0..64)
         .map(|i| {
-            let (x, y) = ((i % 8) as f32 / 4.0 - 0.9, (i / 8) as f32 / 4.0 - 0.9);
+            let (x, y) = ((i % 8) as f32 / 4.0 - 0.9, (i / 8) as f32 / 4.0 - 0.85);
             Ray::new(Vec3::new(x, y, 0.0), Vec3::Z)
         })
         .collect();

@@ -303,11 +303,13 @@ fn jacobian(
 /// The half-vector vertex `x_i` keeps: the shading normal for a Dirac vertex, its current
 /// generalized half-vector in the world for a glossy one treated as specular.
 fn kept_half(scene: &Scene, x: &[Vertex], i: usize, treatment: &Treatment) -> Half {
-    if !treatment.glossy(x, i) {
-        return Half::Normal;
-    }
+    if treatment.glossy(x, i) { Half::World(half_vector_of(scene, x, i)) } else { Half::Normal }
+}
+
+/// The generalized half-vector of interior vertex `x_i` in the world.
+fn half_vector_of(scene: &Scene, x: &[Vertex], i: usize) -> DVec3 {
     let d = |j: usize| (x[j].p - x[i].p).normalize().as_dvec3();
-    Half::World(manifold::half_vector(d(i - 1), d(i + 1), x[i].frame.n.as_dvec3(), x[i].bsdf(scene).eta() as f64))
+    manifold::half_vector(d(i - 1), d(i + 1), x[i].frame.n.as_dvec3(), x[i].bsdf(scene).eta() as f64)
 }
 
 /// The specular chain of `x` from `c` to `b` as a traced chain: how its vertices scatter,
@@ -329,7 +331,7 @@ fn chain_of(scene: &Scene, x: &[Vertex], plan: &Plan, treatment: &Treatment) -> 
 /// the ray turned into the one leaving it with `x_i`'s half-vector in the hit's shading
 /// frame. `None` when the ray leaves the scene or the half-vector cannot be kept there.
 fn retrace_glossy(scene: &Scene, ray: &mut Ray, x: &[Vertex], i: usize, counters: &mut Counters) -> Option<Vertex> {
-    let Half::World(h) = kept_half(scene, x, i, &Treatment(vec![true; x.len()])) else { return None };
+    let h = half_vector_of(scene, x, i);
     let f = &x[i].frame;
     let local = DVec3::new(h.dot(f.s.as_dvec3()), h.dot(f.t.as_dvec3()), h.dot(f.n.as_dvec3()));
     counters.extension_rays += 1;
