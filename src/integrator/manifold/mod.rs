@@ -429,19 +429,17 @@ pub fn trace(
         if let Some(&scatter) = scatters.get(i) {
             let n = si.shading.n;
             let half = halves.get(i).copied().unwrap_or(Half::Normal);
-            let d = match (half, scatter) {
-                (Half::Normal, Scatter::Reflect) => reflect(si.wo, n),
-                (Half::Normal, Scatter::Refract) => refract(si.wo, n, scene.bsdf(&si).eta())?.0,
+            let (d, keep) = match (half, scatter) {
+                (Half::Normal, Scatter::Reflect) => (reflect(si.wo, n), half),
+                (Half::Normal, Scatter::Refract) => (refract(si.wo, n, scene.bsdf(&si).eta())?.0, half),
                 _ => {
                     let v = ChainVertex::at(scene, &si)?;
                     let m = half.world(&v);
-                    kept.push(if let Half::World(_) = half { Half::Local(v.to_local(m)) } else { half });
-                    scatter_about(si.wo.as_dvec3().normalize(), m, v.n, v.eta, scatter)?.as_vec3()
+                    let wo = scatter_about(si.wo.as_dvec3().normalize(), m, v.n, v.eta, scatter)?;
+                    (wo.as_vec3(), Half::Local(v.to_local(m)))
                 }
             };
-            if half == Half::Normal {
-                kept.push(Half::Normal);
-            }
+            kept.push(if let Half::World(_) = half { keep } else { half });
             ray = si.spawn_ray(d.try_normalize()?);
         }
         hits.push(si);
@@ -537,9 +535,10 @@ pub fn lobe_half_angle(kind: crate::bsdf::microfacet::MicrofacetType, alpha: f64
 /// The probability that the manifold perturbation treats a vertex as non-specular (contract
 /// `memlt.md`, step 2): 1 for a diffuse lobe, 0 for a Dirac one, and for a glossy one of
 /// 90% half-angle `θ_d` (see [`lobe_half_angle`]) `(1 - cos θ_d) / (1 - cos(θ_d + θ_diff))`,
-/// where `θ_diff` is the running average of the half-vector changes the perturbation has
-/// produced: a lobe much wider than the changes is walked over as if it were diffuse, one
-/// much narrower as if it were a mirror. The probability enters both proposal densities.
+/// where `θ_diff` is the half-vector change lobes are judged against (`--theta-diff`; Mitsuba
+/// 0.6 keeps a running average of the changes its perturbations produced): a lobe much
+/// wider than the changes is walked over as if it were diffuse, one much narrower as if it
+/// were a mirror. The probability enters both proposal densities.
 pub fn nonspecular_probability(lobe_half_angle: Option<f64>, theta_diff: f64) -> f64 {
     match lobe_half_angle {
         None => 1.0,

@@ -601,6 +601,15 @@ fn offset_chains_walk_keeping_their_half_vectors_and_their_densities_hold() {
     assert!((etendue / expected - 1.0).abs() > 1e-2, "étendue {etendue} against {expected}");
 }
 
+/// An offset half-vector with its constraint coordinate `axis` (`ĥ·s` or `ĥ·t`) moved by `e`,
+/// on the same side of the tangent plane.
+fn nudged(half: Half, axis: usize, e: f64) -> Half {
+    let Half::Local(m) = half else { panic!("an offset vertex") };
+    let mut t = DVec2::new(m.x, m.y);
+    t[axis] += e;
+    Half::Local(DVec3::new(t.x, t.y, m.z.signum() * (1.0 - t.length_squared()).sqrt()))
+}
+
 /// `|det ∂(x_g …) / ∂(C_g …)|` over a chain's specular vertices `x_g` that keep offset
 /// half-vectors, its start and end fixed (and its other specular vertices on their
 /// constraints), by central differences: each offset moved, the chain re-traced and walked
@@ -610,10 +619,7 @@ fn offset_jacobian(s: &Scene, chain: &TracedChain, d: f64) -> f64 {
     let positions = |c: &TracedChain| -> Vec<DVec3> { offsets.iter().map(|&j| c.hits[j].p.as_dvec3()).collect() };
     let moved = |j: usize, axis: usize, e: f64| -> Vec<DVec3> {
         let mut halves = chain.halves.clone();
-        let Half::Local(m) = halves[j] else { unreachable!("an offset vertex") };
-        let mut t = DVec2::new(m.x, m.y);
-        t[axis] += e;
-        halves[j] = Half::Local(DVec3::new(t.x, t.y, m.z.signum() * (1.0 - t.length_squared()).sqrt()));
+        halves[j] = nudged(halves[j], axis, e);
         let shapes: Vec<u32> = chain.hits.iter().map(|h| h.shape).collect();
         let first = trace(s, (chain.start, chain.start_ng), chain.hits[0].p, (&chain.scatters(), &halves), &shapes)
             .expect("the moved chain traces");
@@ -709,10 +715,7 @@ fn kept_half_vectors_followed_from_a_point_give_the_density_the_perturbation_rep
             dir = (w + [e1, e2][c] * e).normalize();
         } else {
             let (j, axis) = ((c - 2) / 2, (c - 2) % 2);
-            let Half::Local(m) = halves[j] else { panic!("all offset") };
-            let mut t = DVec2::new(m.x, m.y);
-            t[axis] += e;
-            halves[j] = Half::Local(DVec3::new(t.x, t.y, m.z.signum() * (1.0 - t.length_squared()).sqrt()));
+            halves[j] = nudged(halves[j], axis, e);
         }
         let aim = a + (dir * 2.0).as_vec3();
         let traced = trace(&s, (a, Vec3::ZERO), aim, (&scatters, &halves), &shapes).expect("the moved chain traces");

@@ -160,7 +160,7 @@ impl Treatment {
     /// vertices: the others are the same in both paths, and so are their probabilities).
     fn probability(&self, scene: &Scene, x: &[Vertex], theta_diff: f64, indices: impl Iterator<Item = usize>) -> f64 {
         if theta_diff <= 0.0 {
-            return f64::from(u8::from(*self == Treatment::dirac(x)));
+            return f64::from(u8::from(self.0.iter().zip(x).all(|(&s, v)| s == dirac(v))));
         }
         indices
             .map(|i| match glossy_half_angle(scene, x, i) {
@@ -312,6 +312,11 @@ fn half_vector_of(scene: &Scene, x: &[Vertex], i: usize) -> DVec3 {
     manifold::half_vector(d(i - 1), d(i + 1), x[i].frame.n.as_dvec3(), x[i].bsdf(scene).eta() as f64)
 }
 
+/// How interior vertex `x_i` scatters: by reflection or by refraction.
+fn scatter_of(x: &[Vertex], i: usize) -> Scatter {
+    if reflects(x, i) { Scatter::Reflect } else { Scatter::Refract }
+}
+
 /// The specular chain of `x` from `c` to `b` as a traced chain: how its vertices scatter,
 /// the half-vectors they keep, their shapes, and the chain re-traced from `c` through them.
 /// `None` when the re-traced chain misses `x_b` by more than a thousandth of its length.
@@ -319,8 +324,7 @@ fn chain_of(scene: &Scene, x: &[Vertex], plan: &Plan, treatment: &Treatment) -> 
     let (b, c) = (plan.b, plan.c?);
     let indices: Vec<usize> = plan.reversed().span(c, b).collect();
     let interior = &indices[..indices.len() - 1];
-    let scatters: Vec<Scatter> =
-        interior.iter().map(|&i| if reflects(x, i) { Scatter::Reflect } else { Scatter::Refract }).collect();
+    let scatters: Vec<Scatter> = interior.iter().map(|&i| scatter_of(x, i)).collect();
     let halves: Vec<Half> = interior.iter().map(|&i| kept_half(scene, x, i, treatment)).collect();
     let shapes: Vec<u32> = indices.iter().map(|&i| x[i].shape).collect();
     let chain = manifold::trace(scene, (x[c].p, x[c].ng), x[indices[0]].p, (&scatters, &halves), &shapes)?;
@@ -339,9 +343,8 @@ fn retrace_glossy(scene: &Scene, ray: &mut Ray, x: &[Vertex], i: usize, counters
     let v = surface_vertex(scene, &si, false);
     let g = &v.frame;
     let m = g.s.as_dvec3() * local.x + g.t.as_dvec3() * local.y + g.n.as_dvec3() * local.z;
-    let scatter = if reflects(x, i) { Scatter::Reflect } else { Scatter::Refract };
     let eta = v.bsdf(scene).eta() as f64;
-    let wo = manifold::scatter_about(si.wo.as_dvec3().normalize(), m, g.n.as_dvec3(), eta, scatter)?;
+    let wo = manifold::scatter_about(si.wo.as_dvec3().normalize(), m, g.n.as_dvec3(), eta, scatter_of(x, i))?;
     *ray = si.spawn_ray(wo.as_vec3());
     Some(v)
 }
@@ -361,7 +364,9 @@ pub fn propose<R: Random>(
     let pick = ((rng.next_1d() * n_x as f32) as usize).min(n_x.checked_sub(1)?);
     let plan = plans(scene, x, &treatment).nth(pick)?;
     let (a, b) = (plan.a, plan.b);
-    if plan.span(a, plan.c.unwrap_or(b)).any(|i| treatment.glossy(x, i)) {
+    // The vertices the move changes.
+    let changed = || plan.span(a, plan.c.unwrap_or(b));
+    if changed().any(|i| treatment.glossy(x, i)) {
         walks.glossy += 1;
     }
     let next = plan.next(a);
@@ -414,7 +419,6 @@ pub fn propose<R: Random>(
     let wy = (y[next].p - y[a].p).normalize();
     let d2 = (wy - wx).length_squared() as f64;
     let kappa_y = concentration(scene, &y, &plan, lambda);
-    let changed = || plan.span(a, plan.c.unwrap_or(b));
     let (t_x, t_y) = (
         treatment.probability(scene, x, theta_diff, changed()),
         treatment.probability(scene, &y, theta_diff, changed()),
