@@ -106,6 +106,7 @@ pub struct MethodEntry {
     pub multichain_perturbation: Option<bool>,
     pub lambda: Option<f64>,
     pub theta_diff: Option<f64>,
+    pub chains: Option<usize>,
     pub pc_light_paths: Option<usize>,
     pub pc_pool_vertices: Option<usize>,
     pub pc_connections: Option<u32>,
@@ -265,6 +266,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.theta_diff {
         o.mlt.theta_diff = x;
+    }
+    if let Some(x) = m.chains {
+        o.mlt.chains = x;
     }
     if let Some(b) = &m.mlt_path_integrator {
         o.mlt.base = value_enum::<MltBase>(file, "mlt_path_integrator", b)?;

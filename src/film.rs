@@ -394,6 +394,15 @@ impl Film {
         self.combine_splats(other, |d, s| d.add_sum(s));
     }
 
+    /// Adds the splats and dropped samples of other films (a Markov-chain render's worker
+    /// films; exact, so their order does not matter).
+    pub fn add_splat_films(&mut self, others: &[Film]) {
+        for f in others {
+            self.add_film_splats(f);
+            self.invalid_samples += f.invalid_samples;
+        }
+    }
+
     /// Adds each of `other`'s splat sums into this film's with `add` (creating this film's
     /// splats when it has none).
     fn combine_splats(&mut self, other: &Film, add: impl Fn(&mut ExactSum, ExactSum)) {

@@ -186,6 +186,10 @@ struct RenderArgs {
     /// narrower as specular; 0: glossy vertices are never treated as specular).
     #[arg(long, default_value_t = MltOptions::default().theta_diff)]
     theta_diff: f64,
+    /// PSSMLT and MEMLT: Markov chains, each started from a bootstrap path drawn in
+    /// proportion to its contribution (the image does not depend on the thread count).
+    #[arg(long, default_value_t = MltOptions::default().chains)]
+    chains: usize,
     /// Memory limit of a light pool (lvc, pcbpt), in MiB.
     #[arg(long, default_value_t = 4096)]
     max_pool_mb: usize,
@@ -445,6 +449,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         manifold_perturbation: a.manifold_perturbation,
         lambda: a.lambda,
         theta_diff: a.theta_diff,
+        chains: a.chains,
     };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {

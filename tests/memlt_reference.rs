@@ -90,7 +90,7 @@ fn memlt_glass_caustic() {
 }
 
 #[test]
-fn memlt_is_deterministic_for_a_seed_and_thread_count() {
+fn memlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     let run = |seed, threads| {
         let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
@@ -102,8 +102,12 @@ fn memlt_is_deterministic_for_a_seed_and_thread_count() {
     let bits = |o: &RenderOutput| o.image.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
     let a = run(7, 2);
     assert_eq!(bits(&a), bits(&run(7, 2)), "same seed and threads, different image");
+    // The chains (64) run the same mutations whichever thread runs them.
+    assert_eq!(bits(&a), bits(&run(7, 1)), "one thread against two, different image");
+    assert_eq!(bits(&a), bits(&run(7, 3)), "three threads against two, different image");
     assert_ne!(bits(&a), bits(&run(8, 2)), "the seed must change the image");
     let s = a.stats.memlt.as_ref().unwrap();
+    assert_eq!(s.chains, 64);
     assert_eq!(s.mutations, 4 * 48 * 40);
     assert_eq!(s.mutators.iter().map(|m| m.proposed).sum::<u64>(), s.mutations);
 }
@@ -140,6 +144,12 @@ fn memlt_refuses_options_that_leave_no_chain() {
     o.mlt.bootstrap_fraction = 1.0;
     let e = integrator::render(&scene, &o).err().expect("the whole time on the bootstrap must be refused").to_string();
     assert!(e.contains("--bootstrap-fraction"), "{e}");
+    for kind in [IntegratorKind::Memlt, IntegratorKind::Pssmlt] {
+        let mut o = RenderOptions::new(kind, Budget::Spp(1));
+        o.mlt.chains = 0;
+        let e = integrator::render(&scene, &o).err().expect("no chain must be refused").to_string();
+        assert!(e.contains("--chains"), "{kind:?}: {e}");
+    }
 }
 
 #[test]

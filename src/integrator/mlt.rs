@@ -9,8 +9,9 @@
 //! missed. The scalar contribution of a state is the sum of the luminances of everything it
 //! adds to the film. Both the current and the proposed state are splatted with their
 //! expected weights; the image is scaled by the normalisation `b` estimated from
-//! `--bootstrap` independent samples. One chain per worker thread, each with its own seed and
-//! film, merged in order: a fixed seed and thread count give the same image.
+//! `--bootstrap` independent samples. `--chains` chains (64), each with its own seed, run the
+//! same number of mutations; the worker threads splat them into films of their own, whose
+//! exact sums make the image independent of the thread count.
 
 use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};
@@ -66,6 +67,10 @@ pub struct MltOptions {
     /// judges a glossy lobe: the wider the lobe against it, the more often the vertex is
     /// treated as diffuse rather than specular (0: glossy vertices are never specular).
     pub theta_diff: f64,
+    /// Markov chains, each started from a bootstrap path drawn in proportion to its
+    /// contribution, all run for the same number of mutations (independent of the
+    /// number of threads).
+    pub chains: usize,
 }
 
 impl Default for MltOptions {
@@ -83,6 +88,7 @@ impl Default for MltOptions {
             manifold_perturbation: true,
             lambda: 50.0,
             theta_diff: 1.0,
+            chains: 64,
         }
     }
 }
@@ -321,7 +327,6 @@ struct Chain {
     current: Contributions,
     f: f32,
     scratch: Scratch,
-    film: Film,
     counters: Counters,
     stats: MltStats,
     /// Sum of the contributions of large-step proposals.
@@ -334,17 +339,17 @@ struct Chain {
 impl Chain {
     /// One mutation: a proposal (large or small step), both states splatted with their
     /// expected weights, the proposal accepted or not.
-    fn step(&mut self, ev: &Evaluator, b: f32) {
+    fn step(&mut self, ev: &Evaluator, b: f32, film: &mut Film) {
         let (proposed, buf) = (&mut self.proposed, &mut self.buf);
         self.rng.start_iteration(false);
         let large = self.rng.is_large_step();
         let fp = ev.eval(&mut self.rng, &mut self.scratch, proposed, &mut self.counters);
         let a = if self.f > 0.0 { (fp / self.f).min(1.0) } else { 1.0 };
         if fp > 0.0 {
-            deposit(&mut self.film, proposed, a * b / fp, buf);
+            deposit(film, proposed, a * b / fp, buf);
         }
         if self.f > 0.0 {
-            deposit(&mut self.film, &self.current, (1.0 - a) * b / self.f, buf);
+            deposit(film, &self.current, (1.0 - a) * b / self.f, buf);
         }
         if large {
             self.stats.large_proposed += 1;
@@ -367,14 +372,11 @@ impl Chain {
     }
 }
 
-/// The chains' films added in order (into `film`), and the normalisation refined with
-/// every large step: the bootstrap's `n_boot` samples of mean `b` and the large-step
-/// proposals are all independent uniform samples.
-fn merge_chains(chains: &[Chain], film: &mut Film, b: f64, n_boot: usize) -> f64 {
+/// The normalisation refined with every large step: the bootstrap's `n_boot` samples of
+/// mean `b` and the large-step proposals are all independent uniform samples.
+fn refined_normalisation(chains: &[Chain], b: f64, n_boot: usize) -> f64 {
     let (mut sum, mut count) = (b * n_boot as f64, n_boot as f64);
     for ch in chains {
-        film.add_film_splats(&ch.film);
-        film.invalid_samples += ch.film.invalid_samples;
         sum += ch.large_sum;
         count += ch.stats.large_proposed as f64;
     }
@@ -478,6 +480,9 @@ pub fn render(
     if mo.bootstrap == 0 {
         return Err(crate::error::Error::Usage("--bootstrap must be at least 1".into()));
     }
+    if mo.chains == 0 {
+        return Err(crate::error::Error::Usage("--chains must be at least 1".into()));
+    }
     if mo.base == MltBase::Bdpt {
         super::bidir::bdpt::check_lights(scene, "pssmlt").map_err(crate::error::Error::Usage)?;
     }
@@ -507,7 +512,7 @@ pub fn render(
         normalisation: b,
         bootstrap_normalisation: b,
         bootstrap_samples: weights.len() as u64,
-        chains: threads,
+        chains: mo.chains,
         bootstrap_seconds,
         ..Default::default()
     };
@@ -520,7 +525,7 @@ pub fn render(
             Budget::Spp(spp) => spp as u64 * pixels,
             Budget::Time(_) => u64::MAX,
         };
-        let mut chains: Vec<Chain> = (0..threads as u64)
+        let mut chains: Vec<Chain> = (0..mo.chains as u64)
             .map(|i| {
                 let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
                 let (j, _) = dist.sample(pick.next_1d());
@@ -539,7 +544,6 @@ pub fn render(
                     current,
                     f,
                     scratch,
-                    film: Film::new(w, h, scene.film.filter),
                     counters,
                     stats: MltStats::default(),
                     large_sum: 0.0,
@@ -550,6 +554,7 @@ pub fn render(
             .collect();
         let bf = b as f32;
         let n_boot = weights.len();
+        let mut films = vec![Film::new(w, h, scene.film.filter); threads];
         let done;
         (done, interrupted) = super::run_chains(
             &pool,
@@ -558,17 +563,19 @@ pub fn render(
             pixels,
             total,
             &mut chains,
-            |ch| ch.step(&ev, bf),
+            &mut films,
+            |ch, film| ch.step(&ev, bf, film),
             &mut snapshots,
-            |chains, done| {
+            |chains, films, done| {
                 let mut f = Film::new(w, h, scene.film.filter);
-                let refined = merge_chains(chains, &mut f, b, n_boot);
+                f.add_splat_films(films);
                 f.light_paths = done;
-                let rescale = (refined / b) as f32;
+                let rescale = (refined_normalisation(chains, b, n_boot) / b) as f32;
                 f.develop().into_iter().map(|p| p * rescale).collect()
             },
         );
-        stats.normalisation = merge_chains(&chains, &mut film, b, weights.len());
+        film.add_splat_films(&films);
+        stats.normalisation = refined_normalisation(&chains, b, n_boot);
         for ch in &chains {
             counters += ch.counters;
             stats.small_proposed += ch.stats.small_proposed;

@@ -321,10 +321,13 @@ impl RenderStats {
     }
 }
 
-/// Runs Markov chains (one per worker thread) for the budget: `total` mutations (or the
-/// time budget) in rounds of about one mutation per pixel, every chain running `step` the
-/// same number of times per round, so that time budgets and Ctrl-C are checked regularly.
-/// After each round the snapshots due are developed by `develop(chains, done)`. Returns the
+/// Runs Markov chains for the budget: `total` mutations (or the time budget) in rounds of
+/// about one mutation per pixel, every chain running `step` the same number of times per
+/// round, so that time budgets and Ctrl-C are checked regularly. The chains are split into
+/// one contiguous group per film (one film per worker thread), each group's steps
+/// splatting into its film: a chain's steps do not depend on the group it is in, and the
+/// films' sums are exact, so the image does not depend on the number of threads. After
+/// each round the snapshots due are developed by `develop(chains, films, done)`. Returns the
 /// mutations done and whether the render was interrupted.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_chains<C: Send>(
@@ -334,28 +337,37 @@ pub(crate) fn run_chains<C: Send>(
     pixels: u64,
     total: u64,
     chains: &mut [C],
-    step: impl Fn(&mut C) + Sync,
+    films: &mut [Film],
+    step: impl Fn(&mut C, &mut Film) + Sync,
     snapshots: &mut Vec<Snapshot>,
-    develop: impl Fn(&[C], u64) -> Vec<Rgb>,
+    develop: impl Fn(&[C], &[Film], u64) -> Vec<Rgb>,
 ) -> (u64, bool) {
     use rayon::prelude::*;
-    let threads = chains.len() as u64;
-    let per_round = pixels.div_ceil(threads);
+    let count = chains.len() as u64;
+    if count == 0 || films.is_empty() {
+        return (0, false);
+    }
+    let per_group = chains.len().div_ceil(films.len());
+    let per_round = pixels.div_ceil(count);
     let mut done = 0u64;
     while done < total {
-        let n = per_round.min((total - done).div_ceil(threads));
+        let n = per_round.min((total - done).div_ceil(count));
         pool.install(|| {
-            chains.par_iter_mut().for_each(|ch| {
+            chains.par_chunks_mut(per_group).zip(films.par_iter_mut()).with_max_len(1).for_each(|(group, film)| {
                 crate::accel::embree::set_flush_denormals();
-                for _ in 0..n {
-                    step(ch);
+                for ch in group {
+                    for _ in 0..n {
+                        step(ch, film);
+                    }
                 }
             })
         });
-        done += n * threads;
+        done += n * count;
         if !opts.checkpoints.is_empty() {
             let elapsed = start.elapsed().as_secs_f64();
-            take_snapshots(&opts.checkpoints, snapshots, elapsed, (done / pixels) as u32, || develop(chains, done));
+            take_snapshots(&opts.checkpoints, snapshots, elapsed, (done / pixels) as u32, || {
+                develop(chains, films, done)
+            });
         }
         if opts.stop.as_ref().is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst)) {
             return (done, true);

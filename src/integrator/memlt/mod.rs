@@ -8,9 +8,9 @@
 //! `f / p`; their mean is a second, independent estimate of `b` (`seed_normalisation` in the
 //! statistics). Each step proposes a mutation chosen uniformly among the mutators that suit
 //! the current path, accepts it with probability `min(1, f(y) T(y→x) / f(x) T(x→y))` on
-//! luminances, and splats both paths with their expected weights. One chain per worker
-//! thread with its own seed and film, merged in order: a fixed seed and thread count give the
-//! same image.
+//! luminances, and splats both paths with their expected weights. `--chains` chains (64),
+//! each with its own seed, run the same number of mutations; the worker threads splat them
+//! into films of their own, whose exact sums make the image independent of the thread count.
 
 pub mod bidirectional;
 pub mod caustic;
@@ -156,13 +156,12 @@ fn scalar(m: &Measured) -> f64 {
     if l.is_finite() && l > 0.0 { l } else { 0.0 }
 }
 
-/// One Markov chain with its own film.
+/// One Markov chain (its splats go to the film of the worker that runs it).
 struct Chain {
     rng: Sampler,
     path: Vec<Vertex>,
     current: Measured,
     f: f64,
-    film: Film,
     counters: Counters,
     proposed: [u64; Mutator::ALL.len()],
     accepted: [u64; Mutator::ALL.len()],
@@ -185,7 +184,7 @@ struct StepSettings {
 impl Chain {
     /// One step: a proposal, both paths splatted with their expected weights (each with
     /// luminance `b`), the proposal accepted or not.
-    fn step(&mut self, scene: &Scene, set: &StepSettings) {
+    fn step(&mut self, scene: &Scene, set: &StepSettings, film: &mut Film) {
         let StepSettings { lengths, radii, b, .. } = *set;
         self.counters.samples += 1;
         // A mutator chosen uniformly among those that suit the current path; the proposal
@@ -195,7 +194,7 @@ impl Chain {
         if n_x == 0 {
             // No enabled mutator suits the path: the chain stays (its splat is the current
             // path's, with weight one).
-            self.film.add_splats(&[Splat {
+            film.add_splats(&[Splat {
                 pos: self.current.raster,
                 value: self.current.f * (b as f64 / self.f) as f32,
                 layer: 0,
@@ -244,7 +243,7 @@ impl Chain {
             splats[n] = Splat { pos: p.measured.raster, value: p.measured.f * (a * b as f64 / fy) as f32, layer: 0 };
             n += 1;
         }
-        self.film.add_splats(&splats[..n]);
+        film.add_splats(&splats[..n]);
         if let Some((p, fy)) = proposal
             && (self.rng.next_1d() as f64) < a
         {
@@ -306,6 +305,9 @@ pub fn render(
     let n_boot = opts.mlt.bootstrap;
     if n_boot == 0 {
         return Err(Error::Usage("--bootstrap must be at least 1".into()));
+    }
+    if opts.mlt.chains == 0 {
+        return Err(Error::Usage("--chains must be at least 1".into()));
     }
     super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
     if scene.lights.iter().any(|l| !matches!(l, crate::light::Light::Area { .. })) {
@@ -420,7 +422,7 @@ pub fn render(
         normalisation_error: b_error,
         seed_normalisation: seed_b,
         bootstrap_samples: (n_boot * boot_batches) as u64,
-        chains: threads,
+        chains: opts.mlt.chains,
         bootstrap_seconds,
         min_edges: lengths.min,
         max_edges: lengths.max,
@@ -430,9 +432,10 @@ pub fn render(
     let mut interrupted = stopped();
     let mut done = 0u64;
     let mut chains: Vec<Chain> = Vec::new();
+    let mut films = vec![Film::new(w, h, scene.film.filter); threads];
     if b > 0.0 && seed_b > 0.0 && !interrupted {
         let dist = Distribution1D::new(&weights);
-        for i in 0..threads as u64 {
+        for i in 0..opts.mlt.chains as u64 {
             let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
             let (j, _) = dist.sample(pick.next_1d());
             let mut rng = Sampler::new(&key(SEED_STREAM, j as u64));
@@ -444,7 +447,6 @@ pub fn render(
                 f: scalar(&current),
                 path,
                 current,
-                film: Film::new(w, h, scene.film.filter),
                 counters: c,
                 proposed: [0; Mutator::ALL.len()],
                 accepted: [0; Mutator::ALL.len()],
@@ -471,23 +473,21 @@ pub fn render(
             pixels,
             total,
             &mut chains,
-            |ch| ch.step(scene, &set),
+            &mut films,
+            |ch, film| ch.step(scene, &set, film),
             &mut snapshots,
-            |chains, done| {
+            |_, films, done| {
                 let mut f = base.clone();
-                for ch in chains {
-                    f.add_film_splats(&ch.film);
-                }
+                f.add_splat_films(films);
                 f.light_paths = done;
                 f.develop()
             },
         );
     }
+    base.add_splat_films(&films);
     let mut proposed = [0u64; Mutator::ALL.len()];
     let mut accepted = [0u64; Mutator::ALL.len()];
     for ch in &chains {
-        base.add_film_splats(&ch.film);
-        base.invalid_samples += ch.film.invalid_samples;
         counters += ch.counters;
         stats.manifold_walks += ch.walks;
         for m in 0..Mutator::ALL.len() {
