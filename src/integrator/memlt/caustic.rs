@@ -2,7 +2,9 @@
 //! for a path whose camera end is a rough vertex seen directly after a chain of Dirac lobes
 //! (`(L|D) S+ D E`, a caustic seen by the camera), turns the direction leaving the chain's
 //! light-side end `x_m` by a small angle, re-traces the chain through the same lobes to a
-//! new rough vertex and joins it to the pinhole.
+//! new rough vertex and joins it to the pinhole. As in Mitsuba 0.6 the chain may be empty
+//! (`(L|D) D E`): the perturbation then moves the point the camera sees from the light's
+//! side, keeping the rest of the path.
 //!
 //! The angle has density `∝ 1/θ` between `θ1` and `θ2`, in a uniform azimuth around the
 //! current direction: the image-space radii of the lens perturbation (0.1 pixel, 5% of the
@@ -23,17 +25,18 @@ use crate::scene::Scene;
 use glam::Vec3;
 
 /// Where the caustic perturbation turns the path: the index `m` of the rough vertex (or the
-/// light) before the Dirac chain that ends at the rough vertex `x_{k-1}` the camera sees.
+/// light) before the Dirac chain (possibly empty) that ends at the rough vertex `x_{k-1}`
+/// the camera sees.
 pub fn suits(scene: &Scene, x: &[Vertex]) -> Option<usize> {
     let k = x.len() - 1;
-    if k < 3 || x[k - 1].kind != VertexKind::Surface || !connectible(scene, &x[k - 1]) {
+    if k < 2 || x[k - 1].kind != VertexKind::Surface || !connectible(scene, &x[k - 1]) {
         return None;
     }
     let mut m = k - 2;
     while m >= 1 && x[m].delta {
         m -= 1;
     }
-    (m + 2 < k && !x[m].delta && connectible(scene, &x[m])).then_some(m)
+    (!x[m].delta && connectible(scene, &x[m])).then_some(m)
 }
 
 /// The angles `[θ1, θ2]` for a path: the radii's angles at the camera, times the eye edge's
