@@ -25,24 +25,32 @@ pub struct Lengths {
     pub max: usize,
 }
 
-/// `(kd, a)` with their probabilities for a path of `k` edges: every deletion with its
-/// probability. `kd = 1` cannot start at `a = 0`.
-fn deletions(k: usize) -> impl Iterator<Item = (usize, usize, f64)> {
-    let starts = move |kd: usize| if kd == 1 { k } else { k + 2 - kd };
-    let norm: f64 = (1..=k + 1).filter(|&kd| starts(kd) > 0).map(|kd| 0.5f64.powi(kd as i32)).sum();
-    (1..=k + 1).flat_map(move |kd| {
-        let n = starts(kd);
-        let first = usize::from(kd == 1);
-        (first..first + n).map(move |a| (kd, a, 0.5f64.powi(kd as i32) / norm / n as f64))
-    })
+/// `2^-n`, exactly.
+#[inline]
+fn half_pow(n: usize) -> f64 {
+    debug_assert!(n < 1023);
+    f64::from_bits((1023 - n as u64) << 52)
 }
 
-/// Probability of deleting `kd` edges from edge `a` of a path of `k` edges.
+/// The edges a deletion of `kd` edges may start at in a path of `k` edges: `kd = 1`
+/// cannot start at `a = 0` (the light point's choice is not an edge one can re-join).
+fn starts(k: usize, kd: usize) -> std::ops::Range<usize> {
+    if kd == 1 { 1..k + 1 } else { 0..k + 2 - kd }
+}
+
+/// Probability of deleting `kd` edges (`1 ..= k + 1`, `∝ 2^-kd`, normalised by
+/// `1 - 2^-(k+1)`) from edge `a` (uniform among [`starts`]) of a path of `k` edges.
 pub fn deletion_pmf(k: usize, kd: usize, a: usize) -> f64 {
-    if kd == 0 || kd > k + 1 || a + kd > k + 1 || (a == 0 && kd == 1) {
+    if kd == 0 || kd > k + 1 || !starts(k, kd).contains(&a) {
         return 0.0;
     }
-    deletions(k).find(|&(d, s, _)| d == kd && s == a).map_or(0.0, |(_, _, p)| p)
+    half_pow(kd) / (1.0 - half_pow(k + 1)) / starts(k, kd).len() as f64
+}
+
+/// Every deletion `(kd, a)` of a path of `k` edges with its probability.
+#[cfg(test)]
+fn deletions(k: usize) -> impl Iterator<Item = (usize, usize, f64)> {
+    (1..=k + 1).flat_map(move |kd| starts(k, kd).map(move |a| (kd, a, deletion_pmf(k, kd, a))))
 }
 
 /// The lengths `ka` may take after deleting `kd` edges from edge `a` of a path of `k`.
@@ -61,8 +69,12 @@ pub fn addition_pmf(k: usize, kd: usize, a: usize, ka: usize, lengths: Lengths) 
     if !range.contains(&ka) {
         return 0.0;
     }
-    let w = |n: usize| 0.5f64.powi(n.abs_diff(kd) as i32);
-    w(ka) / range.map(w).sum::<f64>()
+    half_pow(ka.abs_diff(kd)) / addition_norm(range, kd)
+}
+
+/// `Σ 2^-|n - kd|` over the lengths `n` of `range`.
+fn addition_norm(range: std::ops::RangeInclusive<usize>, kd: usize) -> f64 {
+    range.map(|n| half_pow(n.abs_diff(kd))).sum()
 }
 
 /// A proposal with the densities of both directions.
@@ -80,6 +92,37 @@ pub fn density(scene: &Scene, k: usize, y: &[Vertex], kd: usize, a: usize, ka: u
     deletion_pmf(k, kd, a) * addition_pmf(k, kd, a, ka, lengths) * stretch_density(scene, y, a, ka - 1)
 }
 
+/// Draws a move for a path of `k` edges: `(kd, a, ka)` with probability
+/// `deletion_pmf(k, kd, a) · addition_pmf(k, kd, a, ka)`; `None` when no length is left to
+/// add.
+fn draw_move<R: Random>(k: usize, lengths: Lengths, rng: &mut R) -> Option<(usize, usize, usize)> {
+    // `kd` by its marginal `2^-kd / (1 - 2^-(k+1))`, then its start uniformly.
+    let u = rng.next_1d() as f64 * (1.0 - half_pow(k + 1));
+    let mut acc = 0.0;
+    let mut kd = k + 1;
+    for n in 1..=k + 1 {
+        acc += half_pow(n);
+        if u < acc {
+            kd = n;
+            break;
+        }
+    }
+    let range = starts(k, kd);
+    let a = range.start + ((rng.next_1d() * range.len() as f32) as usize).min(range.len() - 1);
+    let range = additions(k, kd, a, lengths);
+    let u = rng.next_1d() as f64 * addition_norm(range.clone(), kd);
+    let mut acc = 0.0;
+    let mut ka = 0;
+    for n in range {
+        acc += half_pow(n.abs_diff(kd));
+        ka = n;
+        if u < acc {
+            break;
+        }
+    }
+    (ka > 0).then_some((kd, a, ka))
+}
+
 /// Proposes a bidirectional mutation of `x`; `None` when it fails (the proposal then has no
 /// contribution and is rejected).
 pub fn propose<R: Random>(
@@ -90,30 +133,7 @@ pub fn propose<R: Random>(
     counters: &mut Counters,
 ) -> Option<Proposal> {
     let k = x.len() - 1;
-    let u = rng.next_1d() as f64;
-    let mut acc = 0.0;
-    let mut pick = None;
-    for (kd, a, p) in deletions(k) {
-        acc += p;
-        pick = Some((kd, a));
-        if u < acc {
-            break;
-        }
-    }
-    let (kd, a) = pick?;
-    let u = rng.next_1d() as f64;
-    let mut acc = 0.0;
-    let mut ka = 0;
-    for n in additions(k, kd, a, lengths) {
-        acc += addition_pmf(k, kd, a, n, lengths);
-        ka = n;
-        if u < acc {
-            break;
-        }
-    }
-    if ka == 0 {
-        return None;
-    }
+    let (kd, a, ka) = draw_move(k, lengths, rng)?;
     let s = ((rng.next_1d() * ka as f32) as usize).min(ka - 1);
     let c = a + kd - 1;
     let y = regenerate(scene, &x[..a], &x[c..], s, ka - 1 - s, rng, counters)?;
@@ -126,6 +146,55 @@ pub fn propose<R: Random>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Counts of `draw_move`'s moves for a path of `k` edges against `n` times their
+    /// probabilities as `pmf` gives them (one cell per move, one for failed draws).
+    fn draw_counts(
+        k: usize,
+        lengths: Lengths,
+        n: usize,
+        pmf: impl Fn(usize, usize, usize) -> f64,
+    ) -> (Vec<u64>, Vec<f64>) {
+        let moves: Vec<(usize, usize, usize)> =
+            deletions(k).flat_map(|(kd, a, _)| additions(k, kd, a, lengths).map(move |ka| (kd, a, ka))).collect();
+        let mut counts = vec![0u64; moves.len() + 1];
+        let mut rng = crate::sampling::Sampler::new(&[5, k as u64]);
+        for _ in 0..n {
+            match draw_move(k, lengths, &mut rng) {
+                Some(m) => counts[moves.iter().position(|&x| x == m).expect("a move of the list")] += 1,
+                None => counts[moves.len()] += 1,
+            }
+        }
+        let mut expected: Vec<f64> = moves.iter().map(|&(kd, a, ka)| n as f64 * pmf(kd, a, ka)).collect();
+        expected.push(n as f64 - expected.iter().sum::<f64>());
+        (counts, expected)
+    }
+
+    #[test]
+    fn moves_are_drawn_with_their_probabilities() {
+        use crate::sampling::chi2::discrete_chi2;
+        let lengths = Lengths { min: 2, max: 7 };
+        let n = 400_000;
+        for k in [2, 4, 7] {
+            let (counts, expected) =
+                draw_counts(k, lengths, n, |kd, a, ka| deletion_pmf(k, kd, a) * addition_pmf(k, kd, a, ka, lengths));
+            let r = discrete_chi2(&counts, &expected);
+            assert!(r.passed(), "k = {k}: p = {} {:?}", r.p_value, r.message);
+        }
+        // Negative control: deletion lengths claimed `∝ 2^-kd` with the 1-edge deletions'
+        // share moved by 3% onto the 2-edge ones (which are half as likely).
+        let k = 4;
+        let skewed = |kd: usize, a: usize, ka: usize| {
+            let f = match kd {
+                1 => 0.97,
+                2 => 1.06,
+                _ => 1.0,
+            };
+            f * deletion_pmf(k, kd, a) * addition_pmf(k, kd, a, ka, lengths)
+        };
+        let (counts, expected) = draw_counts(k, lengths, n, skewed);
+        assert!(!discrete_chi2(&counts, &expected).passed(), "a skewed deletion pmf was not caught");
+    }
 
     #[test]
     fn deletions_sum_to_one_and_match_their_pmf() {

@@ -51,10 +51,13 @@ impl Mutator {
         [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::Manifold];
 }
 
+/// For each mutator, whether it suits a path and from where ([`suitable`]).
+type Suits = [Option<usize>; Mutator::ALL.len()];
+
 /// The mutators that suit a path (the bidirectional mutation suits every path) among those
 /// `enabled`: for each, `None` when it does not, else the vertex it works from (0 for the
 /// bidirectional and manifold ones).
-fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) -> [Option<usize>; Mutator::ALL.len()] {
+fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) -> Suits {
     let on = |m: Mutator| enabled[m as usize];
     [
         on(Mutator::Bidirectional).then_some(0),
@@ -162,6 +165,8 @@ struct Chain {
     path: Vec<Vertex>,
     current: Measured,
     f: f64,
+    /// The mutators that suit the current path ([`suitable`]), kept from its proposal.
+    suits: Suits,
     counters: Counters,
     proposed: [u64; Mutator::ALL.len()],
     accepted: [u64; Mutator::ALL.len()],
@@ -189,7 +194,7 @@ impl Chain {
         self.counters.samples += 1;
         // A mutator chosen uniformly among those that suit the current path; the proposal
         // is accepted with the suitability of both paths in its densities.
-        let suits = suitable(scene, &self.path, set.enabled);
+        let suits = self.suits;
         let n_x = suits.iter().flatten().count();
         if n_x == 0 {
             // No enabled mutator suits the path: the chain stays (its splat is the current
@@ -219,7 +224,8 @@ impl Chain {
         let (a, proposal) = match proposal {
             Some(p) => {
                 let fy = scalar(&p.measured);
-                let n_y = suitable(scene, &p.path, set.enabled).iter().flatten().count();
+                let suits_y = suitable(scene, &p.path, set.enabled);
+                let n_y = suits_y.iter().flatten().count();
                 let num = fy * p.backward * n_x as f64;
                 let den = self.f * p.forward * n_y as f64;
                 let a = if fy > 0.0 && p.forward > 0.0 && num.is_finite() && den > 0.0 {
@@ -227,7 +233,7 @@ impl Chain {
                 } else {
                     0.0
                 };
-                (a, Some((p, fy)))
+                (a, Some((p, fy, suits_y)))
             }
             None => (0.0, None),
         };
@@ -237,17 +243,18 @@ impl Chain {
             layer: 0,
         }; 2];
         let mut n = usize::from(a < 1.0);
-        if let Some((p, fy)) = &proposal
+        if let Some((p, fy, _)) = &proposal
             && a > 0.0
         {
             splats[n] = Splat { pos: p.measured.raster, value: p.measured.f * (a * b as f64 / fy) as f32, layer: 0 };
             n += 1;
         }
         film.add_splats(&splats[..n]);
-        if let Some((p, fy)) = proposal
+        if let Some((p, fy, suits_y)) = proposal
             && (self.rng.next_1d() as f64) < a
         {
             self.path = p.path;
+            self.suits = suits_y;
             self.current = p.measured;
             self.f = fy;
             self.accepted[m as usize] += 1;
@@ -445,6 +452,7 @@ pub fn render(
             chains.push(Chain {
                 rng: Sampler::new(&key(CHAIN_STREAM ^ 1, i)),
                 f: scalar(&current),
+                suits: suitable(scene, &path, enabled(&opts.mlt)),
                 path,
                 current,
                 counters: c,
