@@ -73,6 +73,20 @@ pub struct MltOptions {
     pub chains: usize,
 }
 
+impl MltOptions {
+    /// Refuses no bootstrap sample or no chain (PSSMLT and MEMLT alike).
+    pub fn check_counts(&self) -> Result<(), crate::error::Error> {
+        use crate::error::Error;
+        if self.bootstrap == 0 {
+            return Err(Error::Usage("--bootstrap must be at least 1".into()));
+        }
+        if self.chains == 0 {
+            return Err(Error::Usage("--chains must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
 impl Default for MltOptions {
     fn default() -> MltOptions {
         MltOptions {
@@ -477,12 +491,7 @@ pub fn render(
             mo.large_step_prob
         )));
     }
-    if mo.bootstrap == 0 {
-        return Err(crate::error::Error::Usage("--bootstrap must be at least 1".into()));
-    }
-    if mo.chains == 0 {
-        return Err(crate::error::Error::Usage("--chains must be at least 1".into()));
-    }
+    mo.check_counts()?;
     if mo.base == MltBase::Bdpt {
         super::bidir::bdpt::check_lights(scene, "pssmlt").map_err(crate::error::Error::Usage)?;
     }

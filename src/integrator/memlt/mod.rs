@@ -310,12 +310,7 @@ pub fn render(
 ) -> Result<RenderOutput, crate::error::Error> {
     use crate::error::Error;
     let n_boot = opts.mlt.bootstrap;
-    if n_boot == 0 {
-        return Err(Error::Usage("--bootstrap must be at least 1".into()));
-    }
-    if opts.mlt.chains == 0 {
-        return Err(Error::Usage("--chains must be at least 1".into()));
-    }
+    opts.mlt.check_counts()?;
     super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
     if scene.lights.iter().any(|l| !matches!(l, crate::light::Light::Area { .. })) {
         return Err(Error::Usage(format!(
@@ -439,8 +434,8 @@ pub fn render(
     let mut interrupted = stopped();
     let mut done = 0u64;
     let mut chains: Vec<Chain> = Vec::new();
-    let mut films = vec![Film::new(w, h, scene.film.filter); threads];
     if b > 0.0 && seed_b > 0.0 && !interrupted {
+        let on = enabled(&opts.mlt);
         let dist = Distribution1D::new(&weights);
         for i in 0..opts.mlt.chains as u64 {
             let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
@@ -452,7 +447,7 @@ pub fn render(
             chains.push(Chain {
                 rng: Sampler::new(&key(CHAIN_STREAM ^ 1, i)),
                 f: scalar(&current),
-                suits: suitable(scene, &path, enabled(&opts.mlt)),
+                suits: suitable(scene, &path, on),
                 path,
                 current,
                 counters: c,
@@ -470,10 +465,11 @@ pub fn render(
             lengths,
             radii: lens::Radii::for_film(w, h),
             b: b as f32,
-            enabled: enabled(&opts.mlt),
+            enabled: on,
             lambda: opts.mlt.lambda,
             theta_diff: opts.mlt.theta_diff.to_radians(),
         };
+        let mut films = vec![Film::new(w, h, scene.film.filter); threads];
         (done, interrupted) = super::run_chains(
             &pool,
             opts,
@@ -491,8 +487,8 @@ pub fn render(
                 f.develop()
             },
         );
+        base.add_splat_films(&films);
     }
-    base.add_splat_films(&films);
     let mut proposed = [0u64; Mutator::ALL.len()];
     let mut accepted = [0u64; Mutator::ALL.len()];
     for ch in &chains {
