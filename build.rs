@@ -8,7 +8,7 @@
 //! binaries get an rpath to its library folder.
 //!
 //! With `--features oiio`, it also compiles the C++ side of the OpenImageIO bridge
-//! (`src/image_io/oiio.cpp`, with `cxx`) against the system OpenImageIO: found by
+//! (`src/ffi/oiio.cpp`, with `cxx`) against the system OpenImageIO: found by
 //! pkg-config (`OpenImageIO.pc`), or under `$OIIO_DIR` (`include/`, `lib/`) when given.
 
 use std::env;
@@ -95,7 +95,7 @@ fn main() {
 /// Compiles the OpenImageIO bridge and links OpenImageIO (`--features oiio`).
 #[cfg(feature = "oiio")]
 fn build_oiio_bridge() {
-    for file in ["src/image_io/oiio.rs", "src/image_io/oiio.cpp", "src/image_io/oiio.h"] {
+    for file in ["src/ffi/oiio.rs", "src/ffi/oiio.cpp", "src/ffi/oiio.h"] {
         println!("cargo:rerun-if-changed={file}");
     }
     println!("cargo:rerun-if-env-changed=OIIO_DIR");
@@ -120,8 +120,8 @@ fn build_oiio_bridge() {
             ),
         }
     }
-    cxx_build::bridge("src/image_io/oiio.rs")
-        .file("src/image_io/oiio.cpp")
+    cxx_build::bridge("src/ffi/oiio.rs")
+        .file("src/ffi/oiio.cpp")
         .includes(&include_dirs)
         .std("c++17")
         .compile("pcbpt_oiio");

@@ -4,8 +4,8 @@
 //! The crate is organised by what things are: ray queries ([`accel`]), scene loading and
 //! the render-ready scene ([`scene`]), the camera and film, BSDFs, lights, textures,
 //! sampling ([`sampling`], with the χ² harness), integrators, image I/O and comparison.
-//! Code outside the compiler's safety checks lives only in [`accel::embree`] and, with
-//! `--features oiio`, in the `cxx` bridge of `image_io::oiio`.
+//! Code outside the compiler's safety checks lives only in [`ffi`]: the Embree bindings
+//! and, with `--features oiio`, the `cxx` bridge to OpenImageIO.
 #![deny(unsafe_code)]
 
 pub mod accel;
@@ -14,6 +14,7 @@ pub mod camera;
 pub mod compare;
 pub mod error;
 pub mod experiment;
+pub mod ffi;
 pub mod film;
 pub mod image_io;
 pub mod integrator;

@@ -2,13 +2,13 @@
 //!
 //! [`Accel`] answers closest-hit and occlusion queries, for single rays and batches, over
 //! the scene's primitives: triangle meshes and exact spheres. The default backend is the
-//! system Embree bound by our own bindgen layer ([`embree`], the only FFI module);
+//! system Embree bound by our own bindgen layer ([`embree`], in the FFI module [`crate::ffi`]);
 //! with the `obvhs` feature the pure-Rust CWBVH of the `obvhs` crate ([`bvh`]) is
 //! available too, and both report the same hits (up to floating-point ties at shared edges).
 
 #[cfg(feature = "obvhs")]
 pub mod bvh;
-pub mod embree;
+pub use crate::ffi::embree;
 
 use glam::Vec3;
 use std::fmt;

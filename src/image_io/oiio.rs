@@ -8,57 +8,14 @@
 //! Pixels come back as an [`image::DynamicImage`] so that they are turned into linear RGB
 //! by the same code as the `image` crate's: 8-bit integer data stays 8-bit, wider integers
 //! become 16-bit, half/float/double become float; alpha is read straight (unassociated), as
-//! stored. The C++ side is `oiio.h`/`oiio.cpp` beside this file, bound with `cxx`; its
-//! bridge module `ffi` is the only code here outside the compiler's safety checks.
+//! stored. The C++ side and its `cxx` bridge live in [`crate::ffi::oiio`], with the crate's
+//! other foreign bindings: this module is safe Rust.
 
 use super::{Image, encode_srgb8, write_atomically};
 use crate::error::{Error, Result};
+use crate::ffi::oiio as ffi;
 use image::{DynamicImage, ImageBuffer};
 use std::path::Path;
-
-// SAFETY: the `unsafe extern "C++"` block asserts that these declarations match the C++
-// ones in `oiio.h`; cxx's generated C++ checks each signature against them at compile
-// time. Slices are passed with their lengths (the C++ side checks them against the image
-// size before writing or reading), C++ exceptions become `Err`, and the generated Rust
-// wrappers are safe functions.
-#[allow(unsafe_code)]
-#[cxx::bridge(namespace = "pcbpt::oiio")]
-mod ffi {
-    /// What OpenImageIO finds in a file, and what [`read`](super::read) returns of it.
-    #[derive(Clone, Debug, PartialEq, Eq)]
-    pub struct Info {
-        /// Full-resolution size of the first subimage.
-        pub width: u32,
-        pub height: u32,
-        /// Channels returned: 1 grey, 2 grey and alpha, 3 RGB, 4 RGBA.
-        pub channels: u32,
-        /// Bits per returned channel: 8 and 16 unsigned integers, 32 float.
-        pub bits: u32,
-        /// OpenImageIO's name of the file's format (`tiff`, `openexr`, `hdr`, …).
-        pub format: String,
-        /// Tile size; 0 for an image stored in scanlines.
-        pub tile_width: u32,
-        pub tile_height: u32,
-        /// MIP levels of the first subimage (1 when it is not mip-mapped).
-        pub mip_levels: u32,
-    }
-
-    unsafe extern "C++" {
-        include!("pcbpt/src/image_io/oiio.h");
-
-        /// An open image file (subimage 0, MIP level 0).
-        type Input;
-
-        fn open(path: &str) -> Result<UniquePtr<Input>>;
-        fn info(self: &Input) -> Info;
-        fn read_u8(self: Pin<&mut Input>, out: &mut [u8]) -> Result<()>;
-        fn read_u16(self: Pin<&mut Input>, out: &mut [u16]) -> Result<()>;
-        fn read_f32(self: Pin<&mut Input>, out: &mut [f32]) -> Result<()>;
-        fn write_u8(path: &str, format: &str, width: u32, height: u32, channels: u32, data: &[u8]) -> Result<()>;
-        fn write_f32(path: &str, format: &str, width: u32, height: u32, channels: u32, data: &[f32]) -> Result<()>;
-        fn make_texture(src: &str, dst: &str) -> Result<()>;
-    }
-}
 
 fn utf8(path: &Path) -> Result<&str> {
     path.to_str().ok_or_else(|| Error::in_file(path, "OpenImageIO needs a UTF-8 file name"))

@@ -1,4 +1,4 @@
-// The C++ side of the OpenImageIO bridge (`src/image_io/oiio.rs`): opens any image
+// The C++ side of the OpenImageIO bridge (`src/ffi/oiio.rs`): opens any image
 // OpenImageIO reads and copies its full-resolution pixels into Rust buffers, writes images
 // through OpenImageIO's writers, and makes tiled, mip-mapped TIFF textures. Every function
 // reports failure by throwing std::runtime_error, which cxx turns into a Rust `Err`; no

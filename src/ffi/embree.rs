@@ -3,13 +3,11 @@
 //! the bindings `build.rs` generates from `wrapper.h`. [`version`] reports the library
 //! linked at run time.
 //!
-//! This is the only module of the crate with `unsafe` code. Ownership is RAII: [`Device`],
+//! With the OpenImageIO bridge beside it, the only code of the crate with `unsafe`. Ownership is RAII: [`Device`],
 //! [`EmbreeScene`] and the geometries release their Embree handles on `Drop`. Errors that
 //! Embree reports through the device error callback are collected and returned as
 //! [`AccelError::Embree`]; nothing aborts.
-#![allow(unsafe_code)]
-
-use super::{AccelError, BuildOptions, BuildQuality, BvhLayout, Cutout, Cutouts, Geometry, Hit, Ray, keeps_hit};
+use crate::accel::{AccelError, BuildOptions, BuildQuality, BvhLayout, Cutout, Cutouts, Geometry, Hit, Ray, keeps_hit};
 use std::ffi::{CStr, c_char, c_void};
 use std::ptr;
 use std::sync::{Arc, Mutex};

@@ -1,7 +1,7 @@
-// OpenImageIO calls behind the `cxx` bridge of `src/image_io/oiio.rs` (declared in oiio.h).
+// OpenImageIO calls behind the `cxx` bridge of `src/ffi/oiio.rs` (declared in oiio.h).
 
-#include "pcbpt/src/image_io/oiio.h"
-#include "pcbpt/src/image_io/oiio.rs.h"
+#include "pcbpt/src/ffi/oiio.h"
+#include "pcbpt/src/ffi/oiio.rs.h"
 
 #include <OpenImageIO/imagebufalgo.h>
 
