@@ -53,6 +53,9 @@ REFERENCES = {
     # A glass ball on a floor under a small spherical light: its caustic seen directly and
     # through the ball (MEMLT's scene).
     "glass-caustic": ("scenes/glass-caustic/scene.xml", {"resx": 160, "resy": 90}, 32768, None),
+    # An open box under a point light and a spot light, both out of the camera's view
+    # (MEMLT's lights with a Dirac position).
+    "spot-point": ("scenes/spot-point/scene.xml", {"resx": 128, "resy": 96}, 4096, None),
 }
 
 # Settings the scene file gives, recorded in the JSON beside the reference.

@@ -39,6 +39,16 @@ fn lvc_cornell_ply() {
 }
 
 #[test]
+fn lighttrace_spot_point() {
+    check(&SPOT_POINT, IntegratorKind::Lighttrace, 64);
+}
+
+#[test]
+fn bdpt_spot_point() {
+    check(&SPOT_POINT, IntegratorKind::Bdpt, 32);
+}
+
+#[test]
 fn lighttrace_veach_mis() {
     check(&VEACH_MIS, IntegratorKind::Lighttrace, 256);
 }

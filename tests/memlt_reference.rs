@@ -57,6 +57,22 @@ fn memlt_veach_ajar() {
 }
 
 #[test]
+fn memlt_spot_point() {
+    // A point light and a spot light: light positions no ray finds, taken by their
+    // discrete probability, with the direct light in the chains and separate.
+    let scene = SPOT_POINT.scene();
+    check(
+        &scene,
+        "spot-point.exr",
+        1.45e-3,
+        128,
+        -1,
+        "spot-point, MEMLT with the direct light in the chains, 2 × 128 spp",
+    );
+    check(&scene, "spot-point.exr", 1.45e-3, 128, 16, "spot-point, MEMLT, 2 × 128 spp");
+}
+
+#[test]
 fn memlt_glass_caustic() {
     // A glass ball's caustic seen directly (the caustic perturbation's paths), the floor
     // through the ball (the lens perturbation's) and the caustic through the ball (the
@@ -118,7 +134,7 @@ fn memlt_refuses_lights_it_does_not_handle() {
     let scene = SUNLIT_ROOM.scene();
     let o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));
     let e = integrator::render(&scene, &o).err().expect("lights at infinity must be refused").to_string();
-    assert!(e.contains("area lights only") && e.contains("sunlit-room"), "{e}");
+    assert!(e.contains("area, point and spot lights") && e.contains("sunlit-room"), "{e}");
 }
 
 #[test]

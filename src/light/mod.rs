@@ -383,6 +383,24 @@ impl Light {
         }
     }
 
+    /// A direction of emission from a point of the light with normal `n`, distributed as
+    /// [`Light::sample_emission`]'s (density [`Light::pdf_emission_direction`]): what a walk
+    /// leaving a kept light point needs. `None` for lights at infinity and below an area
+    /// light's surface.
+    pub fn sample_emission_direction(&self, n: Vec3, u: Vec2) -> Option<Vec3> {
+        match self {
+            Light::Area { .. } => {
+                let local = crate::sampling::square_to_cosine_hemisphere(u);
+                (local.z > 0.0).then(|| Frame::from_normal(n).to_world(local))
+            }
+            Light::Point { .. } => Some(square_to_uniform_sphere(u)),
+            Light::Spot { frame, cutoff, .. } => {
+                Some(frame.to_world(crate::sampling::square_to_uniform_cone(u, cutoff.cos())))
+            }
+            _ => None,
+        }
+    }
+
     /// Solid-angle density of [`Light::sample_emission`] choosing direction `d` (unit) at a
     /// point with normal `n`.
     pub fn pdf_emission_direction(&self, n: Vec3, d: Vec3) -> f32 {
@@ -647,6 +665,29 @@ mod tests {
             },
         );
         assert!(!r.passed(), "{r}");
+    }
+
+    #[test]
+    fn emission_directions_follow_their_densities_chi2() {
+        // The directions a walk leaves a kept light point along (MEMLT's), against the
+        // densities of `sample_emission`: cosine about an area light's normal, uniform for a
+        // point light, uniform in a spot light's cone.
+        let n = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let area = Light::Area { shape: 0, radiance: Texture::Constant(Vec3::ONE) };
+        let point = Light::Point { position: Vec3::ZERO, intensity: Vec3::ONE };
+        let frame = Frame::from_normal(Vec3::new(-0.2, 0.1, -1.0).normalize());
+        let spot = Light::Spot { position: Vec3::ZERO, frame, intensity: Vec3::ONE, cutoff: 0.5, beam_width: 0.3 };
+        for light in [&area, &point, &spot] {
+            let t = Chi2Test::new(SphereDomain::default());
+            t.run(|u| light.sample_emission_direction(n, u), |w| light.pdf_emission_direction(n, w)).assert_pass();
+        }
+        // Negative control: the cone's density claimed with a cutoff 5% wider.
+        let wider = Light::Spot { position: Vec3::ZERO, frame, intensity: Vec3::ONE, cutoff: 0.525, beam_width: 0.3 };
+        let t = Chi2Test::new(SphereDomain::default());
+        let r = t.run(|u| spot.sample_emission_direction(n, u), |w| wider.pdf_emission_direction(n, w));
+        assert!(!r.passed(), "{r}");
+        // Lights at infinity have no emission point to leave from.
+        assert_eq!(Light::Constant { radiance: Vec3::ONE }.sample_emission_direction(n, Vec2::splat(0.5)), None);
     }
 
     /// Counts of disk points (from `point(u)`) in 8 rings of equal area × 16 sectors of

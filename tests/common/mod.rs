@@ -168,6 +168,19 @@ pub const VEACH_MIS: Case = Case {
     mean_tol: 0.005,
 };
 
+/// An open box under a point light and a spot light, both out of the camera's view (a
+/// scene made for the tests: lights with a Dirac position).
+pub const SPOT_POINT: Case = Case {
+    name: "spot-point",
+    scene: "scenes/spot-point/scene.xml",
+    defines: &[("resx", "128"), ("resy", "96")],
+    reference: "spot-point.exr",
+    ref_noise: 1.45e-3,
+    mean_cutoff: None,
+    resolution: None,
+    mean_tol: 0.005,
+};
+
 pub const VEACH_AJAR: Case = Case {
     name: "veach-ajar",
     scene: "scenes/veach-ajar/scene.xml",

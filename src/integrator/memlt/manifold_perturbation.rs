@@ -34,7 +34,8 @@
 
 use super::bidirectional::Proposal;
 use super::path::{
-    area_factor, as_light, connectible, contribution, join, lobe_pdf, ray_from, reflects, retrace, surface_vertex,
+    area_factor, as_light, connectible, contribution, hittable_light, join, lobe_pdf, ray_from, reflects, retrace,
+    surface_vertex,
 };
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
@@ -204,7 +205,8 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
         b = step(b)?;
     }
     if b == 0 {
-        return matches!(x[0].kind, VertexKind::Light(_)).then_some(Plan { a, toward_light, b, c: None });
+        // The moved ray must find the light: not a point or spot light's position.
+        return hittable_light(scene, &x[0]).then_some(Plan { a, toward_light, b, c: None });
     }
     if b == k || !connectible(scene, &x[b]) {
         return None;

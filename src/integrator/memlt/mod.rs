@@ -312,10 +312,10 @@ pub fn render(
     let n_boot = opts.mlt.bootstrap;
     opts.mlt.check_counts()?;
     super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
-    if scene.lights.iter().any(|l| !matches!(l, crate::light::Light::Area { .. })) {
+    if scene.lights.iter().any(|l| l.at_infinity()) {
         return Err(Error::Usage(format!(
-            "{}: the memlt integrator handles area lights only; this scene has a point, spot, directional or \
-             infinitely distant light",
+            "{}: the memlt integrator handles area, point and spot lights; this scene has a directional light or \
+             light from infinity (constant, envmap, sky or sun)",
             scene.path.display()
         )));
     }
