@@ -154,8 +154,9 @@ struct RenderArgs {
     /// PSSMLT: the estimator the Markov chains drive.
     #[arg(long, value_enum, default_value_t = MltBase::Bdpt)]
     mlt_path_integrator: MltBase,
-    /// MEMLT: samples per pixel of a separate direct-lighting estimate (paths of one or two
-    /// edges, by the path tracer); -1 (the default) leaves every path to the Markov chains.
+    /// MEMLT: samples per pixel of a separate direct-lighting estimate by the path tracer
+    /// (paths of one edge, and of two through a rough vertex; those through a Dirac lobe are
+    /// the chains'); -1 leaves every path to the Markov chains.
     #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
     direct_samples: i32,
     /// MEMLT with --time: the BDPT bootstrap goes on in batches of --bootstrap samples until

@@ -15,7 +15,7 @@
 
 use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};
-use super::bidir::{Sink, WalkLimits};
+use super::bidir::{Sink, Vertex, WalkLimits};
 use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::math::{Rgb, luminance};
@@ -44,9 +44,9 @@ pub struct MltOptions {
     /// Independent samples that estimate the normalisation `b` and seed the chains.
     pub bootstrap: usize,
     pub base: MltBase,
-    /// MEMLT: samples per pixel of a separate direct-lighting estimate (paths of one or two
-    /// edges, by the path tracer), the chains rendering the longer paths; -1 (the default)
-    /// leaves every path to the chains.
+    /// MEMLT: samples per pixel of a separate direct-lighting estimate by the path tracer
+    /// (16 by default, as Mitsuba 0.6: paths of one edge, and of two through a rough
+    /// vertex), the chains rendering the others; -1 leaves every path to the chains.
     pub direct_samples: i32,
     /// MEMLT with a time budget: the bootstrap goes on in batches of `bootstrap` samples
     /// until this fraction of the time is spent (the image's brightness is its estimate).
@@ -93,7 +93,7 @@ impl Default for MltOptions {
             large_step_prob: 0.3,
             bootstrap: 100_000,
             base: MltBase::Bdpt,
-            direct_samples: -1,
+            direct_samples: 16,
             bootstrap_fraction: 0.1,
             bidirectional_mutation: true,
             lens_perturbation: true,
@@ -259,8 +259,11 @@ struct Contributions {
     /// Camera-side contributions of the current sample, summed at its film position.
     pixel: Rgb,
     pos: Vec2,
-    /// Strategies of paths with fewer edges are left out.
+    /// Strategies of paths with fewer edges are left out ...
     min_edges: usize,
+    /// ... but for two-edge paths whose middle vertex scatters through a Dirac lobe, when
+    /// this is set (MEMLT's chains beside a direct-light pass that leaves those out).
+    dirac_two_edges: bool,
 }
 
 impl Sink for Contributions {
@@ -275,6 +278,14 @@ impl Sink for Contributions {
     fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
         if s + t > self.min_edges {
             self.splats.push(Splat { pos, value, layer: 0 });
+        }
+    }
+
+    #[inline]
+    fn add_emission(&mut self, camera: &[Vertex], value: Rgb) {
+        let t = camera.len();
+        if t > self.min_edges || (self.dirac_two_edges && t == 3 && camera[1].delta) {
+            self.pixel += value;
         }
     }
 }
@@ -404,7 +415,7 @@ fn bootstrap(
     ev: &Evaluator,
     n: usize,
     large_step_prob: f32,
-    min_edges: usize,
+    (min_edges, dirac_two_edges): (usize, bool),
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
 ) -> (Vec<f32>, Counters) {
     let chunk = 1024usize;
@@ -414,7 +425,7 @@ fn bootstrap(
             .map(|k| {
                 crate::accel::embree::set_flush_denormals();
                 let mut scratch = Scratch::default();
-                let mut out = Contributions { min_edges, ..Default::default() };
+                let mut out = Contributions { min_edges, dirac_two_edges, ..Default::default() };
                 let mut c = Counters::default();
                 let fs = (k * chunk..((k + 1) * chunk).min(n))
                     .map(|i| {
@@ -436,7 +447,8 @@ fn bootstrap(
     (weights, counters)
 }
 
-/// The mean luminance of the image's paths of at least `min_edges` edges (Metropolis'
+/// The mean luminance of the image's paths of at least `min_edges` edges, and with
+/// `dirac_two_edges` of the two-edge paths through a Dirac lobe too (Metropolis'
 /// normalisation `b`) estimated from `n` independent BDPT samples, each through a uniformly
 /// random film position, with its standard error and the work the samples took.
 pub(crate) fn bdpt_normalisation(
@@ -444,11 +456,11 @@ pub(crate) fn bdpt_normalisation(
     opts: &RenderOptions,
     pool: &rayon::ThreadPool,
     n: usize,
-    min_edges: usize,
+    paths: (usize, bool),
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
 ) -> (f64, f64, Counters) {
     let ev = evaluator(scene, opts, MltBase::Bdpt);
-    let (weights, counters) = bootstrap(pool, &ev, n, 1.0, min_edges, key);
+    let (weights, counters) = bootstrap(pool, &ev, n, 1.0, paths, key);
     let n = n.max(1) as f64;
     let mean = weights.iter().map(|&f| f as f64).sum::<f64>() / n;
     let square = weights.iter().map(|&f| f as f64 * f as f64).sum::<f64>() / n;
@@ -513,7 +525,7 @@ pub fn render(
     };
 
     // Bootstrap: independent samples estimate b and give the chains their start states.
-    let (weights, mut counters) = bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, 0, &key);
+    let (weights, mut counters) = bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, (0, false), &key);
     let b = weights.iter().map(|&f| f as f64).sum::<f64>() / weights.len() as f64;
     let bootstrap_seconds = start.elapsed().as_secs_f64();
     let mut film = Film::new(w, h, scene.film.filter);

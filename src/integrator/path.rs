@@ -18,6 +18,9 @@ pub struct PathTracer {
     pub max_depth: u32,
     pub rr_depth: u32,
     pub hide_emitters: bool,
+    /// Emission reached from a surface through a Dirac lobe counts (`true` but in MEMLT's
+    /// direct-light pass, whose chains take those paths).
+    pub dirac_emission: bool,
 }
 
 impl PathTracer {
@@ -26,18 +29,20 @@ impl PathTracer {
             max_depth: if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 },
             rr_depth: spec.rr_depth,
             hide_emitters: spec.hide_emitters,
+            dirac_emission: true,
         }
     }
 
     /// MIS weight of emission reached after `segments` earlier segments: seen directly by
-    /// the camera (0), through a delta lobe, or by BSDF sampling against light sampling
-    /// (whose density `pdf_light` is computed only when needed).
+    /// the camera (0), through a delta lobe (0 without `dirac_emission`), or by BSDF
+    /// sampling against light sampling (whose density `pdf_light` is computed only when
+    /// needed).
     #[inline]
     fn emission_weight(&self, segments: u32, prev_delta: bool, prev_pdf: f32, pdf_light: impl FnOnce() -> f32) -> f32 {
         if segments == 0 {
             if self.hide_emitters { 0.0 } else { 1.0 }
         } else if prev_delta {
-            1.0
+            if self.dirac_emission { 1.0 } else { 0.0 }
         } else {
             power_heuristic(prev_pdf, pdf_light())
         }

@@ -92,7 +92,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return;
         }
         let w = mis_weight_with(self.scene, &[], camera, None, self.heuristic, self.counts);
-        sink.add(0, t, pt.beta * le * w);
+        sink.add_emission(camera, pt.beta * le * w);
     }
 
     /// `s = 1`: next-event estimation from `z_{t-1}` to a fresh point on a light.

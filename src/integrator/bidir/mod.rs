@@ -745,4 +745,10 @@ pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -
 pub trait Sink {
     fn add(&mut self, s: usize, t: usize, value: Rgb);
     fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb);
+    /// `s = 0`: the camera subpath `camera` ends on an emitter (by default
+    /// `add(0, camera.len(), value)`; a sink that sorts paths by their vertices looks at them).
+    #[inline]
+    fn add_emission(&mut self, camera: &[Vertex], value: Rgb) {
+        self.add(0, camera.len(), value);
+    }
 }

@@ -23,6 +23,18 @@ use crate::scene::Scene;
 pub struct Lengths {
     pub min: usize,
     pub max: usize,
+    /// A direct-light pass renders the paths of one edge and the two-edge paths through a
+    /// rough vertex: the chains' two-edge paths are those through a Dirac lobe alone.
+    pub direct_separate: bool,
+}
+
+impl Lengths {
+    /// Whether path `x` is one of the chains' (its contribution is zero to them otherwise).
+    #[inline]
+    pub fn covers(&self, x: &[Vertex]) -> bool {
+        let k = x.len().saturating_sub(1);
+        (self.min..=self.max).contains(&k) && !(self.direct_separate && k == 2 && !x[1].delta)
+    }
 }
 
 /// `2^-n`, exactly.
@@ -173,7 +185,7 @@ mod tests {
     #[test]
     fn moves_are_drawn_with_their_probabilities() {
         use crate::sampling::chi2::discrete_chi2;
-        let lengths = Lengths { min: 2, max: 7 };
+        let lengths = Lengths { min: 2, max: 7, direct_separate: false };
         let n = 400_000;
         for k in [2, 4, 7] {
             let (counts, expected) =
@@ -213,7 +225,7 @@ mod tests {
 
     #[test]
     fn additions_sum_to_one_and_every_move_has_its_reverse() {
-        let lengths = Lengths { min: 2, max: 7 };
+        let lengths = Lengths { min: 2, max: 7, direct_separate: false };
         for k in lengths.min..=lengths.max {
             for (kd, a, _) in deletions(k) {
                 // Deleting one edge of a path at the longest length leaves no length to

@@ -114,7 +114,7 @@ pub struct MemltStats {
 pub fn lengths(scene: &Scene) -> Lengths {
     let spec = &scene.integrator;
     let max = if spec.max_depth < 0 { MAX_EDGES } else { (spec.max_depth as usize).min(MAX_EDGES) };
-    Lengths { min: if spec.hide_emitters { 2 } else { 1 }, max }
+    Lengths { min: if spec.hide_emitters { 2 } else { 1 }, max, direct_separate: false }
 }
 
 /// Probability of drawing a start path of `k` edges: `∝ 2^-(k - min)`.
@@ -147,6 +147,9 @@ pub fn independent_path<R: Random>(
     let s = ((rng.next_1d() * (k + 1) as f32) as usize).min(k);
     let camera = Vertex::camera(scene.camera.position);
     let y = path::regenerate(scene, &[], std::slice::from_ref(&camera), s, k - s, rng, counters)?;
+    if !lengths.covers(&y) {
+        return None;
+    }
     let m = path::contribution(scene, &y)?;
     let p = seed_length_pmf(lengths, k) * path::stretch_density(scene, &y, 0, k);
     (p > 0.0).then_some((y, m, p))
@@ -223,7 +226,7 @@ impl Chain {
         self.proposed[m as usize] += 1;
         let (a, proposal) = match proposal {
             Some(p) => {
-                let fy = scalar(&p.measured);
+                let fy = if lengths.covers(&p.path) { scalar(&p.measured) } else { 0.0 };
                 let suits_y = suitable(scene, &p.path, set.enabled);
                 let n_y = suits_y.iter().flatten().count();
                 let num = fy * p.backward * n_x as f64;
@@ -271,7 +274,7 @@ fn normalisation(
     scene: &Scene,
     opts: &RenderOptions,
     pool: &rayon::ThreadPool,
-    min_edges: usize,
+    lengths: Lengths,
     start: Instant,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
     counters: &mut Counters,
@@ -285,9 +288,14 @@ fn normalisation(
     let (mut sum, mut variance, mut batches) = (0.0, 0.0, 0usize);
     while batches == 0 || (start.elapsed().as_secs_f64() < until && !stopped()) {
         let offset = (batches * n) as u64;
-        let (b, e, c) = super::mlt::bdpt_normalisation(scene, opts, pool, n, min_edges, &|s, i| {
-            key(s ^ BOOTSTRAP_STREAM, i + offset)
-        });
+        let (b, e, c) = super::mlt::bdpt_normalisation(
+            scene,
+            opts,
+            pool,
+            n,
+            (lengths.min + usize::from(lengths.direct_separate), lengths.direct_separate),
+            &|s, i| key(s ^ BOOTSTRAP_STREAM, i + offset),
+        );
         *counters += c;
         sum += b;
         variance += e * e;
@@ -344,7 +352,8 @@ pub fn render(
     let threads = pool.current_num_threads();
     let mut lengths = lengths(scene);
     if direct > 0 {
-        lengths.min = 3;
+        lengths.min = lengths.min.max(2);
+        lengths.direct_separate = true;
     }
     let (w, h) = (scene.film.width, scene.film.height);
     let pixels = w as u64 * h as u64;
@@ -358,7 +367,9 @@ pub fn render(
         }
         k
     };
-    // The direct light (paths of one and two edges) by the path tracer, when asked for.
+    // The direct light by the path tracer, when asked for: paths of one edge, and of two
+    // through a rough vertex (those through a Dirac lobe, a small light's reflection in
+    // glass say, are the chains').
     let mut base = Film::new(w, h, scene.film.filter);
     let mut counters = Counters::default();
     if direct > 0 {
@@ -369,7 +380,7 @@ pub fn render(
         o.progress = false;
         let spec = &scene.integrator;
         let max_depth = if spec.max_depth < 0 { 2 } else { (spec.max_depth as u32).min(2) };
-        let pt = super::path::PathTracer { max_depth, ..super::path::PathTracer::new(spec) };
+        let pt = super::path::PathTracer { max_depth, dirac_emission: false, ..super::path::PathTracer::new(spec) };
         let out = super::render_loop::run(scene, &o, pt, false, None)?;
         counters += out.stats.counters;
         if let Some(f) = &out.film {
@@ -392,7 +403,7 @@ pub fn render(
             iterations,
         );
     }
-    let (b, b_error, boot_batches) = normalisation(scene, opts, &pool, lengths.min, start, &key, &mut counters);
+    let (b, b_error, boot_batches) = normalisation(scene, opts, &pool, lengths, start, &key, &mut counters);
     // Start-path candidates and their weights f / p.
     let chunk = 1024usize;
     let parts: Vec<(Vec<f32>, Counters)> = pool.install(|| {

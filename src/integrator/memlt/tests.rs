@@ -35,7 +35,7 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
 fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
     let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
     let pool = super::super::thread_pool(2).unwrap();
-    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, min, &|s, i| vec![11, s, i]).0
+    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, (min, false), &|s, i| vec![11, s, i]).0
 }
 
 /// `|a - b|` in standard errors.
@@ -379,4 +379,45 @@ fn every_mutator_is_in_detailed_balance_with_point_and_spot_lights() {
         let (skewed, se) = balance(&scene, m, true, (50.0, 1.0, n));
         assert!(skewed.abs() > 6.0 * se, "{m:?}: a skewed forward density was not caught: {skewed} ± {se}");
     }
+}
+
+/// A mirror floor under a small area light before a diffuse wall: the camera sees the
+/// light's reflection (two-edge paths through a Dirac lobe) and the wall lit directly and
+/// through the mirror.
+fn mirror() -> Scene {
+    let shapes = r#"<shape type="rectangle"><transform name="to_world"><scale value="3"/></transform>
+  <bsdf type="conductor"/></shape>
+<shape type="rectangle"><transform name="to_world"><scale value="3"/><rotate x="1" angle="90"/><translate y="2" z="2"/></transform><bsdf type="diffuse"/></shape>
+<shape type="rectangle"><transform name="to_world"><scale value="0.4"/><rotate x="1" angle="180"/><translate y="0.5" z="1.5"/></transform>
+  <emitter type="area"><rgb name="radiance" value="8"/></emitter></shape>"#;
+    inline_scene("mirror.xml", (4, 50.0), ("0, -3, 1", "0, 0.5, -0.6"), (24, 18), shapes)
+}
+
+#[test]
+fn chains_beside_the_direct_pass_take_the_two_edge_paths_through_dirac_lobes() {
+    // With the direct light separate, the chains' paths are those of three edges or more
+    // and the two-edge paths through a Dirac lobe (the light seen in the mirror): the
+    // generator restricted to them (`Lengths::covers`) must estimate what the BDPT
+    // bootstrap counts for them. Leaving the mirror's two-edge paths out of the bootstrap
+    // must be caught.
+    let scene = mirror();
+    let mut lengths = lengths(&scene);
+    lengths.min = 2;
+    lengths.direct_separate = true;
+    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
+    let pool = super::super::thread_pool(2).unwrap();
+    let b = |dirac: bool| {
+        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 400_000, (3, dirac), &|s, i| vec![31, s, i]).0
+    };
+    let chains = mean_and_error(4_000_000, |i| {
+        let mut rng = Sampler::new(&[33, i as u64]);
+        let Some((y, m, p)) = independent_path(&scene, lengths, &mut rng, &mut Counters::default()) else {
+            return 0.0;
+        };
+        assert!(lengths.covers(&y));
+        scalar(&m) / p
+    });
+    let (with, without) = (b(true), b(false));
+    assert!(sigmas(chains, with) < 4.0 && chains.1 < 0.02 * with, "chains' paths: {chains:?} against BDPT's {with}");
+    assert!(sigmas(chains, without) > 6.0, "the mirror's two-edge paths were not missed: {chains:?} against {without}");
 }
