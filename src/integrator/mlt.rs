@@ -575,7 +575,6 @@ pub fn render(
             .collect();
         let bf = b as f32;
         let n_boot = weights.len();
-        let mut films = vec![Film::new(w, h, scene.film.filter); threads];
         let done;
         (done, interrupted) = super::run_chains(
             &pool,
@@ -584,18 +583,14 @@ pub fn render(
             pixels,
             total,
             &mut chains,
-            &mut films,
+            &mut film,
             |ch, film| ch.step(&ev, bf, film),
             &mut snapshots,
-            |chains, films, done| {
-                let mut f = Film::new(w, h, scene.film.filter);
-                f.add_splat_films(films);
-                f.light_paths = done;
+            |chains, f| {
                 let rescale = (refined_normalisation(chains, b, n_boot) / b) as f32;
                 f.develop().into_iter().map(|p| p * rescale).collect()
             },
         );
-        film.add_splat_films(&films);
         stats.normalisation = refined_normalisation(&chains, b, n_boot);
         for ch in &chains {
             counters += ch.counters;

@@ -324,11 +324,12 @@ impl RenderStats {
 /// Runs Markov chains for the budget: `total` mutations (or the time budget) in rounds of
 /// about one mutation per pixel, every chain running `step` the same number of times per
 /// round, so that time budgets and Ctrl-C are checked regularly. The chains are split into
-/// one contiguous group per film (one film per worker thread), each group's steps
-/// splatting into its film: a chain's steps do not depend on the group it is in, and the
-/// films' sums are exact, so the image does not depend on the number of threads. After
-/// each round the snapshots due are developed by `develop(chains, films, done)`. Returns the
-/// mutations done and whether the render was interrupted.
+/// one contiguous group per worker thread, each group's steps splatting into a film of the
+/// thread's own: a chain's steps do not depend on the group it is in, and the films' sums
+/// are exact, so the image does not depend on the number of threads. After each round the
+/// snapshots due are developed by `develop(chains, film)`, `film` being `into` with the
+/// splats so far (and the mutations done as its light paths); at the end the splats are
+/// added to `into`. Returns the mutations done and whether the render was interrupted.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_chains<C: Send>(
     pool: &rayon::ThreadPool,
@@ -337,16 +338,17 @@ pub(crate) fn run_chains<C: Send>(
     pixels: u64,
     total: u64,
     chains: &mut [C],
-    films: &mut [Film],
+    into: &mut Film,
     step: impl Fn(&mut C, &mut Film) + Sync,
     snapshots: &mut Vec<Snapshot>,
-    develop: impl Fn(&[C], &[Film], u64) -> Vec<Rgb>,
+    develop: impl Fn(&[C], Film) -> Vec<Rgb>,
 ) -> (u64, bool) {
     use rayon::prelude::*;
     let count = chains.len() as u64;
-    if count == 0 || films.is_empty() {
+    if count == 0 {
         return (0, false);
     }
+    let mut films = vec![Film::new(into.width, into.height, into.filter); pool.current_num_threads().max(1)];
     let per_group = chains.len().div_ceil(films.len());
     let per_round = pixels.div_ceil(count);
     let mut done = 0u64;
@@ -366,10 +368,14 @@ pub(crate) fn run_chains<C: Send>(
         if !opts.checkpoints.is_empty() {
             let elapsed = start.elapsed().as_secs_f64();
             take_snapshots(&opts.checkpoints, snapshots, elapsed, (done / pixels) as u32, || {
-                develop(chains, films, done)
+                let mut f = into.clone();
+                f.add_splat_films(&films);
+                f.light_paths = done;
+                develop(chains, f)
             });
         }
         if opts.stop.as_ref().is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst)) {
+            into.add_splat_films(&films);
             return (done, true);
         }
         if let Budget::Time(t) = opts.budget
@@ -378,6 +384,7 @@ pub(crate) fn run_chains<C: Send>(
             break;
         }
     }
+    into.add_splat_films(&films);
     (done, false)
 }
 

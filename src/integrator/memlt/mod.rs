@@ -480,7 +480,6 @@ pub fn render(
             lambda: opts.mlt.lambda,
             theta_diff: opts.mlt.theta_diff.to_radians(),
         };
-        let mut films = vec![Film::new(w, h, scene.film.filter); threads];
         (done, interrupted) = super::run_chains(
             &pool,
             opts,
@@ -488,17 +487,11 @@ pub fn render(
             pixels,
             total,
             &mut chains,
-            &mut films,
+            &mut base,
             |ch, film| ch.step(scene, &set, film),
             &mut snapshots,
-            |_, films, done| {
-                let mut f = base.clone();
-                f.add_splat_films(films);
-                f.light_paths = done;
-                f.develop()
-            },
+            |_, f| f.develop(),
         );
-        base.add_splat_films(&films);
     }
     let mut proposed = [0u64; Mutator::ALL.len()];
     let mut accepted = [0u64; Mutator::ALL.len()];
