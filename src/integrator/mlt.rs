@@ -283,9 +283,10 @@ impl Sink for Contributions {
 
     #[inline]
     fn add_emission(&mut self, camera: &[Vertex], value: Rgb) {
-        let t = camera.len();
-        if t > self.min_edges || (self.dirac_two_edges && t == 3 && camera[1].delta) {
+        if self.dirac_two_edges && camera.len() == 3 && camera[1].delta {
             self.pixel += value;
+        } else {
+            self.add(0, camera.len(), value);
         }
     }
 }

@@ -348,10 +348,10 @@ pub(crate) fn run_chains<C: Send>(
     if count == 0 {
         return (0, false);
     }
-    let mut films = vec![Film::new(into.width, into.height, into.filter); pool.current_num_threads().max(1)];
+    let mut films = vec![Film::new(into.width, into.height, into.filter); pool.current_num_threads()];
     let per_group = chains.len().div_ceil(films.len());
     let per_round = pixels.div_ceil(count);
-    let mut done = 0u64;
+    let (mut done, mut interrupted) = (0u64, false);
     while done < total {
         let n = per_round.min((total - done).div_ceil(count));
         pool.install(|| {
@@ -375,8 +375,8 @@ pub(crate) fn run_chains<C: Send>(
             });
         }
         if opts.stop.as_ref().is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst)) {
-            into.add_splat_films(&films);
-            return (done, true);
+            interrupted = true;
+            break;
         }
         if let Budget::Time(t) = opts.budget
             && start.elapsed().as_secs_f64() >= t
@@ -385,7 +385,7 @@ pub(crate) fn run_chains<C: Send>(
         }
     }
     into.add_splat_films(&films);
-    (done, false)
+    (done, interrupted)
 }
 
 /// The output of a Markov-chain render (PSSMLT, MEMLT): its statistics, with the

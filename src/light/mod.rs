@@ -335,8 +335,7 @@ impl Light {
     }
 
     /// Samples a point on the light (area lights uniformly by area) and a direction of
-    /// emission (area lights: cosine-weighted about the normal; point lights: uniform;
-    /// spot lights: uniform within the cutoff cone).
+    /// emission ([`Light::sample_emission_direction`]).
     pub fn sample_emission(&self, shapes: &[Shape], u1: f32, u_pos: Vec2, u_dir: Vec2) -> Option<EmissionSample> {
         match self {
             Light::Area { shape, .. } => {
@@ -345,57 +344,36 @@ impl Light {
                 if ps.n == Vec3::ZERO {
                     return None;
                 }
-                let local = crate::sampling::square_to_cosine_hemisphere(u_dir);
-                if local.z <= 0.0 {
-                    return None;
-                }
-                let d = Frame::from_normal(ps.n).to_world(local);
-                Some(EmissionSample {
-                    p: ps.p,
-                    n: ps.n,
-                    uv: ps.uv,
-                    d,
-                    pdf_pos: 1.0 / s.area(),
-                    pdf_dir: local.z * std::f32::consts::FRAC_1_PI,
-                })
+                let (d, pdf_dir) = self.sample_emission_direction(ps.n, u_dir)?;
+                Some(EmissionSample { p: ps.p, n: ps.n, uv: ps.uv, d, pdf_pos: 1.0 / s.area(), pdf_dir })
             }
-            Light::Point { position, .. } => Some(EmissionSample {
-                p: *position,
-                n: Vec3::ZERO,
-                uv: Vec2::ZERO,
-                d: square_to_uniform_sphere(u_dir),
-                pdf_pos: 1.0,
-                pdf_dir: UNIFORM_SPHERE_PDF,
-            }),
-            Light::Spot { position, frame, cutoff, .. } => {
-                let cos_max = cutoff.cos();
-                let d = frame.to_world(crate::sampling::square_to_uniform_cone(u_dir, cos_max));
-                Some(EmissionSample {
-                    p: *position,
-                    n: Vec3::ZERO,
-                    uv: Vec2::ZERO,
-                    d,
-                    pdf_pos: 1.0,
-                    pdf_dir: crate::sampling::square_to_uniform_cone_pdf(cos_max),
-                })
+            Light::Point { position, .. } | Light::Spot { position, .. } => {
+                let (d, pdf_dir) = self.sample_emission_direction(Vec3::ZERO, u_dir)?;
+                Some(EmissionSample { p: *position, n: Vec3::ZERO, uv: Vec2::ZERO, d, pdf_pos: 1.0, pdf_dir })
             }
             _ => None,
         }
     }
 
-    /// A direction of emission from a point of the light with normal `n`, distributed as
-    /// [`Light::sample_emission`]'s (density [`Light::pdf_emission_direction`]): what a walk
-    /// leaving a kept light point needs. `None` for lights at infinity and below an area
-    /// light's surface.
-    pub fn sample_emission_direction(&self, n: Vec3, u: Vec2) -> Option<Vec3> {
+    /// A direction of emission from a point of the light with normal `n` and its
+    /// solid-angle density ([`Light::pdf_emission_direction`]'s): cosine-weighted about an
+    /// area light's normal, uniform for a point light, uniform within a spot light's cutoff
+    /// cone. What [`Light::sample_emission`] draws, and a walk leaving a kept light point
+    /// needs. `None` for lights at infinity and below an area light's surface.
+    pub fn sample_emission_direction(&self, n: Vec3, u: Vec2) -> Option<(Vec3, f32)> {
         match self {
             Light::Area { .. } => {
                 let local = crate::sampling::square_to_cosine_hemisphere(u);
-                (local.z > 0.0).then(|| Frame::from_normal(n).to_world(local))
+                if local.z <= 0.0 {
+                    return None;
+                }
+                Some((Frame::from_normal(n).to_world(local), local.z * std::f32::consts::FRAC_1_PI))
             }
-            Light::Point { .. } => Some(square_to_uniform_sphere(u)),
+            Light::Point { .. } => Some((square_to_uniform_sphere(u), UNIFORM_SPHERE_PDF)),
             Light::Spot { frame, cutoff, .. } => {
-                Some(frame.to_world(crate::sampling::square_to_uniform_cone(u, cutoff.cos())))
+                let cos_max = cutoff.cos();
+                let d = frame.to_world(crate::sampling::square_to_uniform_cone(u, cos_max));
+                Some((d, crate::sampling::square_to_uniform_cone_pdf(cos_max)))
             }
             _ => None,
         }
@@ -679,12 +657,13 @@ mod tests {
         let spot = Light::Spot { position: Vec3::ZERO, frame, intensity: Vec3::ONE, cutoff: 0.5, beam_width: 0.3 };
         for light in [&area, &point, &spot] {
             let t = Chi2Test::new(SphereDomain::default());
-            t.run(|u| light.sample_emission_direction(n, u), |w| light.pdf_emission_direction(n, w)).assert_pass();
+            t.run(|u| light.sample_emission_direction(n, u).map(|s| s.0), |w| light.pdf_emission_direction(n, w))
+                .assert_pass();
         }
         // Negative control: the cone's density claimed with a cutoff 5% wider.
         let wider = Light::Spot { position: Vec3::ZERO, frame, intensity: Vec3::ONE, cutoff: 0.525, beam_width: 0.3 };
         let t = Chi2Test::new(SphereDomain::default());
-        let r = t.run(|u| spot.sample_emission_direction(n, u), |w| wider.pdf_emission_direction(n, w));
+        let r = t.run(|u| spot.sample_emission_direction(n, u).map(|s| s.0), |w| wider.pdf_emission_direction(n, w));
         assert!(!r.passed(), "{r}");
         // Lights at infinity have no emission point to leave from.
         assert_eq!(Light::Constant { radiance: Vec3::ONE }.sample_emission_direction(n, Vec2::splat(0.5)), None);

@@ -273,7 +273,9 @@ pub fn leave<R: Random>(
             let res = Vec2::new(scene.film.width as f32, scene.film.height as f32);
             Some(scene.camera.generate_ray(u2 * res))
         }
-        VertexKind::Light(l) => scene.lights[l as usize].sample_emission_direction(x.ng, u2).map(|d| ray_from(x, d)),
+        VertexKind::Light(l) => {
+            scene.lights[l as usize].sample_emission_direction(x.ng, u2).map(|(d, _)| ray_from(x, d))
+        }
         VertexKind::Surface => {
             let (back, _) = towards(x, &v[j]);
             let bsdf = x.bsdf(scene);
