@@ -10,16 +10,18 @@
 #       include folders and libraries, no Python bindings, `Imf::Int64` -> `uint64_t` and an
 #       `ImfFrameBuffer.h` include in bitmap.cpp, boost::placeholders in volcache.cpp.
 #       About 17 minutes on 2 cores.
-#   scripts/mitsuba06.sh memlt DEST SPP OUT.exr [SCENE_DIR]
+#   scripts/mitsuba06.sh memlt DEST SPP OUT.exr [SCENE_DIR] [SWITCH=true|false ...]
 #       Renders veach-ajar (SCENE_DIR, default ../shared/scenes/veach-ajar, its
 #       `scene_v0.6.xml`) at 320x180 with unlimited depth and Mitsuba 0.6's MEMLT (`mlt`,
 #       `manifoldPerturbation` true, every other setting its default: direct light separate
 #       at 16 samples, 100 000 luminance samples) at SPP mutations per pixel on 2 threads,
 #       and prints its render time and acceptance statistics. The scene file is copied with
-#       only its integrator block replaced; its models and textures are linked.
+#       only its integrator block replaced; its models and textures are linked. SWITCHes
+#       set the integrator's booleans (`lensPerturbation=false`, ...) to compare single
+#       mutations: give SCENE_DIR to give them.
 set -euo pipefail
 
-cmd=${1:?usage: mitsuba06.sh build DEST | memlt DEST SPP OUT.exr [SCENE_DIR]}
+cmd=${1:?usage: mitsuba06.sh build DEST | memlt DEST SPP OUT.exr [SCENE_DIR] [SWITCH=BOOL ...]}
 dest=${2:?DEST missing}
 mkdir -p "$dest"
 dest=$(cd "$dest" && pwd)
@@ -70,14 +72,21 @@ memlt)
     trap 'rm -rf "$work"' EXIT
     ln -s "$(cd "$scene_dir" && pwd)/models" "$work/models"
     ln -s "$(cd "$scene_dir" && pwd)/textures" "$work/textures"
-    python3 - "$scene_dir/scene_v0.6.xml" "$work/memlt.xml" <<'PY'
+    python3 - "$scene_dir/scene_v0.6.xml" "$work/memlt.xml" "${@:6}" <<'PY'
 import re, sys
 s = open(sys.argv[1]).read()
 block = re.search(r'<integrator type="\$integrator">.*?</integrator>', s, re.S)
 if not block:
     sys.exit(f"{sys.argv[1]}: no integrator block to replace")
+switches = {"manifoldPerturbation": "true"}
+for arg in sys.argv[3:]:
+    name, _, value = arg.partition("=")
+    if value not in ("true", "false"):
+        sys.exit(f"switch {arg!r}: expected NAME=true or NAME=false")
+    switches[name] = value
+flags = "".join(f'\t\t<boolean name="{n}" value="{v}" />\n' for n, v in switches.items())
 s = s.replace(block.group(0), '<integrator type="mlt">\n\t\t<integer name="maxDepth" value="-1" />\n'
-              '\t\t<boolean name="manifoldPerturbation" value="true" />\n\t</integrator>')
+              + flags + '\t</integrator>')
 open(sys.argv[2], 'w').write(s)
 PY
     export PATH="$dest/mitsuba/dist:$PATH" LD_LIBRARY_PATH="$dest/mitsuba/dist"

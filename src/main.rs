@@ -547,7 +547,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
             .collect();
         eprintln!(
-            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors; bootstrap {:.2} s",
+            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors, {} moved the light point; bootstrap {:.2} s",
             m.normalisation,
             m.normalisation_error,
             m.seed_normalisation,
@@ -561,6 +561,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.manifold_walks.converged,
             m.manifold_walks.irreversible,
             m.manifold_walks.glossy,
+            m.manifold_walks.light_points,
             m.bootstrap_seconds
         );
     } else if !a.quiet && s.bidir.is_some() {

@@ -4,13 +4,15 @@
 //!
 //! A path of `k` edges is seen as `k + 1` edges counting the choice of its light point (the
 //! edge "before" `x_0`). A run of `kd` consecutive ones is deleted, starting at edge `a`:
-//! `x_0 .. x_{a-1}` and `x_{a+kd-1} .. x_k` stay (the pinhole always does); `kd` is drawn with
-//! probability `∝ 2^-kd` and `a` uniformly. `ka` new edges take their place, `∝ 2^-|ka-kd|`
-//! within the lengths allowed, and the `ka - 1` new vertices are split uniformly into a
-//! light-side and a camera-side walk. Regenerating the light point (`a = 0`) deletes and adds
-//! at least two edges, and deleting one edge adds at least two (one would give the same path
-//! back), so that every move has its reverse. The proposal density sums over
-//! every split that could have produced the new stretch ([`stretch_density`]).
+//! `x_0 .. x_{a-1}` and `x_{a+kd-1} .. x_k` stay (the pinhole always does), and `ka` new
+//! edges take their place. As in Mitsuba 0.6, the new length `k - kd + ka` is drawn first,
+//! `∝ 2^-|Δk|` around the current one, then `kd` `∝ 2^-|kd - 2|` (a vertex replaced is the
+//! most likely move) among the lengths that reach it, and `a` uniformly; the `ka - 1` new
+//! vertices are split uniformly into a light-side and a camera-side walk. Regenerating the
+//! light point (`a = 0`) deletes and adds at least two edges, and a move that keeps the
+//! length deletes at least two (one would give the same path back), so that every move has
+//! its reverse. The proposal density sums over every split that could have produced the
+//! new stretch ([`stretch_density`]).
 
 use super::path::{Measured, contribution, regenerate, stretch_density};
 use crate::integrator::Counters;
@@ -44,49 +46,73 @@ fn half_pow(n: usize) -> f64 {
     f64::from_bits((1023 - n as u64) << 52)
 }
 
-/// The edges a deletion of `kd` edges may start at in a path of `k` edges: `kd = 1`
-/// cannot start at `a = 0` (the light point's choice is not an edge one can re-join).
-fn starts(k: usize, kd: usize) -> std::ops::Range<usize> {
-    if kd == 1 { 1..k + 1 } else { 0..k + 2 - kd }
-}
-
-/// Probability of deleting `kd` edges (`1 ..= k + 1`, `∝ 2^-kd`, normalised by
-/// `1 - 2^-(k+1)`) from edge `a` (uniform among [`starts`]) of a path of `k` edges.
-pub fn deletion_pmf(k: usize, kd: usize, a: usize) -> f64 {
-    if kd == 0 || kd > k + 1 || !starts(k, kd).contains(&a) {
+/// `2^-|n - centre|` normalised over `range`: a two-sided geometric distribution.
+fn two_sided_pmf(n: usize, centre: usize, range: std::ops::RangeInclusive<usize>) -> f64 {
+    if !range.contains(&n) {
         return 0.0;
     }
-    half_pow(kd) / (1.0 - half_pow(k + 1)) / starts(k, kd).len() as f64
+    half_pow(n.abs_diff(centre)) / range.map(|m| half_pow(m.abs_diff(centre))).sum::<f64>()
 }
 
-/// Every deletion `(kd, a)` of a path of `k` edges with its probability.
+/// A draw from [`two_sided_pmf`] (`range` not empty).
+fn two_sided_sample(u: f32, centre: usize, range: std::ops::RangeInclusive<usize>) -> usize {
+    let u = u as f64 * range.clone().map(|m| half_pow(m.abs_diff(centre))).sum::<f64>();
+    let mut acc = 0.0;
+    let mut last = *range.start();
+    for n in range {
+        acc += half_pow(n.abs_diff(centre));
+        last = n;
+        if u < acc {
+            break;
+        }
+    }
+    last
+}
+
+/// The deletion lengths allowed when a path of `k` edges is to become one of `k2`: enough
+/// to reach `k2`, and at least two when the length stays (deleting one edge and adding one
+/// back gives the same path), up to all `k + 1`.
+fn deletions(k: usize, k2: usize) -> std::ops::RangeInclusive<usize> {
+    let least = if k == k2 { 2 } else { 1 };
+    least.max((k + 1).saturating_sub(k2))..=k + 1
+}
+
+/// The edges a deletion of `kd` edges, replaced by `ka`, may start at in a path of `k`
+/// edges. The light point's choice (`a = 0`) is not an edge one can re-join (`kd = 1`), and
+/// regenerating it needs a new vertex on each side of the join (`ka ≥ 2`).
+fn starts(k: usize, kd: usize, ka: usize) -> std::ops::Range<usize> {
+    let first = usize::from(kd == 1 || ka == 1);
+    first..(k + 2).saturating_sub(kd).max(first)
+}
+
+/// Probability of the move `(kd, a, ka)` of a path of `k` edges: the new length
+/// `k2 = k - kd + ka` drawn `∝ 2^-|k2 - k|` among the lengths allowed, the deletion length
+/// `kd` `∝ 2^-|kd - 2|` among [`deletions`], its start `a` uniformly among [`starts`].
+pub fn move_pmf(k: usize, kd: usize, a: usize, ka: usize, lengths: Lengths) -> f64 {
+    if ka == 0 || kd == 0 || kd > k + 1 {
+        return 0.0;
+    }
+    let k2 = k - kd + ka;
+    let range = starts(k, kd, ka);
+    if !range.contains(&a) {
+        return 0.0;
+    }
+    two_sided_pmf(k2, k, lengths.min..=lengths.max) * two_sided_pmf(kd, 2, deletions(k, k2)) / range.len() as f64
+}
+
+/// Every move `(kd, a, ka)` of a path of `k` edges with its probability.
 #[cfg(test)]
-fn deletions(k: usize) -> impl Iterator<Item = (usize, usize, f64)> {
-    (1..=k + 1).flat_map(move |kd| starts(k, kd).map(move |a| (kd, a, deletion_pmf(k, kd, a))))
-}
-
-/// The lengths `ka` may take after deleting `kd` edges from edge `a` of a path of `k`.
-fn additions(k: usize, kd: usize, a: usize, lengths: Lengths) -> std::ops::RangeInclusive<usize> {
-    // Regenerating the light point, or re-joining the ends of one deleted edge, adds two
-    // edges or more: one would give the same path back.
-    let lo = if a == 0 || kd == 1 { 2 } else { 1 };
-    let lo = lo.max((lengths.min + kd).saturating_sub(k));
-    let hi = lengths.max + kd - k;
-    lo..=hi
-}
-
-/// Probability of `ka` new edges after deleting `kd` from edge `a` of a path of `k`.
-pub fn addition_pmf(k: usize, kd: usize, a: usize, ka: usize, lengths: Lengths) -> f64 {
-    let range = additions(k, kd, a, lengths);
-    if !range.contains(&ka) {
-        return 0.0;
+fn moves(k: usize, lengths: Lengths) -> Vec<(usize, usize, usize, f64)> {
+    let mut all = Vec::new();
+    for k2 in lengths.min..=lengths.max {
+        for kd in deletions(k, k2) {
+            let ka = k2 + kd - k;
+            for a in starts(k, kd, ka) {
+                all.push((kd, a, ka, move_pmf(k, kd, a, ka, lengths)));
+            }
+        }
     }
-    half_pow(ka.abs_diff(kd)) / addition_norm(range, kd)
-}
-
-/// `Σ 2^-|n - kd|` over the lengths `n` of `range`.
-fn addition_norm(range: std::ops::RangeInclusive<usize>, kd: usize) -> f64 {
-    range.map(|n| half_pow(n.abs_diff(kd))).sum()
+    all
 }
 
 /// A proposal with the densities of both directions.
@@ -101,38 +127,21 @@ pub struct Proposal {
 /// `T(x → y)` of a bidirectional mutation of `x` (`k` edges) that deleted `kd` edges from
 /// edge `a` and put `ka` in their place, giving `y`.
 pub fn density(scene: &Scene, k: usize, y: &[Vertex], kd: usize, a: usize, ka: usize, lengths: Lengths) -> f64 {
-    deletion_pmf(k, kd, a) * addition_pmf(k, kd, a, ka, lengths) * stretch_density(scene, y, a, ka - 1)
+    move_pmf(k, kd, a, ka, lengths) * stretch_density(scene, y, a, ka - 1)
 }
 
-/// Draws a move for a path of `k` edges: `(kd, a, ka)` with probability
-/// `deletion_pmf(k, kd, a) · addition_pmf(k, kd, a, ka)`; `None` when no length is left to
-/// add.
+/// Draws a move `(kd, a, ka)` for a path of `k` edges with probability [`move_pmf`];
+/// `None` when the deletion leaves no edge to start at (which would take a new length of 0).
 fn draw_move<R: Random>(k: usize, lengths: Lengths, rng: &mut R) -> Option<(usize, usize, usize)> {
-    // `kd` by its marginal `2^-kd / (1 - 2^-(k+1))`, then its start uniformly.
-    let u = rng.next_1d() as f64 * (1.0 - half_pow(k + 1));
-    let mut acc = 0.0;
-    let mut kd = k + 1;
-    for n in 1..=k + 1 {
-        acc += half_pow(n);
-        if u < acc {
-            kd = n;
-            break;
-        }
+    let k2 = two_sided_sample(rng.next_1d(), k, lengths.min..=lengths.max);
+    let kd = two_sided_sample(rng.next_1d(), 2, deletions(k, k2));
+    let ka = k2 + kd - k;
+    let range = starts(k, kd, ka);
+    if range.is_empty() {
+        return None;
     }
-    let range = starts(k, kd);
     let a = range.start + ((rng.next_1d() * range.len() as f32) as usize).min(range.len() - 1);
-    let range = additions(k, kd, a, lengths);
-    let u = rng.next_1d() as f64 * addition_norm(range.clone(), kd);
-    let mut acc = 0.0;
-    let mut ka = 0;
-    for n in range {
-        acc += half_pow(n.abs_diff(kd));
-        ka = n;
-        if u < acc {
-            break;
-        }
-    }
-    (ka > 0).then_some((kd, a, ka))
+    Some((kd, a, ka))
 }
 
 /// Proposes a bidirectional mutation of `x`; `None` when it fails (the proposal then has no
@@ -167,17 +176,16 @@ mod tests {
         n: usize,
         pmf: impl Fn(usize, usize, usize) -> f64,
     ) -> (Vec<u64>, Vec<f64>) {
-        let moves: Vec<(usize, usize, usize)> =
-            deletions(k).flat_map(|(kd, a, _)| additions(k, kd, a, lengths).map(move |ka| (kd, a, ka))).collect();
-        let mut counts = vec![0u64; moves.len() + 1];
+        let all: Vec<(usize, usize, usize)> = moves(k, lengths).into_iter().map(|(kd, a, ka, _)| (kd, a, ka)).collect();
+        let mut counts = vec![0u64; all.len() + 1];
         let mut rng = crate::sampling::Sampler::new(&[5, k as u64]);
         for _ in 0..n {
             match draw_move(k, lengths, &mut rng) {
-                Some(m) => counts[moves.iter().position(|&x| x == m).expect("a move of the list")] += 1,
-                None => counts[moves.len()] += 1,
+                Some(m) => counts[all.iter().position(|&x| x == m).expect("a move of the list")] += 1,
+                None => counts[all.len()] += 1,
             }
         }
-        let mut expected: Vec<f64> = moves.iter().map(|&(kd, a, ka)| n as f64 * pmf(kd, a, ka)).collect();
+        let mut expected: Vec<f64> = all.iter().map(|&(kd, a, ka)| n as f64 * pmf(kd, a, ka)).collect();
         expected.push(n as f64 - expected.iter().sum::<f64>());
         (counts, expected)
     }
@@ -188,62 +196,46 @@ mod tests {
         let lengths = Lengths { min: 2, max: 7, direct_separate: false };
         let n = 400_000;
         for k in [2, 4, 7] {
-            let (counts, expected) =
-                draw_counts(k, lengths, n, |kd, a, ka| deletion_pmf(k, kd, a) * addition_pmf(k, kd, a, ka, lengths));
+            let (counts, expected) = draw_counts(k, lengths, n, |kd, a, ka| move_pmf(k, kd, a, ka, lengths));
             let r = discrete_chi2(&counts, &expected);
             assert!(r.passed(), "k = {k}: p = {} {:?}", r.p_value, r.message);
         }
-        // Negative control: deletion lengths claimed `∝ 2^-kd` with the 1-edge deletions'
-        // share moved by 3% onto the 2-edge ones (which are half as likely).
+        // Negative control: the 2-edge deletions' share claimed 3% lower, the 3-edge ones'
+        // (which are half as likely) 6% higher.
         let k = 4;
         let skewed = |kd: usize, a: usize, ka: usize| {
             let f = match kd {
-                1 => 0.97,
-                2 => 1.06,
+                2 => 0.97,
+                3 => 1.06,
                 _ => 1.0,
             };
-            f * deletion_pmf(k, kd, a) * addition_pmf(k, kd, a, ka, lengths)
+            f * move_pmf(k, kd, a, ka, lengths)
         };
         let (counts, expected) = draw_counts(k, lengths, n, skewed);
         assert!(!discrete_chi2(&counts, &expected).passed(), "a skewed deletion pmf was not caught");
     }
 
     #[test]
-    fn deletions_sum_to_one_and_match_their_pmf() {
-        for k in 1..12 {
-            let all: Vec<_> = deletions(k).collect();
-            let total: f64 = all.iter().map(|d| d.2).sum();
-            assert!((total - 1.0).abs() < 1e-12, "k = {k}: {total}");
-            for &(kd, a, p) in &all {
-                assert_eq!(deletion_pmf(k, kd, a), p);
-                assert!(a + kd <= k + 1 && !(a == 0 && kd == 1));
-            }
-            assert_eq!(deletion_pmf(k, 1, 0), 0.0);
-            assert_eq!(deletion_pmf(k, k + 2, 0), 0.0);
-        }
-    }
-
-    #[test]
-    fn additions_sum_to_one_and_every_move_has_its_reverse() {
+    fn moves_sum_to_one_and_every_move_has_its_reverse() {
         let lengths = Lengths { min: 2, max: 7, direct_separate: false };
         for k in lengths.min..=lengths.max {
-            for (kd, a, _) in deletions(k) {
-                // Deleting one edge of a path at the longest length leaves no length to
-                // add (such proposals fail).
-                if additions(k, kd, a, lengths).is_empty() {
-                    assert!(kd == 1 && k == lengths.max);
-                    continue;
-                }
-                let total: f64 = additions(k, kd, a, lengths).map(|ka| addition_pmf(k, kd, a, ka, lengths)).sum();
-                assert!((total - 1.0).abs() < 1e-12, "k {k} kd {kd} a {a}: {total}");
-                for ka in additions(k, kd, a, lengths) {
-                    let k2 = k - kd + ka;
-                    assert!((lengths.min..=lengths.max).contains(&k2));
-                    // The reverse move deletes `ka` from the same edge and adds `kd`.
-                    assert!(deletion_pmf(k2, ka, a) > 0.0, "k {k} kd {kd} a {a} ka {ka}");
-                    assert!(addition_pmf(k2, ka, a, kd, lengths) > 0.0, "k {k} kd {kd} a {a} ka {ka}");
-                }
+            let all = moves(k, lengths);
+            let total: f64 = all.iter().map(|m| m.3).sum();
+            // No draw fails: a start is left unless every edge is deleted and one added,
+            // which would leave no edge at all.
+            assert!((total - 1.0).abs() < 1e-12, "k = {k}: {total}");
+            for &(kd, a, ka, p) in &all {
+                assert!(p > 0.0, "k {k} kd {kd} a {a} ka {ka}");
+                assert!(a + kd <= k + 1 && !(a == 0 && (kd == 1 || ka == 1)));
+                let k2 = k - kd + ka;
+                assert!((lengths.min..=lengths.max).contains(&k2));
+                assert!(k2 != k || kd >= 2, "a move that gives the path back");
+                // The reverse move deletes `ka` from the same edge and adds `kd`.
+                assert!(move_pmf(k2, ka, a, kd, lengths) > 0.0, "k {k} kd {kd} a {a} ka {ka}");
             }
+            assert_eq!(move_pmf(k, 1, 0, 2, lengths), 0.0);
+            assert_eq!(move_pmf(k, 2, 0, 1, lengths), 0.0);
+            assert_eq!(move_pmf(k, k + 2, 0, 2, lengths), 0.0);
         }
     }
 }

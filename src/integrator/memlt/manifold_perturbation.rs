@@ -6,12 +6,19 @@
 //! (a rough surface, the pinhole or the light) and a direction of travel along the path;
 //! `b`, the first non-specular vertex after the specular vertices that follow `a`; `c`, the
 //! first non-specular vertex after the specular chain that follows `b` (none when `b` is the
-//! light's point). One plan is chosen uniformly among those the path admits. The direction
-//! leaving `a` is turned by a von Mises–Fisher lobe around the current one, of concentration
+//! light's point). The plan that starts at the camera is chosen with probability
+//! [`SENSOR_PROBABILITY`] where the path admits it (Mitsuba 0.6's preference), otherwise one
+//! uniformly among all those the path admits. The direction
+//! leaving `a` is turned by a von Mises–Fisher lobe around the current one, of peak density
 //! `max(1/4π, p) λ²` with `p` the scattering density of the current direction at `a`; the
 //! ray is followed through the same Dirac lobes to the new `b`. Between `b` and `c` the
 //! specular chain is walked onto its manifold, `c` fixed, until it ends at the new `b`; the
-//! walk back from the proposal must return to the current path.
+//! walk back from the proposal must return to the current path. One more plan moves the
+//! light point itself ([`position_plan`]): an area light's point is displaced in its tangent
+//! plane by a Gaussian whose density peaks at the light walk's density of the point times
+//! `λ²`, projected back onto the light along its normal, and joined to its rough neighbour
+//! (the walk back from the new point must find the current one; the pinhole, the other
+//! end, has no area to move on).
 //!
 //! Which vertices count as specular is drawn before the plan ([`Treatment`]): Dirac ones
 //! always, diffuse ones never, a glossy one with a probability set by its lobe's width
@@ -34,8 +41,8 @@
 
 use super::bidirectional::Proposal;
 use super::path::{
-    area_factor, as_light, connectible, contribution, hittable_light, join, lobe_pdf, ray_from, reflects, retrace,
-    surface_vertex,
+    area_factor, as_light, connectible, contribution, hittable_light, join, lobe_pdf, pdf_from_light, ray_from,
+    reflects, retrace, surface_vertex,
 };
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
@@ -43,7 +50,7 @@ use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::integrator::manifold::{self, Half, Scatter, TracedChain};
 use crate::math::Frame;
-use crate::sampling::{Random, square_to_von_mises_fisher};
+use crate::sampling::{Random, square_to_gaussian_2d, square_to_gaussian_2d_pdf, square_to_von_mises_fisher};
 use crate::scene::Scene;
 use glam::DVec3;
 use serde::Serialize;
@@ -60,6 +67,9 @@ pub struct Plan {
     pub toward_light: bool,
     pub b: usize,
     pub c: Option<usize>,
+    /// The light point itself moves (`a = b = 0`, towards the camera): displaced on its
+    /// light's surface by a Gaussian, then joined to `c`.
+    pub position: bool,
 }
 
 impl Plan {
@@ -97,6 +107,8 @@ pub struct WalkStats {
     pub irreversible: u64,
     /// Perturbations that treated a glossy vertex as specular.
     pub glossy: u64,
+    /// Perturbations that moved the light point on its surface.
+    pub light_points: u64,
 }
 
 impl std::ops::AddAssign for WalkStats {
@@ -105,6 +117,7 @@ impl std::ops::AddAssign for WalkStats {
         self.converged += o.converged;
         self.irreversible += o.irreversible;
         self.glossy += o.glossy;
+        self.light_points += o.light_points;
     }
 }
 
@@ -206,7 +219,7 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
     }
     if b == 0 {
         // The moved ray must find the light: not a point or spot light's position.
-        return hittable_light(scene, &x[0]).then_some(Plan { a, toward_light, b, c: None });
+        return hittable_light(scene, &x[0]).then_some(Plan { a, toward_light, b, c: None, position: false });
     }
     if b == k || !connectible(scene, &x[b]) {
         return None;
@@ -219,12 +232,92 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
     if c == k && c.abs_diff(b) > 1 {
         return None;
     }
-    (x[c].kind != VertexKind::Surface || connectible(scene, &x[c])).then_some(Plan { a, toward_light, b, c: Some(c) })
+    (x[c].kind != VertexKind::Surface || connectible(scene, &x[c])).then_some(Plan {
+        a,
+        toward_light,
+        b,
+        c: Some(c),
+        position: false,
+    })
+}
+
+/// The plan that moves the light point on its surface, where the path admits it: an area
+/// light's point whose neighbour `x_1` is a rough vertex it is joined to (not the pinhole: a
+/// path of one edge is the direct light's, or moves with the camera's plans).
+pub fn position_plan(scene: &Scene, x: &[Vertex], treatment: &Treatment) -> Option<Plan> {
+    let k = x.len() - 1;
+    let ok = hittable_light(scene, &x[0])
+        && k >= 2
+        && x[1].kind == VertexKind::Surface
+        && connectible(scene, &x[1])
+        && !treatment.specular(1);
+    ok.then_some(Plan { a: 0, toward_light: false, b: 0, c: Some(1), position: true })
 }
 
 /// Every plan a path admits under a treatment, in a fixed order.
 pub fn plans<'a>(scene: &'a Scene, x: &'a [Vertex], treatment: &'a Treatment) -> impl Iterator<Item = Plan> + 'a {
-    (0..x.len()).flat_map(move |a| [true, false].into_iter().filter_map(move |t| plan(scene, x, a, t, treatment)))
+    position_plan(scene, x, treatment).into_iter().chain(
+        (0..x.len()).flat_map(move |a| [true, false].into_iter().filter_map(move |t| plan(scene, x, a, t, treatment))),
+    )
+}
+
+/// The light point `x_0` displaced by `offset` in the plane of its geometric normal and
+/// projected back onto its light along that normal (the nearer of the two directions): the
+/// light vertex there, `None` when neither direction finds the same light first.
+fn displaced_light_point(scene: &Scene, x0: &Vertex, offset: glam::Vec2, counters: &mut Counters) -> Option<Vertex> {
+    let VertexKind::Light(l) = x0.kind else { return None };
+    let f = Frame::from_normal(x0.ng);
+    let q = x0.p + f.s * offset.x + f.t * offset.y;
+    let eps = 1e-4 * (1.0 + q.abs().max_element());
+    let mut best: Option<(f32, Vertex)> = None;
+    for d in [-x0.ng, x0.ng] {
+        counters.extension_rays += 1;
+        let Some(si) = scene.intersect(&Ray::new(q - d * eps, d)) else { continue };
+        let on_light = scene.shapes.get(si.shape as usize).and_then(|s| s.light) == Some(l as usize);
+        let dist = (si.p - q).length();
+        if on_light && best.as_ref().is_none_or(|(t, _)| dist < *t) {
+            best = Some((dist, as_light(scene, &surface_vertex(scene, &si, false))?));
+        }
+    }
+    best.map(|(_, v)| v)
+}
+
+/// The Gaussian position perturbation's standard deviation at a light point: its density
+/// peaks at the light walk's density of the point times `λ²`.
+fn position_sigma(scene: &Scene, x: &[Vertex], lambda: f64) -> f64 {
+    1.0 / (2.0 * std::f64::consts::PI * pdf_from_light(scene, x, 0) * lambda * lambda).sqrt()
+}
+
+/// The area density with which [`displaced_light_point`] moves `from` to `to`, deviation
+/// `sigma`: the Gaussian's density of the offset in `from`'s plane times the cosine between
+/// the two normals.
+fn position_density(from: &Vertex, to: &Vertex, sigma: f64) -> f64 {
+    let f = Frame::from_normal(from.ng);
+    let rel = to.p - from.p;
+    let offset = glam::Vec2::new(rel.dot(f.s), rel.dot(f.t));
+    square_to_gaussian_2d_pdf(offset, sigma as f32) as f64 * from.ng.dot(to.ng).abs() as f64
+}
+
+/// The probability with which a perturbation starts at the camera, towards the light, where
+/// a path admits that plan (Mitsuba 0.6's preference for perturbations from the sensor);
+/// otherwise a plan is chosen uniformly among all the path admits.
+pub const SENSOR_PROBABILITY: f32 = 0.25;
+
+/// The plan that starts at the camera, when the path admits it.
+fn camera_plan(scene: &Scene, x: &[Vertex], treatment: &Treatment) -> Option<Plan> {
+    plan(scene, x, x.len() - 1, true, treatment)
+}
+
+/// The probability of choosing `plan` on a path that admits `n` plans, `camera` among them
+/// where it admits the camera's.
+fn plan_probability(plan: &Plan, camera: Option<Plan>, n: usize) -> f64 {
+    match camera {
+        Some(c) => {
+            let s = SENSOR_PROBABILITY as f64;
+            (1.0 - s) / n as f64 + if c == *plan { s } else { 0.0 }
+        }
+        None => 1.0 / n as f64,
+    }
 }
 
 /// Whether the manifold perturbation suits `x`: a plan with its Dirac vertices alone
@@ -251,9 +344,12 @@ fn direction_density(scene: &Scene, x: &[Vertex], plan: &Plan) -> f64 {
     p as f64
 }
 
-/// The von Mises–Fisher concentration for a path.
+/// The von Mises–Fisher concentration for a path: the lobe's peak density is
+/// `max(1/4π, p) λ²`, which for a lobe this sharp (a peak of at least `λ²/4π`) is a
+/// concentration of `2π` times the peak.
 fn concentration(scene: &Scene, x: &[Vertex], plan: &Plan, lambda: f64) -> f64 {
-    (direction_density(scene, x, plan).max(1.0 / (4.0 * std::f64::consts::PI)) * lambda * lambda).min(1e6)
+    let peak = direction_density(scene, x, plan).max(1.0 / (4.0 * std::f64::consts::PI)) * lambda * lambda;
+    (2.0 * std::f64::consts::PI * peak).min(1e6)
 }
 
 /// The von Mises–Fisher solid-angle density, concentration `kappa`, of a direction at
@@ -363,8 +459,16 @@ pub fn propose<R: Random>(
 ) -> Option<Proposal> {
     let treatment = Treatment::draw(scene, x, theta_diff, rng);
     let n_x = plans(scene, x, &treatment).count();
-    let pick = ((rng.next_1d() * n_x as f32) as usize).min(n_x.checked_sub(1)?);
-    let plan = plans(scene, x, &treatment).nth(pick)?;
+    let camera_x = camera_plan(scene, x, &treatment);
+    let u = rng.next_1d();
+    let plan = match camera_x {
+        Some(p) if u < SENSOR_PROBABILITY => p,
+        _ => {
+            let u = if camera_x.is_some() { (u - SENSOR_PROBABILITY) / (1.0 - SENSOR_PROBABILITY) } else { u };
+            let pick = ((u * n_x as f32) as usize).min(n_x.checked_sub(1)?);
+            plans(scene, x, &treatment).nth(pick)?
+        }
+    };
     let (a, b) = (plan.a, plan.b);
     // The vertices the move changes.
     let changed = || plan.span(a, plan.c.unwrap_or(b));
@@ -373,22 +477,31 @@ pub fn propose<R: Random>(
     }
     let next = plan.next(a);
     let wx = (x[next].p - x[a].p).normalize();
-    let kappa_x = concentration(scene, x, &plan, lambda);
-    let local = square_to_von_mises_fisher(rng.next_2d(), kappa_x as f32);
-    let mut ray = ray_from(&x[a], Frame::from_normal(wx).to_world(local));
-    // From `a` through the same Dirac lobes and kept half-vectors to the new `b`.
     let mut y = x.to_vec();
-    for i in plan.span(a, b) {
-        y[i] = if treatment.glossy(x, i) {
-            retrace_glossy(scene, &mut ray, x, i, counters)?
-        } else {
-            retrace(scene, &mut ray, x, i, i != b, counters)?
-        };
-    }
-    if b == 0 {
-        y[0] = as_light(scene, &y[0])?;
-    } else if !connectible(scene, &y[b]) {
-        return None;
+    let mut kappa_x = 0.0;
+    if plan.position {
+        // The light point moved on its surface.
+        walks.light_points += 1;
+        let sigma = position_sigma(scene, x, lambda);
+        let offset = square_to_gaussian_2d(rng.next_2d(), sigma as f32);
+        y[0] = displaced_light_point(scene, &x[0], offset, counters)?;
+    } else {
+        kappa_x = concentration(scene, x, &plan, lambda);
+        let local = square_to_von_mises_fisher(rng.next_2d(), kappa_x as f32);
+        let mut ray = ray_from(&x[a], Frame::from_normal(wx).to_world(local));
+        // From `a` through the same Dirac lobes and kept half-vectors to the new `b`.
+        for i in plan.span(a, b) {
+            y[i] = if treatment.glossy(x, i) {
+                retrace_glossy(scene, &mut ray, x, i, counters)?
+            } else {
+                retrace(scene, &mut ray, x, i, i != b, counters)?
+            };
+        }
+        if b == 0 {
+            y[0] = as_light(scene, &y[0])?;
+        } else if !connectible(scene, &y[b]) {
+            return None;
+        }
     }
     // From `c` through the specular chain to the new `b`.
     let mut chains = None;
@@ -412,22 +525,44 @@ pub fn propose<R: Random>(
             chains = Some((current, walked));
         }
     }
-    // The reverse move must be planned the same way.
-    if self::plan(scene, &y, a, plan.toward_light, &treatment) != Some(plan) {
+    // The reverse move must be planned the same way (and a moved light point must be found
+    // again from the new one).
+    if plan.position {
+        if position_plan(scene, &y, &treatment) != Some(plan) {
+            return None;
+        }
+        let f = Frame::from_normal(y[0].ng);
+        let rel = x[0].p - y[0].p;
+        let back = displaced_light_point(scene, &y[0], glam::Vec2::new(rel.dot(f.s), rel.dot(f.t)), counters)?;
+        let scale = 1.0 + x[0].p.abs().max_element();
+        if ((back.p - x[0].p).length() as f64) > 1e-3 * position_sigma(scene, x, lambda) + 1e-5 * scale as f64 {
+            return None;
+        }
+    } else if self::plan(scene, &y, a, plan.toward_light, &treatment) != Some(plan) {
         return None;
     }
     let n_y = plans(scene, &y, &treatment).count();
+    let (p_x, p_y) =
+        (plan_probability(&plan, camera_x, n_x), plan_probability(&plan, camera_plan(scene, &y, &treatment), n_y));
     let measured = contribution(scene, &y)?;
-    let wy = (y[next].p - y[a].p).normalize();
-    let d2 = (wy - wx).length_squared() as f64;
-    let kappa_y = concentration(scene, &y, &plan, lambda);
+    // The densities of the moved vertex: the light point's position, or `a`'s direction.
+    let (moved_x, moved_y) = if plan.position {
+        (
+            position_density(&x[0], &y[0], position_sigma(scene, x, lambda)),
+            position_density(&y[0], &x[0], position_sigma(scene, &y, lambda)),
+        )
+    } else {
+        let wy = (y[next].p - y[a].p).normalize();
+        let d2 = (wy - wx).length_squared() as f64;
+        (vmf_density(d2, kappa_x), vmf_density(d2, concentration(scene, &y, &plan, lambda)))
+    };
     let (t_x, t_y) = (
         treatment.probability(scene, x, theta_diff, changed()),
         treatment.probability(scene, &y, theta_diff, changed()),
     );
     let jacobian = |v: &[Vertex], chain: Option<&TracedChain>| jacobian(scene, v, &plan, &treatment, chain);
-    let forward = vmf_density(d2, kappa_x) * jacobian(&y, chains.as_ref().map(|c| &c.1))? * t_x / n_x as f64;
-    let backward = vmf_density(d2, kappa_y) * jacobian(x, chains.as_ref().map(|c| &c.0))? * t_y / n_y as f64;
+    let forward = moved_x * jacobian(&y, chains.as_ref().map(|c| &c.1))? * t_x * p_x;
+    let backward = moved_y * jacobian(x, chains.as_ref().map(|c| &c.0))? * t_y * p_y;
     Some(Proposal { path: y, measured, forward, backward })
 }
 

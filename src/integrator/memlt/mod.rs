@@ -352,8 +352,14 @@ pub fn render(
     let threads = pool.current_num_threads();
     let mut lengths = lengths(scene);
     if direct > 0 {
-        lengths.min = lengths.min.max(2);
-        lengths.direct_separate = true;
+        // The chains keep the two-edge paths through a Dirac lobe; where no surface has one,
+        // they start at three edges, so that no move proposes a path the direct pass renders.
+        if scene.shapes.iter().any(|sh| scene.bsdfs[sh.bsdf].lobes(glam::Vec2::ZERO).any(|l| l.is_delta())) {
+            lengths.min = lengths.min.max(2);
+            lengths.direct_separate = true;
+        } else {
+            lengths.min = lengths.min.max(3);
+        }
     }
     let (w, h) = (scene.film.width, scene.film.height);
     let pixels = w as u64 * h as u64;

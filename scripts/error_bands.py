@@ -1,0 +1,57 @@
+#!/usr/bin/env python3
+"""relMSE of test images against a reference, per luminance band of the reference's pixels.
+
+The relMSE is `pcbpt compare`'s (per channel `(t - r)^2 / (r^2 + 0.01)`, averaged over all
+channels of the pixels counted); the bands are the quarters of the reference's pixels by
+luminance (darkest first), so that one sees where in the image a method's error sits:
+Metropolis methods spread their samples by brightness, and their error by band differs from
+a path tracer's. Also printed: the relMSE of the images box-filtered to 2x2 and 4x4 blocks
+(noise that survives averaging neighbouring pixels is the chains' low-frequency error) and
+the ratio of image means.
+
+    pip install mitsuba numpy
+    python3 scripts/error_bands.py REFERENCE.exr TEST.exr [TEST.exr ...]
+"""
+import sys
+
+import numpy as np
+
+
+def load(path):
+    import mitsuba as mi
+
+    mi.set_variant("scalar_rgb")
+    bmp = mi.Bitmap(path).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, False)
+    return np.array(bmp, dtype=np.float64)
+
+
+def relmse(t, r):
+    return float(np.mean((t - r) ** 2 / (r * r + 0.01)))
+
+
+def boxed(a, f):
+    h, w = a.shape[0] // f * f, a.shape[1] // f * f
+    return a[:h, :w].reshape(h // f, f, w // f, f, 3).mean(axis=(1, 3))
+
+
+def main():
+    if len(sys.argv) < 3:
+        sys.exit(__doc__)
+    ref = load(sys.argv[1])
+    lum = ref @ np.array([0.2126, 0.7152, 0.0722])
+    band = np.digitize(lum, np.quantile(lum, [0.25, 0.5, 0.75]))
+    print("image: relMSE, 2x2, 4x4, quarters by luminance (darkest first), mean ratio")
+    for path in sys.argv[2:]:
+        t = load(path)
+        if t.shape != ref.shape:
+            sys.exit(f"{path}: {t.shape[1]}x{t.shape[0]} against the reference's {ref.shape[1]}x{ref.shape[0]}")
+        terms = (t - ref) ** 2 / (ref * ref + 0.01)
+        quarters = " ".join(f"{terms[band == i].mean():.4f}" for i in range(4))
+        print(
+            f"{path}: {relmse(t, ref):.5f}, {relmse(boxed(t, 2), boxed(ref, 2)):.5f}, "
+            f"{relmse(boxed(t, 4), boxed(ref, 4)):.5f}, {quarters}, {t.mean() / ref.mean():.4f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
