@@ -178,8 +178,8 @@ struct RenderArgs {
     /// MEMLT: Veach's multi-chain perturbation among the mutations.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     multichain_perturbation: bool,
-    /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's
-    /// concentration is the current direction's scattering density times λ²).
+    /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's peak
+    /// density is the current direction's scattering density times λ²).
     #[arg(long, default_value_t = MltOptions::default().lambda)]
     lambda: f64,
     /// MEMLT: the half-vector change, in degrees, against which the manifold perturbation

@@ -60,8 +60,9 @@ pub struct MltOptions {
     pub multichain_perturbation: bool,
     pub manifold_perturbation: bool,
     /// MEMLT: how much sharper than the current direction's scattering density the manifold
-    /// perturbation's von Mises–Fisher lobe is (its concentration is that density times
-    /// `λ²`).
+    /// perturbation's von Mises–Fisher lobe is (its peak density is that density times
+    /// `λ²`; an area light's point moved by the perturbation gets a Gaussian whose peak is
+    /// the point's density times `λ²`).
     pub lambda: f64,
     /// MEMLT: the half-vector change (degrees) against which the manifold perturbation
     /// judges a glossy lobe: the wider the lobe against it, the more often the vertex is
@@ -101,7 +102,7 @@ impl Default for MltOptions {
             multichain_perturbation: true,
             manifold_perturbation: true,
             lambda: 50.0,
-            theta_diff: 1.0,
+            theta_diff: 5.0,
             chains: 64,
         }
     }
