@@ -104,6 +104,7 @@ pub struct MethodEntry {
     pub lens_perturbation: Option<bool>,
     pub caustic_perturbation: Option<bool>,
     pub multichain_perturbation: Option<bool>,
+    pub independent_mutation: Option<bool>,
     pub lambda: Option<f64>,
     pub theta_diff: Option<f64>,
     pub chains: Option<usize>,
@@ -260,6 +261,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.multichain_perturbation {
         o.mlt.multichain_perturbation = x;
+    }
+    if let Some(x) = m.independent_mutation {
+        o.mlt.independent_mutation = x;
     }
     if let Some(x) = m.lambda {
         o.mlt.lambda = x;

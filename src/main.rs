@@ -178,6 +178,10 @@ struct RenderArgs {
     /// MEMLT: Veach's multi-chain perturbation among the mutations.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     multichain_perturbation: bool,
+    /// MEMLT: the independent mutation among the mutations (a whole new path from the
+    /// bidirectional generator, Kelemen's large step in path space; not Mitsuba 0.6's).
+    #[arg(long, default_value_t = MltOptions::default().independent_mutation, action = clap::ArgAction::Set)]
+    independent_mutation: bool,
     /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's peak
     /// density is the current direction's scattering density times λ²).
     #[arg(long, default_value_t = MltOptions::default().lambda)]
@@ -447,6 +451,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         lens_perturbation: a.lens_perturbation,
         caustic_perturbation: a.caustic_perturbation,
         multichain_perturbation: a.multichain_perturbation,
+        independent_mutation: a.independent_mutation,
         manifold_perturbation: a.manifold_perturbation,
         lambda: a.lambda,
         theta_diff: a.theta_diff,

@@ -52,13 +52,15 @@ pub struct MltOptions {
     /// until this fraction of the time is spent (the image's brightness is its estimate).
     pub bootstrap_fraction: f64,
     /// MEMLT: which mutations the chains use (Mitsuba 0.6's switches): the bidirectional
-    /// mutation, Veach's lens and caustic perturbations, and the manifold perturbation
-    /// (without it, Veach's MLT).
+    /// mutation, Veach's lens, caustic and multi-chain perturbations, and the manifold
+    /// perturbation (without it, Veach's MLT); and, beyond Mitsuba 0.6, the independent
+    /// mutation (a whole new path: Kelemen's large step in path space).
     pub bidirectional_mutation: bool,
     pub lens_perturbation: bool,
     pub caustic_perturbation: bool,
     pub multichain_perturbation: bool,
     pub manifold_perturbation: bool,
+    pub independent_mutation: bool,
     /// MEMLT: how much sharper than the current direction's scattering density the manifold
     /// perturbation's von Mises–Fisher lobe is (its peak density is that density times
     /// `λ²`; an area light's point moved by the perturbation gets a Gaussian whose peak is
@@ -100,6 +102,7 @@ impl Default for MltOptions {
             lens_perturbation: true,
             caustic_perturbation: true,
             multichain_perturbation: true,
+            independent_mutation: false,
             manifold_perturbation: true,
             lambda: 50.0,
             theta_diff: 5.0,

@@ -14,6 +14,7 @@
 
 pub mod bidirectional;
 pub mod caustic;
+pub mod independent;
 pub mod lens;
 pub mod manifold_perturbation;
 pub mod multichain;
@@ -44,11 +45,18 @@ pub enum Mutator {
     Caustic,
     MultiChain,
     Manifold,
+    Independent,
 }
 
 impl Mutator {
-    pub const ALL: [Mutator; 5] =
-        [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::Manifold];
+    pub const ALL: [Mutator; 6] = [
+        Mutator::Bidirectional,
+        Mutator::Lens,
+        Mutator::Caustic,
+        Mutator::MultiChain,
+        Mutator::Manifold,
+        Mutator::Independent,
+    ];
 }
 
 /// For each mutator, whether it suits a path and from where ([`suitable`]).
@@ -56,7 +64,7 @@ type Suits = [Option<usize>; Mutator::ALL.len()];
 
 /// The mutators that suit a path (the bidirectional mutation suits every path) among those
 /// `enabled`: for each, `None` when it does not, else the vertex it works from (0 for the
-/// bidirectional and manifold ones).
+/// bidirectional, manifold and independent ones).
 fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) -> Suits {
     let on = |m: Mutator| enabled[m as usize];
     [
@@ -65,6 +73,7 @@ fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) ->
         if on(Mutator::Caustic) { caustic::suits(scene, x) } else { None },
         if on(Mutator::MultiChain) { multichain::suits(scene, x) } else { None },
         (on(Mutator::Manifold) && manifold_perturbation::suits(scene, x)).then_some(0),
+        on(Mutator::Independent).then_some(0),
     ]
 }
 
@@ -76,6 +85,7 @@ pub fn enabled(o: &super::mlt::MltOptions) -> [bool; Mutator::ALL.len()] {
         o.caustic_perturbation,
         o.multichain_perturbation,
         o.manifold_perturbation,
+        o.independent_mutation,
     ]
 }
 
@@ -151,8 +161,15 @@ pub fn independent_path<R: Random>(
         return None;
     }
     let m = path::contribution(scene, &y)?;
-    let p = seed_length_pmf(lengths, k) * path::stretch_density(scene, &y, 0, k);
+    let p = whole_path_density(scene, lengths, &y);
     (p > 0.0).then_some((y, m, p))
+}
+
+/// The density with which [`independent_path`] generates path `x` (0 for a length it never
+/// draws).
+pub fn whole_path_density(scene: &Scene, lengths: Lengths, x: &[Vertex]) -> f64 {
+    let k = x.len() - 1;
+    seed_length_pmf(lengths, k) * path::stretch_density(scene, x, 0, k)
 }
 
 /// Scalar contribution of a path: its luminance (zero when not positive and finite).
@@ -222,6 +239,7 @@ impl Chain {
             Mutator::Manifold => {
                 manifold_perturbation::propose(scene, x, (set.lambda, set.theta_diff), rng, c, &mut self.walks)
             }
+            Mutator::Independent => independent::propose(scene, x, lengths, rng, c),
         };
         self.proposed[m as usize] += 1;
         let (a, proposal) = match proposal {
@@ -334,7 +352,7 @@ pub fn render(
         )));
     }
     if !enabled(&opts.mlt).iter().any(|&e| e) {
-        return Err(Error::Usage("memlt needs at least one mutation (all five are switched off)".into()));
+        return Err(Error::Usage("memlt needs at least one mutation (all six are switched off)".into()));
     }
     let fraction = opts.mlt.bootstrap_fraction;
     if !(0.0..1.0).contains(&fraction) {

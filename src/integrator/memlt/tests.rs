@@ -193,6 +193,7 @@ fn balance_of(
                 Mutator::Lens => lens::propose(scene, &x, mx.raster, at, radii, &mut rng, &mut c),
                 Mutator::Caustic => caustic::propose(scene, &x, at, radii, &mut rng, &mut c),
                 Mutator::MultiChain => multichain::propose(scene, &x, mx.raster, at, radii, &mut rng, &mut c),
+                Mutator::Independent => independent::propose(scene, &x, lengths, &mut rng, &mut c),
                 Mutator::Manifold => manifold_perturbation::propose(
                     scene,
                     &x,
@@ -233,7 +234,10 @@ fn every_mutator_is_in_detailed_balance() {
     // perturbation there with empty chains: the seen point moved from the light's side).
     let checks = [
         (glass_caustic(), &[Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::Manifold][..]),
-        (cornell(), &[Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::Manifold][..]),
+        (
+            cornell(),
+            &[Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::Manifold, Mutator::Independent][..],
+        ),
     ];
     for (scene, mutators) in &checks {
         for &m in *mutators {
@@ -242,6 +246,7 @@ fn every_mutator_is_in_detailed_balance() {
             // paths suit the multi-chain perturbation.
             let n = match m {
                 Mutator::Bidirectional => 4_800_000,
+                Mutator::Independent => 1_200_000,
                 Mutator::MultiChain => 4_000_000,
                 _ => 300_000,
             };
