@@ -292,10 +292,15 @@ fn position_sigma(scene: &Scene, x: &[Vertex], lambda: f64) -> f64 {
 /// `sigma`: the Gaussian's density of the offset in `from`'s plane times the cosine between
 /// the two normals.
 fn position_density(from: &Vertex, to: &Vertex, sigma: f64) -> f64 {
+    square_to_gaussian_2d_pdf(tangent_offset(from, to), sigma as f32) as f64 * from.ng.dot(to.ng).abs() as f64
+}
+
+/// The offset of `to` from `from` in the plane of `from`'s geometric normal, in the frame
+/// [`displaced_light_point`] displaces `from` in.
+fn tangent_offset(from: &Vertex, to: &Vertex) -> glam::Vec2 {
     let f = Frame::from_normal(from.ng);
     let rel = to.p - from.p;
-    let offset = glam::Vec2::new(rel.dot(f.s), rel.dot(f.t));
-    square_to_gaussian_2d_pdf(offset, sigma as f32) as f64 * from.ng.dot(to.ng).abs() as f64
+    glam::Vec2::new(rel.dot(f.s), rel.dot(f.t))
 }
 
 /// The probability with which a perturbation starts at the camera, towards the light, where
@@ -479,11 +484,12 @@ pub fn propose<R: Random>(
     let wx = (x[next].p - x[a].p).normalize();
     let mut y = x.to_vec();
     let mut kappa_x = 0.0;
+    // The position perturbation's deviation at the current light point (plans that move it).
+    let sigma_x = if plan.position { position_sigma(scene, x, lambda) } else { 0.0 };
     if plan.position {
         // The light point moved on its surface.
         walks.light_points += 1;
-        let sigma = position_sigma(scene, x, lambda);
-        let offset = square_to_gaussian_2d(rng.next_2d(), sigma as f32);
+        let offset = square_to_gaussian_2d(rng.next_2d(), sigma_x as f32);
         y[0] = displaced_light_point(scene, &x[0], offset, counters)?;
     } else {
         kappa_x = concentration(scene, x, &plan, lambda);
@@ -531,11 +537,9 @@ pub fn propose<R: Random>(
         if position_plan(scene, &y, &treatment) != Some(plan) {
             return None;
         }
-        let f = Frame::from_normal(y[0].ng);
-        let rel = x[0].p - y[0].p;
-        let back = displaced_light_point(scene, &y[0], glam::Vec2::new(rel.dot(f.s), rel.dot(f.t)), counters)?;
+        let back = displaced_light_point(scene, &y[0], tangent_offset(&y[0], &x[0]), counters)?;
         let scale = 1.0 + x[0].p.abs().max_element();
-        if ((back.p - x[0].p).length() as f64) > 1e-3 * position_sigma(scene, x, lambda) + 1e-5 * scale as f64 {
+        if ((back.p - x[0].p).length() as f64) > 1e-3 * sigma_x + 1e-5 * scale as f64 {
             return None;
         }
     } else if self::plan(scene, &y, a, plan.toward_light, &treatment) != Some(plan) {
@@ -547,10 +551,7 @@ pub fn propose<R: Random>(
     let measured = contribution(scene, &y)?;
     // The densities of the moved vertex: the light point's position, or `a`'s direction.
     let (moved_x, moved_y) = if plan.position {
-        (
-            position_density(&x[0], &y[0], position_sigma(scene, x, lambda)),
-            position_density(&y[0], &x[0], position_sigma(scene, &y, lambda)),
-        )
+        (position_density(&x[0], &y[0], sigma_x), position_density(&y[0], &x[0], position_sigma(scene, &y, lambda)))
     } else {
         let wy = (y[next].p - y[a].p).normalize();
         let d2 = (wy - wx).length_squared() as f64;
