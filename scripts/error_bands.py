@@ -9,8 +9,12 @@ a path tracer's. Also printed: the relMSE of the images box-filtered to 2x2 and 
 (noise that survives averaging neighbouring pixels is the chains' low-frequency error) and
 the ratio of image means.
 
+With `--region NAME=X0:X1,Y0:Y1` (pixel ranges, end excluded; repeatable) it also prints
+each region's share of the relMSE: the sum of its pixels' terms over the whole image's pixel
+count, so that the shares and the rest add up to the relMSE.
+
     pip install mitsuba numpy
-    python3 scripts/error_bands.py REFERENCE.exr TEST.exr [TEST.exr ...]
+    python3 scripts/error_bands.py REFERENCE.exr TEST.exr [TEST.exr ...] [--region NAME=X0:X1,Y0:Y1 ...]
 """
 import sys
 
@@ -34,14 +38,32 @@ def boxed(a, f):
     return a[:h, :w].reshape(h // f, f, w // f, f, 3).mean(axis=(1, 3))
 
 
+def parse_region(text):
+    try:
+        name, ranges = text.split("=")
+        xs, ys = ranges.split(",")
+        x0, x1 = (int(v) for v in xs.split(":"))
+        y0, y1 = (int(v) for v in ys.split(":"))
+    except ValueError:
+        sys.exit(f"--region {text}: expected NAME=X0:X1,Y0:Y1")
+    return name, (slice(y0, y1), slice(x0, x1))
+
+
 def main():
-    if len(sys.argv) < 3:
+    args, regions = [], []
+    it = iter(sys.argv[1:])
+    for a in it:
+        if a == "--region":
+            regions.append(parse_region(next(it, "")))
+        else:
+            args.append(a)
+    if len(args) < 2:
         sys.exit(__doc__)
-    ref = load(sys.argv[1])
+    ref = load(args[0])
     lum = ref @ np.array([0.2126, 0.7152, 0.0722])
     band = np.digitize(lum, np.quantile(lum, [0.25, 0.5, 0.75]))
     print("image: relMSE, 2x2, 4x4, quarters by luminance (darkest first), mean ratio")
-    for path in sys.argv[2:]:
+    for path in args[1:]:
         t = load(path)
         if t.shape != ref.shape:
             sys.exit(f"{path}: {t.shape[1]}x{t.shape[0]} against the reference's {ref.shape[1]}x{ref.shape[0]}")
@@ -51,6 +73,11 @@ def main():
             f"{path}: {relmse(t, ref):.5f}, {relmse(boxed(t, 2), boxed(ref, 2)):.5f}, "
             f"{relmse(boxed(t, 4), boxed(ref, 4)):.5f}, {quarters}, {t.mean() / ref.mean():.4f}"
         )
+        if regions:
+            per_pixel = terms.mean(axis=2)
+            shares = [(name, per_pixel[r].sum() / per_pixel.size) for name, r in regions]
+            rest = per_pixel.mean() - sum(v for _, v in shares)
+            print("  " + ", ".join(f"{name} {v:.5f}" for name, v in shares) + f", rest {rest:.5f}")
 
 
 if __name__ == "__main__":
