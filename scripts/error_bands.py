@@ -16,6 +16,7 @@ count, so that the shares and the rest add up to the relMSE.
     pip install mitsuba numpy
     python3 scripts/error_bands.py REFERENCE.exr TEST.exr [TEST.exr ...] [--region NAME=X0:X1,Y0:Y1 ...]
 """
+import argparse
 import sys
 
 import numpy as np
@@ -45,25 +46,21 @@ def parse_region(text):
         x0, x1 = (int(v) for v in xs.split(":"))
         y0, y1 = (int(v) for v in ys.split(":"))
     except ValueError:
-        sys.exit(f"--region {text}: expected NAME=X0:X1,Y0:Y1")
+        raise argparse.ArgumentTypeError(f"{text}: expected NAME=X0:X1,Y0:Y1")
     return name, (slice(y0, y1), slice(x0, x1))
 
 
 def main():
-    args, regions = [], []
-    it = iter(sys.argv[1:])
-    for a in it:
-        if a == "--region":
-            regions.append(parse_region(next(it, "")))
-        else:
-            args.append(a)
-    if len(args) < 2:
-        sys.exit(__doc__)
-    ref = load(args[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("reference")
+    ap.add_argument("tests", nargs="+")
+    ap.add_argument("--region", type=parse_region, action="append", default=[], metavar="NAME=X0:X1,Y0:Y1")
+    a = ap.parse_args()
+    ref = load(a.reference)
     lum = ref @ np.array([0.2126, 0.7152, 0.0722])
     band = np.digitize(lum, np.quantile(lum, [0.25, 0.5, 0.75]))
     print("image: relMSE, 2x2, 4x4, quarters by luminance (darkest first), mean ratio")
-    for path in args[1:]:
+    for path in a.tests:
         t = load(path)
         if t.shape != ref.shape:
             sys.exit(f"{path}: {t.shape[1]}x{t.shape[0]} against the reference's {ref.shape[1]}x{ref.shape[0]}")
@@ -73,9 +70,9 @@ def main():
             f"{path}: {relmse(t, ref):.5f}, {relmse(boxed(t, 2), boxed(ref, 2)):.5f}, "
             f"{relmse(boxed(t, 4), boxed(ref, 4)):.5f}, {quarters}, {t.mean() / ref.mean():.4f}"
         )
-        if regions:
+        if a.region:
             per_pixel = terms.mean(axis=2)
-            shares = [(name, per_pixel[r].sum() / per_pixel.size) for name, r in regions]
+            shares = [(name, per_pixel[r].sum() / per_pixel.size) for name, r in a.region]
             rest = per_pixel.mean() - sum(v for _, v in shares)
             print("  " + ", ".join(f"{name} {v:.5f}" for name, v in shares) + f", rest {rest:.5f}")
 
