@@ -22,11 +22,6 @@ pub fn propose(
     rng: &mut impl Random,
     c: &mut Counters,
 ) -> Option<Proposal> {
-    let backward = super::whole_path_density(scene, lengths, x);
-    super::independent_path(scene, lengths, rng, c).map(|(path, measured, forward)| Proposal {
-        path,
-        measured,
-        forward,
-        backward,
-    })
+    let (path, measured, forward) = super::independent_path(scene, lengths, rng, c)?;
+    Some(Proposal { path, measured, forward, backward: super::whole_path_density(scene, lengths, x) })
 }
