@@ -164,19 +164,19 @@ struct RenderArgs {
     #[arg(long, default_value_t = MltOptions::default().bootstrap_fraction)]
     bootstrap_fraction: f64,
     /// MEMLT: the manifold perturbation among the mutations (`false` gives Veach's MLT).
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    #[arg(long, default_value_t = MltOptions::default().manifold_perturbation, action = clap::ArgAction::Set)]
     manifold_perturbation: bool,
     /// MEMLT: the bidirectional mutation among the mutations.
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    #[arg(long, default_value_t = MltOptions::default().bidirectional_mutation, action = clap::ArgAction::Set)]
     bidirectional_mutation: bool,
     /// MEMLT: Veach's lens perturbation among the mutations.
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    #[arg(long, default_value_t = MltOptions::default().lens_perturbation, action = clap::ArgAction::Set)]
     lens_perturbation: bool,
     /// MEMLT: Veach's caustic perturbation among the mutations.
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    #[arg(long, default_value_t = MltOptions::default().caustic_perturbation, action = clap::ArgAction::Set)]
     caustic_perturbation: bool,
     /// MEMLT: Veach's multi-chain perturbation among the mutations.
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    #[arg(long, default_value_t = MltOptions::default().multichain_perturbation, action = clap::ArgAction::Set)]
     multichain_perturbation: bool,
     /// MEMLT: the independent mutation among the mutations (a whole new path from the
     /// bidirectional generator, Kelemen's large step in path space; not Mitsuba 0.6's).
