@@ -569,6 +569,25 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.manifold_walks.light_points,
             m.bootstrap_seconds
         );
+        if let Some(l) = &m.longest_stay {
+            eprintln!(
+                "  longest stay of a chain in one pixel: {} mutations at ({}, {}), {:.0}% of the light in its 3×3 pixels",
+                l.mutations,
+                l.pixel[0],
+                l.pixel[1],
+                l.share * 100.0
+            );
+            if l.dominates() {
+                eprintln!(
+                    "warning: memlt: one chain stayed {} mutations in pixel ({}, {}) and put {:.0}% of the light around it there: \
+                     those pixels' values rest on a single visit (a longer render, or another --seed, averages it out)",
+                    l.mutations,
+                    l.pixel[0],
+                    l.pixel[1],
+                    l.share * 100.0
+                );
+            }
+        }
     } else if !a.quiet && s.bidir.is_some() {
         let c = &s.counters;
         eprintln!(

@@ -182,3 +182,34 @@ fn memlt_bootstrap_takes_its_share_of_a_time_budget() {
     assert!(s.bootstrap_samples > 1000 && s.bootstrap_samples.is_multiple_of(1000), "{} samples", s.bootstrap_samples);
     assert!(s.bootstrap_seconds >= 0.25 && s.normalisation > 0.0, "{} s", s.bootstrap_seconds);
 }
+
+#[test]
+fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
+    // One chain, the direct light in it, and only the multi-chain perturbation, which no
+    // path of this diffuse box suits (it needs a specular vertex between rough ones): the chain keeps its start path, every mutation splats it
+    // into one pixel, and that pixel's light is all the stay's.
+    let scene =
+        load(&root().join("scenes/cornell-ply/cornell_mi.xml"), &[("resx", "32"), ("resy", "32")], Backend::Embree);
+    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
+    o.seed = 3;
+    o.threads = 2;
+    o.mlt.direct_samples = -1;
+    o.mlt.chains = 1;
+    o.mlt.bidirectional_mutation = false;
+    o.mlt.lens_perturbation = false;
+    o.mlt.caustic_perturbation = false;
+    o.mlt.manifold_perturbation = false;
+    o.mlt.independent_mutation = false;
+    let out = integrator::render(&scene, &o).unwrap();
+    let stay = out.stats.memlt.as_ref().unwrap().longest_stay.unwrap();
+    assert_eq!(stay.mutations, out.width as u64 * out.height as u64 * 4);
+    assert!((stay.share - 1.0).abs() < 1e-3, "share {}", stay.share);
+    assert!(stay.dominates());
+    // With the usual mutations no stay is that long in so short a render.
+    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
+    o.seed = 3;
+    o.threads = 2;
+    let out = integrator::render(&scene, &o).unwrap();
+    let stay = out.stats.memlt.as_ref().unwrap().longest_stay.unwrap();
+    assert!(!stay.dominates(), "{stay:?}");
+}
