@@ -545,6 +545,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.large_acceptance * 100.0,
             m.bootstrap_seconds
         );
+        print_longest_stay("pssmlt", m.longest_stay.as_ref());
     } else if let (false, Some(m)) = (a.quiet, &s.memlt) {
         let acceptance: Vec<String> = m
             .mutators
@@ -569,25 +570,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.manifold_walks.light_points,
             m.bootstrap_seconds
         );
-        if let Some(l) = &m.longest_stay {
-            eprintln!(
-                "  longest stay of a chain in one pixel: {} mutations at ({}, {}), {:.0}% of the light in its 3×3 pixels",
-                l.mutations,
-                l.pixel[0],
-                l.pixel[1],
-                l.share * 100.0
-            );
-            if l.dominates() {
-                eprintln!(
-                    "warning: memlt: one chain stayed {} mutations in pixel ({}, {}) and put {:.0}% of the light around it there: \
-                     those pixels' values rest on a single visit (a longer render, or another --seed, averages it out)",
-                    l.mutations,
-                    l.pixel[0],
-                    l.pixel[1],
-                    l.share * 100.0
-                );
-            }
-        }
+        print_longest_stay("memlt", m.longest_stay.as_ref());
     } else if !a.quiet && s.bidir.is_some() {
         let c = &s.counters;
         eprintln!(
@@ -694,4 +677,24 @@ fn compare_images(a: CompareArgs) -> Result<ExitCode> {
         image_io::write_png_rgb8(path, r.width, r.height, &bytes)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The summary's line on a Metropolis render's longest stay of a chain around one pixel, and
+/// a warning when that stay carries most of the light in the pixels around it.
+fn print_longest_stay(integrator: &str, stay: Option<&pcbpt::integrator::stays::LongestStay>) {
+    let Some(l) = stay else { return };
+    let [x, y] = l.pixel;
+    eprintln!(
+        "  longest stay of a chain around one pixel: {} mutations within a pixel of ({x}, {y}), {:.0}% of the light in those 3×3 pixels",
+        l.mutations,
+        l.share * 100.0
+    );
+    if l.dominates() {
+        eprintln!(
+            "warning: {integrator}: one chain stayed {} mutations within a pixel of ({x}, {y}) and put {:.0}% of the light \
+             in those 3×3 pixels there: their values rest on a single visit (a longer render, or another --seed, averages it out)",
+            l.mutations,
+            l.share * 100.0
+        );
+    }
 }

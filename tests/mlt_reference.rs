@@ -83,3 +83,27 @@ fn pssmlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
         assert!(m.small_acceptance > 0.0 && m.small_acceptance <= 1.0 && m.large_acceptance > 0.0);
     }
 }
+
+#[test]
+fn pssmlt_measures_its_longest_stay_against_the_image() {
+    // A one-pixel film: every state of the one chain lies in it, so the longest stay is the
+    // whole render and carries all of the pixel's light (the image's luminance is `b`, and
+    // every mutation splats `b`).
+    let path = root().join("scenes/cornell-ply/cornell_mi.xml");
+    let scene = load_at(&path, &[], Some((1, 1)), Backend::Embree);
+    let mut o = RenderOptions::new(IntegratorKind::Pssmlt, Budget::Spp(3000));
+    o.seed = 4;
+    o.threads = 2;
+    o.mlt.chains = 1;
+    let out = integrator::render(&scene, &o).unwrap();
+    let stay = out.stats.mlt.unwrap().longest_stay.unwrap();
+    assert_eq!(stay.mutations, 3000);
+    assert_eq!(stay.pixel, [0, 0]);
+    assert!((stay.share - 1.0).abs() < 1e-3, "share {}", stay.share);
+    assert!(stay.dominates());
+    // At the full film no stay of a short render carries that much.
+    let scene = load(&path, &[], Backend::Embree);
+    let out = render(&scene, IntegratorKind::Pssmlt, 4, 4, 2);
+    let stay = out.stats.mlt.unwrap().longest_stay.unwrap();
+    assert!(!stay.dominates(), "{stay:?}");
+}

@@ -16,6 +16,7 @@
 use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};
 use super::bidir::{Sink, Vertex, WalkLimits};
+use super::stays::{self, LongestStay, Stay, Stays, pixel_of, share_in};
 use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::math::{Rgb, luminance};
@@ -130,6 +131,8 @@ pub struct MltStats {
     pub large_acceptance: f64,
     pub mutations_per_second: f64,
     pub bootstrap_seconds: f64,
+    /// The longest any chain's current state stayed in one pixel.
+    pub longest_stay: Option<LongestStay>,
 }
 
 /// Kelemen's small-step perturbation of one coordinate: an offset of size
@@ -364,6 +367,7 @@ struct Chain {
     /// Scratch: the proposal's contributions and the splats of a deposit.
     proposed: Contributions,
     buf: Vec<Splat>,
+    stays: Stays,
 }
 
 impl Chain {
@@ -381,6 +385,13 @@ impl Chain {
         if self.f > 0.0 {
             deposit(film, &self.current, (1.0 - a) * b / self.f, buf);
         }
+        // The part of this step's splats that lands around the current stay's pixel.
+        let (current, f) = (&self.current, self.f);
+        self.stays.record(pixel_of(current.pos), |centre| {
+            let moved = if fp > 0.0 { a as f64 * share_in(&proposed.splats, centre) } else { 0.0 };
+            let stayed = if f > 0.0 { (1.0 - a) as f64 * share_in(&current.splats, centre) } else { 0.0 };
+            moved + stayed
+        });
         if large {
             self.stats.large_proposed += 1;
             self.large_sum += fp as f64;
@@ -544,6 +555,7 @@ pub fn render(
     };
     let mut snapshots = Vec::new();
     let mut interrupted = stopped();
+    let mut longest = Stay::default();
     if b > 0.0 && !interrupted {
         let dist = Distribution1D::new(&weights);
         let total = match opts.budget {
@@ -575,6 +587,7 @@ pub fn render(
                     large_sum: 0.0,
                     proposed: Contributions::default(),
                     buf: Vec::new(),
+                    stays: Stays::default(),
                 }
             })
             .collect();
@@ -597,6 +610,7 @@ pub fn render(
             },
         );
         stats.normalisation = refined_normalisation(&chains, b, n_boot);
+        longest = stays::longest(chains.iter().map(|c| &c.stays));
         for ch in &chains {
             counters += ch.counters;
             stats.small_proposed += ch.stats.small_proposed;
@@ -615,7 +629,9 @@ pub fn render(
     let spp = (stats.mutations / pixels) as u32;
     // The chains splatted with the bootstrap's b; the final b also counts the large steps.
     let rescale = if b > 0.0 { (stats.normalisation / b) as f32 } else { 0.0 };
-    let image = film.develop().into_iter().map(|p| p * rescale).collect();
+    let image: Vec<Rgb> = film.develop().into_iter().map(|p| p * rescale).collect();
+    // Each mutation put the final `b` into the rescaled image.
+    stats.longest_stay = LongestStay::measure(longest, &image, (w, h), stats.normalisation, stats.mutations);
     let bidir = (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone());
     Ok(super::chains_output(
         scene,

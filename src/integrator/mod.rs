@@ -8,6 +8,7 @@ pub mod memlt;
 pub mod mlt;
 pub mod path;
 pub(crate) mod render_loop;
+pub mod stays;
 
 use crate::film::Film;
 use crate::math::Rgb;

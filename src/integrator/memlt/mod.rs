@@ -20,6 +20,7 @@ pub mod manifold_perturbation;
 pub mod multichain;
 pub mod path;
 
+use super::stays::{LongestStay, Stay, Stays, near, pixel_of};
 use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::integrator::bidir::Vertex;
@@ -122,29 +123,6 @@ pub struct MemltStats {
     pub longest_stay: Option<LongestStay>,
 }
 
-/// The longest stay of any chain's current path in one pixel (the first chain's where
-/// several are as long): how many consecutive mutations, where, and the share of the light
-/// in that pixel and its eight neighbours (where a pixel filter of radius one spreads the
-/// stay's splats) that the stay put there. A share above one half means the pixel's value
-/// rests on one visit of one chain: a longer render or another seed averages it out.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct LongestStay {
-    pub mutations: u64,
-    pub pixel: [i32; 2],
-    pub share: f64,
-}
-
-impl LongestStay {
-    /// Shorter stays are not reported as a pixel resting on one visit: in a short render
-    /// every pixel's value comes from a few.
-    pub const MIN_MUTATIONS: u64 = 1000;
-
-    /// Whether the stay carries more than half the light around its pixel.
-    pub fn dominates(&self) -> bool {
-        self.mutations >= Self::MIN_MUTATIONS && self.share > 0.5
-    }
-}
-
 /// The path lengths a scene's integrator settings allow.
 pub fn lengths(scene: &Scene) -> Lengths {
     let spec = &scene.integrator;
@@ -219,46 +197,6 @@ struct Chain {
     stays: Stays,
 }
 
-/// A stretch of consecutive steps in which a chain's current path stayed in one pixel: its
-/// length and the share of the steps' splatted luminance (in units of `b`) that went to
-/// that pixel.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct Stay {
-    pixel: (i32, i32),
-    steps: u64,
-    weight: f64,
-}
-
-/// A chain's current stay and its longest so far. A chain that enters a region of path
-/// space its moves seldom leave (in `glass-caustic`, the floor's caustic reflected in the
-/// ball) stays there for many steps and splats them all into a few pixels: the longest
-/// stay, set against the light in those pixels, tells a user when a pixel's value rests on
-/// one visit (see [`LongestStay`]).
-#[derive(Clone, Copy, Debug, Default)]
-struct Stays {
-    current: Stay,
-    longest: Stay,
-}
-
-impl Stays {
-    /// One step whose current path lies in `pixel`, splatting `weight` there.
-    fn record(&mut self, pixel: (i32, i32), weight: f64) {
-        if self.current.steps == 0 || pixel != self.current.pixel {
-            self.current = Stay { pixel, steps: 0, weight: 0.0 };
-        }
-        self.current.steps += 1;
-        self.current.weight += weight;
-        if self.current.steps > self.longest.steps {
-            self.longest = self.current;
-        }
-    }
-}
-
-/// The pixel that holds a film position.
-fn pixel_of(raster: glam::Vec2) -> (i32, i32) {
-    (raster.x.floor() as i32, raster.y.floor() as i32)
-}
-
 /// What a chain's steps need besides the scene.
 #[derive(Clone, Copy)]
 struct StepSettings {
@@ -285,7 +223,7 @@ impl Chain {
         if n_x == 0 {
             // No enabled mutator suits the path: the chain stays (its splat is the current
             // path's, with weight one).
-            self.stays.record(pixel_of(self.current.raster), 1.0);
+            self.stays.record(pixel_of(self.current.raster), |_| 1.0);
             film.add_splats(&[Splat {
                 pos: self.current.raster,
                 value: self.current.f * (b as f64 / self.f) as f32,
@@ -338,9 +276,10 @@ impl Chain {
             n += 1;
         }
         film.add_splats(&splats[..n]);
-        let here = pixel_of(self.current.raster);
-        let moved_here = proposal.as_ref().is_some_and(|(p, _, _)| pixel_of(p.measured.raster) == here);
-        self.stays.record(here, 1.0 - a + if moved_here { a } else { 0.0 });
+        let to = proposal.as_ref().map(|(p, _, _)| pixel_of(p.measured.raster));
+        self.stays.record(pixel_of(self.current.raster), |centre| {
+            1.0 - a + if to.is_some_and(|t| near(t, centre)) { a } else { 0.0 }
+        });
         if let Some((p, fy, suits_y)) = proposal
             && (self.rng.next_1d() as f64) < a
         {
@@ -589,8 +528,7 @@ pub fn render(
             |_, f| f.develop(),
         );
     }
-    let longest =
-        chains.iter().map(|c| c.stays.longest).fold(Stay::default(), |a, s| if s.steps > a.steps { s } else { a });
+    let longest = super::stays::longest(chains.iter().map(|c| &c.stays));
     let mut proposed = [0u64; Mutator::ALL.len()];
     let mut accepted = [0u64; Mutator::ALL.len()];
     for ch in &chains {
@@ -642,23 +580,7 @@ fn finish(
     let seconds = start.elapsed().as_secs_f64();
     let spp = (done / pixels) as u32;
     let image = film.develop();
-    if longest.steps > 0 && done > 0 {
-        // The stay's splats in the image's units (each step splats luminance `b` in all,
-        // the film scales splats by pixels over mutations), against the image's luminance
-        // over the pixel and its neighbours.
-        let (px, py) = longest.pixel;
-        let around: f64 = (py - 1..=py + 1)
-            .flat_map(|y| (px - 1..=px + 1).map(move |x| (x, y)))
-            .filter(|&(x, y)| x >= 0 && y >= 0 && (x as u32) < w && (y as u32) < h)
-            .map(|(x, y)| luminance(image[y as usize * w as usize + x as usize]) as f64)
-            .sum();
-        let stay = longest.weight * b * pixels as f64 / done as f64;
-        stats.longest_stay = Some(LongestStay {
-            mutations: longest.steps,
-            pixel: [px, py],
-            share: if around > 0.0 { stay / around } else { 0.0 },
-        });
-    }
+    stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b, done);
     Ok(super::chains_output(
         scene,
         opts,

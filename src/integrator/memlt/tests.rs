@@ -455,23 +455,3 @@ fn chains_beside_the_direct_pass_take_the_two_edge_paths_through_dirac_lobes() {
     assert!(sigmas(chains, with) < 4.0 && chains.1 < 0.02 * with, "chains' paths: {chains:?} against BDPT's {with}");
     assert!(sigmas(chains, without) > 6.0, "the mirror's two-edge paths were not missed: {chains:?} against {without}");
 }
-
-#[test]
-fn the_longest_stay_in_one_pixel_is_kept() {
-    let mut s = Stays::default();
-    for (pixel, w) in [((3, 4), 1.0), ((3, 4), 0.5), ((5, 4), 1.0), ((5, 4), 0.25), ((5, 4), 1.0), ((3, 4), 1.0)] {
-        s.record(pixel, w);
-    }
-    assert_eq!(s.longest, Stay { pixel: (5, 4), steps: 3, weight: 2.25 });
-    assert_eq!(s.current, Stay { pixel: (3, 4), steps: 1, weight: 1.0 });
-    // A stay as long as the longest does not replace it.
-    s.record((3, 4), 1.0);
-    s.record((3, 4), 1.0);
-    assert_eq!(s.longest.pixel, (5, 4));
-    s.record((3, 4), 1.0);
-    assert_eq!(s.longest, Stay { pixel: (3, 4), steps: 4, weight: 4.0 });
-    assert_eq!(pixel_of(glam::Vec2::new(2.99, 0.0)), (2, 0));
-    assert!(!LongestStay { mutations: 999, pixel: [0, 0], share: 0.9 }.dominates());
-    assert!(LongestStay { mutations: 1000, pixel: [0, 0], share: 0.51 }.dominates());
-    assert!(!LongestStay { mutations: 100_000, pixel: [0, 0], share: 0.5 }.dominates());
-}
