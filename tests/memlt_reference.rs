@@ -186,10 +186,10 @@ fn memlt_bootstrap_takes_its_share_of_a_time_budget() {
 #[test]
 fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     // One chain, the direct light in it, and only the multi-chain perturbation, which no
-    // path of this diffuse box suits (it needs a specular vertex between rough ones): the chain keeps its start path, every mutation splats it
-    // into one pixel, and that pixel's light is all the stay's.
-    let scene =
-        load(&root().join("scenes/cornell-ply/cornell_mi.xml"), &[("resx", "32"), ("resy", "32")], Backend::Embree);
+    // path of this diffuse box suits (it needs a specular vertex between rough ones): the
+    // chain keeps its start path, every mutation splats it into one pixel, and that
+    // pixel's light is all the stay's.
+    let scene = cornell_ply();
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
     o.seed = 3;
     o.threads = 2;
