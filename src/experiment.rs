@@ -108,6 +108,8 @@ pub struct MethodEntry {
     pub lambda: Option<f64>,
     pub theta_diff: Option<f64>,
     pub chains: Option<usize>,
+    pub two_stage: Option<bool>,
+    pub first_stage_reduction: Option<u32>,
     pub pc_light_paths: Option<usize>,
     pub pc_pool_vertices: Option<usize>,
     pub pc_connections: Option<u32>,
@@ -270,6 +272,12 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.theta_diff {
         o.mlt.theta_diff = x;
+    }
+    if let Some(x) = m.two_stage {
+        o.mlt.two_stage = x;
+    }
+    if let Some(x) = m.first_stage_reduction {
+        o.mlt.first_stage_reduction = x;
     }
     if let Some(x) = m.chains {
         o.mlt.chains = x;

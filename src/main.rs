@@ -195,6 +195,15 @@ struct RenderArgs {
     /// proportion to its contribution (the image does not depend on the thread count).
     #[arg(long, default_value_t = MltOptions::default().chains)]
     chains: usize,
+    /// PSSMLT and MEMLT: two-stage Metropolis (Mitsuba 0.6's `twoStage`): a first stage of
+    /// BDPT samples estimates the image at a reduced resolution, and the chains sample paths
+    /// in proportion to their luminance over it, so that dim pixels get as many mutations
+    /// as bright ones. On for memlt, off for pssmlt unless given.
+    #[arg(long, action = clap::ArgAction::Set)]
+    two_stage: Option<bool>,
+    /// Two-stage Metropolis: pixels per side of the first stage's cells.
+    #[arg(long, default_value_t = MltOptions::default().first_stage_reduction)]
+    first_stage_reduction: u32,
     /// Memory limit of a light pool (lvc, pcbpt), in MiB.
     #[arg(long, default_value_t = 4096)]
     max_pool_mb: usize,
@@ -456,6 +465,8 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         lambda: a.lambda,
         theta_diff: a.theta_diff,
         chains: a.chains,
+        two_stage: a.two_stage.unwrap_or(MltOptions::for_integrator(kind).two_stage),
+        first_stage_reduction: a.first_stage_reduction,
     };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
@@ -545,6 +556,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.large_acceptance * 100.0,
             m.bootstrap_seconds
         );
+        print_first_stage(m.first_stage_samples, m.mean_luminance);
         print_longest_stay("pssmlt", m.longest_stay.as_ref());
     } else if let (false, Some(m)) = (a.quiet, &s.memlt) {
         let acceptance: Vec<String> = m
@@ -570,6 +582,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.manifold_walks.light_points,
             m.bootstrap_seconds
         );
+        print_first_stage(m.first_stage_samples, m.mean_luminance);
         print_longest_stay("memlt", m.longest_stay.as_ref());
     } else if !a.quiet && s.bidir.is_some() {
         let c = &s.counters;
@@ -677,6 +690,15 @@ fn compare_images(a: CompareArgs) -> Result<ExitCode> {
         image_io::write_png_rgb8(path, r.width, r.height, &bytes)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Two-stage Metropolis' line of the summary (nothing without a first stage).
+fn print_first_stage(samples: u64, mean_luminance: f64) {
+    if samples > 0 {
+        eprintln!(
+            "  two-stage: the chains' target is luminance over a map from a first stage of {samples} BDPT samples (b above is its mean); the chains' image is scaled to mean luminance {mean_luminance:.5}"
+        );
+    }
 }
 
 /// The summary's line on a Metropolis render's longest stay of a chain around one pixel, and

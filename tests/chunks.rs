@@ -119,12 +119,23 @@ fn the_merge_refuses_mixed_renders_gaps_and_overlaps() {
 
 /// PSSMLT's chunks are chains of their own; merged, they converge to the reference as one
 /// process does (as in `tests/mlt_reference.rs`: two merged renders, seeds 1 and 2, averaged).
+/// With two-stage Metropolis (the default) every chunk builds the same first-stage map.
 #[test]
 fn pssmlt_chunks_merge_to_the_reference() {
+    pssmlt_chunks(true, "cornell-ply, PSSMLT in chunks, 2 × 16 spp");
+}
+
+#[test]
+fn pssmlt_chunks_in_one_stage_merge_to_the_reference() {
+    pssmlt_chunks(false, "cornell-ply, PSSMLT in one stage in chunks, 2 × 16 spp");
+}
+
+fn pssmlt_chunks(two_stage: bool, what: &str) {
     let scene = load(&root().join("scenes/cornell-ply/cornell_mi.xml"), &[], Backend::Embree);
     let dir = tempfile::tempdir().unwrap();
     let merged = |seed, cuts: &[u32]| {
-        let o = options(IntegratorKind::Pssmlt, 16, seed);
+        let mut o = options(IntegratorKind::Pssmlt, 16, seed);
+        o.mlt.two_stage = two_stage;
         let mut bounds = vec![0];
         bounds.extend_from_slice(cuts);
         bounds.push(16);
@@ -137,5 +148,5 @@ fn pssmlt_chunks_merge_to_the_reference() {
     let (a, b) = (merged(1, &[8]), merged(2, &[3, 10]));
     let reference = reference("cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr");
     let (v, _) = Verdict::averaged(&reference, &a, &b, 8.0e-5);
-    v.check("cornell-ply, PSSMLT in chunks, 2 × 16 spp", 0.01, 1.3).unwrap();
+    v.check(what, 0.01, 1.3).unwrap();
 }

@@ -14,17 +14,32 @@ use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutpu
 use pcbpt::scene::Scene;
 
 fn memlt(scene: &Scene, spp: u32, seed: u64, direct_samples: i32) -> RenderOutput {
+    memlt_with(scene, spp, seed, &|o| o.mlt.direct_samples = direct_samples)
+}
+
+fn memlt_with(scene: &Scene, spp: u32, seed: u64, set: &dyn Fn(&mut RenderOptions)) -> RenderOutput {
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(spp));
     o.seed = seed;
     o.threads = 2;
-    o.mlt.direct_samples = direct_samples;
+    set(&mut o);
     integrator::render(scene, &o).unwrap()
 }
 
 fn check(scene: &Scene, reference_name: &str, ref_noise: f64, spp: u32, direct_samples: i32, what: &str) {
+    check_with(scene, reference_name, ref_noise, spp, &|o| o.mlt.direct_samples = direct_samples, what);
+}
+
+fn check_with(
+    scene: &Scene,
+    reference_name: &str,
+    ref_noise: f64,
+    spp: u32,
+    set: &dyn Fn(&mut RenderOptions),
+    what: &str,
+) {
     let reference = reference(reference_name);
-    let a = image(memlt(scene, spp, 1, direct_samples));
-    let b = image(memlt(scene, spp, 2, direct_samples));
+    let a = image(memlt_with(scene, spp, 1, set));
+    let b = image(memlt_with(scene, spp, 2, set));
     let (v, _) = Verdict::averaged(&reference, &a, &b, ref_noise);
     v.check(what, 0.01, 1.3).unwrap();
 }
@@ -38,6 +53,13 @@ fn cornell_ply() -> Scene {
 #[test]
 fn memlt_cornell_ply() {
     check(&cornell_ply(), CORNELL, 8.0e-5, 64, 16, "cornell-ply, MEMLT, 2 × 64 spp");
+}
+
+#[test]
+fn memlt_cornell_ply_single_stage() {
+    // The chains' target the plain luminance (two-stage Metropolis off).
+    let what = "cornell-ply, MEMLT in one stage, 2 × 64 spp";
+    check_with(&cornell_ply(), CORNELL, 8.0e-5, 64, &|o| o.mlt.two_stage = false, what);
 }
 
 #[test]
@@ -181,6 +203,10 @@ fn memlt_bootstrap_takes_its_share_of_a_time_budget() {
     let s = out.stats.memlt.as_ref().unwrap();
     assert!(s.bootstrap_samples > 1000 && s.bootstrap_samples.is_multiple_of(1000), "{} samples", s.bootstrap_samples);
     assert!(s.bootstrap_seconds >= 0.25 && s.normalisation > 0.0, "{} s", s.bootstrap_seconds);
+    // Two-stage Metropolis' first stage has the first half of that time, in batches too.
+    assert!(o.mlt.two_stage);
+    let n = s.first_stage_samples;
+    assert!(n > 1000 && n.is_multiple_of(1000), "{n} first-stage samples");
 }
 
 #[test]

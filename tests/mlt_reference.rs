@@ -36,6 +36,29 @@ fn pssmlt_veach_ajar() {
 }
 
 #[test]
+fn pssmlt_veach_ajar_two_stage() {
+    // Two-stage Metropolis (MEMLT's default): the chains' target luminance over a first
+    // stage's map, the image scaled to the bootstrap's mean luminance.
+    let scene = load(
+        &root().join("scenes/veach-ajar/scene.xml"),
+        &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
+        Backend::Embree,
+    );
+    let reference = reference("veach-ajar.exr");
+    let run = |seed| {
+        let mut o = RenderOptions::new(IntegratorKind::Pssmlt, Budget::Spp(64));
+        o.seed = seed;
+        o.threads = 2;
+        o.mlt.two_stage = true;
+        let out = integrator::render(&scene, &o).unwrap();
+        assert!(out.stats.mlt.unwrap().first_stage_samples > 0);
+        image(out)
+    };
+    let (v, _) = Verdict::averaged(&reference, &run(1), &run(2), 4.5e-3);
+    v.check("veach-ajar, PSSMLT in two stages, 2 × 64 spp", 0.01, 1.3).unwrap();
+}
+
+#[test]
 fn pssmlt_staircase2() {
     // Bitterli's Mitsuba 0.5 export as published, at 320×180 (`--resolution`).
     let scene = STAIRCASE2.scene();

@@ -17,6 +17,7 @@ use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};
 use super::bidir::{Sink, Vertex, WalkLimits};
 use super::stays::{self, LongestStay, Stay, Stays, pixel_of, share_in};
+use super::two_stage::{Grid, Importance};
 use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::math::{Rgb, luminance};
@@ -75,9 +76,22 @@ pub struct MltOptions {
     /// contribution, all run for the same number of mutations (independent of the
     /// number of threads).
     pub chains: usize,
+    /// Two-stage Metropolis ([`super::two_stage`]): the chains sample paths in proportion
+    /// to their luminance over a first stage's estimate of the image at their film position.
+    /// Off in [`MltOptions::default`] (PSSMLT, whose scalar contribution the contract fixes
+    /// as the luminance), on for MEMLT ([`MltOptions::for_integrator`]).
+    pub two_stage: bool,
+    /// Pixels per side of the first stage's cells (Mitsuba 0.6's `firstStageSizeReduction`).
+    pub first_stage_reduction: u32,
 }
 
 impl MltOptions {
+    /// The defaults for `integrator`: [`MltOptions::default`], with two-stage Metropolis
+    /// for MEMLT (measured in BENCHMARKS.md, "Two-stage Metropolis").
+    pub fn for_integrator(integrator: super::IntegratorKind) -> MltOptions {
+        MltOptions { two_stage: integrator == super::IntegratorKind::Memlt, ..MltOptions::default() }
+    }
+
     /// Refuses no bootstrap sample or no chain (PSSMLT and MEMLT alike).
     pub fn check_counts(&self) -> Result<(), crate::error::Error> {
         use crate::error::Error;
@@ -86,6 +100,9 @@ impl MltOptions {
         }
         if self.chains == 0 {
             return Err(Error::Usage("--chains must be at least 1".into()));
+        }
+        if self.first_stage_reduction == 0 {
+            return Err(Error::Usage("--first-stage-reduction must be at least 1 (pixels per side of a cell)".into()));
         }
         Ok(())
     }
@@ -108,6 +125,8 @@ impl Default for MltOptions {
             lambda: 50.0,
             theta_diff: 5.0,
             chains: 64,
+            two_stage: false,
+            first_stage_reduction: 16,
         }
     }
 }
@@ -133,6 +152,12 @@ pub struct MltStats {
     pub bootstrap_seconds: f64,
     /// The longest any chain's current state stayed in one pixel.
     pub longest_stay: Option<LongestStay>,
+    /// Two-stage Metropolis: the first stage's BDPT samples (0 without it). The
+    /// normalisations are then means of luminance over the first stage's map.
+    pub first_stage_samples: u64,
+    /// The image's mean luminance, from the bootstrap and every large step (the
+    /// normalisation without a first stage).
+    pub mean_luminance: f64,
 }
 
 /// Kelemen's small-step perturbation of one coordinate: an offset of size
@@ -261,7 +286,7 @@ impl Random for PrimarySampler {
 
 /// What one state adds to the film, with its scalar contribution.
 #[derive(Default)]
-struct Contributions {
+struct Contributions<'a> {
     splats: Vec<Splat>,
     /// Camera-side contributions of the current sample, summed at its film position.
     pixel: Rgb,
@@ -271,9 +296,14 @@ struct Contributions {
     /// ... but for two-edge paths whose middle vertex scatters through a Dirac lobe, when
     /// this is set (MEMLT's chains beside a direct-light pass that leaves those out).
     dirac_two_edges: bool,
+    /// Two-stage Metropolis: the first stage's map, which each splat's luminance is
+    /// divided by in the scalar contribution.
+    importance: Option<&'a Importance>,
+    /// The plain sum of luminances of the last [`Contributions::finish`].
+    luminance: f32,
 }
 
-impl Sink for Contributions {
+impl Sink for Contributions<'_> {
     #[inline]
     fn add(&mut self, s: usize, t: usize, value: Rgb) {
         if s + t > self.min_edges {
@@ -298,14 +328,20 @@ impl Sink for Contributions {
     }
 }
 
-impl Contributions {
-    /// Moves the pixel's sum into the splat list; returns the sum of luminances.
+impl Contributions<'_> {
+    /// Moves the pixel's sum into the splat list; returns the sum of luminances (each over
+    /// the first stage's map at its position, in two-stage Metropolis).
     fn finish(&mut self) -> f32 {
         if self.pixel != Rgb::ZERO {
             self.splats.push(Splat { pos: self.pos, value: self.pixel, layer: 0 });
         }
         self.pixel = Rgb::ZERO;
-        let f: f32 = self.splats.iter().map(|s| luminance(s.value).max(0.0)).sum();
+        let plain: f32 = self.splats.iter().map(|s| luminance(s.value).max(0.0)).sum();
+        self.luminance = if plain.is_finite() { plain } else { 0.0 };
+        let f: f32 = match self.importance {
+            None => plain,
+            Some(m) => self.splats.iter().map(|s| luminance(s.value).max(0.0) / m.at(s.pos)).sum(),
+        };
         if f.is_finite() { f } else { 0.0 }
     }
 }
@@ -354,23 +390,24 @@ fn deposit(film: &mut Film, contributions: &Contributions, weight: f32, buf: &mu
 }
 
 /// One Markov chain with its own film.
-struct Chain {
+struct Chain<'a> {
     rng: PrimarySampler,
     decide: Sampler,
-    current: Contributions,
+    current: Contributions<'a>,
     f: f32,
     scratch: Scratch,
     counters: Counters,
     stats: MltStats,
-    /// Sum of the contributions of large-step proposals.
+    /// Sum of the contributions of large-step proposals, and of their plain luminances.
     large_sum: f64,
+    large_luminance: f64,
     /// Scratch: the proposal's contributions and the splats of a deposit.
-    proposed: Contributions,
+    proposed: Contributions<'a>,
     buf: Vec<Splat>,
     stays: Stays,
 }
 
-impl Chain {
+impl Chain<'_> {
     /// One mutation: a proposal (large or small step), both states splatted with their
     /// expected weights, the proposal accepted or not.
     fn step(&mut self, ev: &Evaluator, b: f32, film: &mut Film) {
@@ -395,6 +432,7 @@ impl Chain {
         if large {
             self.stats.large_proposed += 1;
             self.large_sum += fp as f64;
+            self.large_luminance += proposed.luminance as f64;
         } else {
             self.stats.small_proposed += 1;
         }
@@ -416,38 +454,69 @@ impl Chain {
 /// The normalisation refined with every large step: the bootstrap's `n_boot` samples of
 /// mean `b` and the large-step proposals are all independent uniform samples.
 fn refined_normalisation(chains: &[Chain], b: f64, n_boot: usize) -> f64 {
-    let (mut sum, mut count) = (b * n_boot as f64, n_boot as f64);
+    refined(chains, b, n_boot, |ch| ch.large_sum)
+}
+
+/// The mean luminance refined so, from the bootstrap's mean luminance `l` (two-stage
+/// Metropolis, where it differs from the normalisation).
+fn refined_luminance(chains: &[Chain], l: f64, n_boot: usize) -> f64 {
+    refined(chains, l, n_boot, |ch| ch.large_luminance)
+}
+
+fn refined(chains: &[Chain], boot: f64, n_boot: usize, large: impl Fn(&Chain) -> f64) -> f64 {
+    let (mut sum, mut count) = (boot * n_boot as f64, n_boot as f64);
     for ch in chains {
-        sum += ch.large_sum;
+        sum += large(ch);
         count += ch.stats.large_proposed as f64;
     }
     sum / count
 }
 
+/// The image developed from the chains' film: scaled by the refined normalisation over the
+/// bootstrap's one (`b`, which the chains splatted with), or in two-stage Metropolis (`l`,
+/// the bootstrap's mean luminance, given) so that its mean luminance is the refined mean
+/// luminance, as Mitsuba 0.6 develops its two-stage image. Also the factor.
+fn develop_chains(chains: &[Chain], film: &Film, b: f64, l: Option<f64>, n_boot: usize) -> (Vec<Rgb>, f64) {
+    let image = film.develop();
+    let s = match l {
+        None if b > 0.0 => refined_normalisation(chains, b, n_boot) / b,
+        None => 0.0,
+        Some(l) => {
+            let mean = image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / image.len().max(1) as f64;
+            if mean > 0.0 { refined_luminance(chains, l, n_boot) / mean } else { 1.0 }
+        }
+    };
+    (image.into_iter().map(|p| p * s as f32).collect(), s)
+}
+
 /// Runs `n` independent samples of the estimator (large steps from the streams
-/// `key(BOOTSTRAP_STREAM, i)`), in parallel; their scalar contributions in order.
+/// `key(BOOTSTRAP_STREAM, i)`), in parallel; their scalar contributions in order (over the
+/// first stage's map where there is one) and, with a map, their plain luminances (else
+/// none: the scalar contributions are those).
 fn bootstrap(
     pool: &rayon::ThreadPool,
     ev: &Evaluator,
     n: usize,
     large_step_prob: f32,
     (min_edges, dirac_two_edges): (usize, bool),
+    importance: Option<&Importance>,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
-) -> (Vec<f32>, Counters) {
+) -> (Vec<f32>, Vec<f32>, Counters) {
     let chunk = 1024usize;
-    let parts: Vec<(Vec<f32>, Counters)> = pool.install(|| {
+    let parts: Vec<(Vec<(f32, f32)>, Counters)> = pool.install(|| {
         (0..n.div_ceil(chunk))
             .into_par_iter()
             .map(|k| {
                 crate::accel::embree::set_flush_denormals();
                 let mut scratch = Scratch::default();
-                let mut out = Contributions { min_edges, dirac_two_edges, ..Default::default() };
+                let mut out = Contributions { min_edges, dirac_two_edges, importance, ..Default::default() };
                 let mut c = Counters::default();
                 let fs = (k * chunk..((k + 1) * chunk).min(n))
                     .map(|i| {
                         let mut rng = PrimarySampler::new(&key(BOOTSTRAP_STREAM, i as u64), large_step_prob);
                         rng.start_iteration(true);
-                        ev.eval(&mut rng, &mut scratch, &mut out, &mut c)
+                        let f = ev.eval(&mut rng, &mut scratch, &mut out, &mut c);
+                        (f, out.luminance)
                     })
                     .collect();
                 (fs, c)
@@ -456,31 +525,140 @@ fn bootstrap(
     });
     let mut counters = Counters::default();
     let mut weights = Vec::with_capacity(n);
+    let mut luminances = Vec::with_capacity(if importance.is_some() { n } else { 0 });
     for (fs, c) in parts {
-        weights.extend(fs);
+        weights.extend(fs.iter().map(|p| p.0));
+        if importance.is_some() {
+            luminances.extend(fs.iter().map(|p| p.1));
+        }
         counters += c;
     }
-    (weights, counters)
+    (weights, luminances, counters)
+}
+
+/// Mean and standard error of samples.
+fn mean_and_error(xs: &[f32]) -> (f64, f64) {
+    let n = xs.len().max(1) as f64;
+    let mean = xs.iter().map(|&f| f as f64).sum::<f64>() / n;
+    let square = xs.iter().map(|&f| f as f64 * f as f64).sum::<f64>() / n;
+    (mean, ((square - mean * mean).max(0.0) / n).sqrt())
 }
 
 /// The mean luminance of the image's paths of at least `min_edges` edges, and with
 /// `dirac_two_edges` of the two-edge paths through a Dirac lobe too (Metropolis'
-/// normalisation `b`) estimated from `n` independent BDPT samples, each through a uniformly
-/// random film position, with its standard error and the work the samples took.
+/// normalisation `b`; with a first stage's map, the mean of luminance over the map)
+/// estimated from `n` independent BDPT samples, each through a uniformly random film
+/// position, with its standard error; the same samples' mean luminance with its standard
+/// error (the same as the first without a map); and the work the samples took.
 pub(crate) fn bdpt_normalisation(
     scene: &Scene,
     opts: &RenderOptions,
     pool: &rayon::ThreadPool,
     n: usize,
     paths: (usize, bool),
+    importance: Option<&Importance>,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
-) -> (f64, f64, Counters) {
+) -> ((f64, f64), (f64, f64), Counters) {
     let ev = evaluator(scene, opts, MltBase::Bdpt);
-    let (weights, counters) = bootstrap(pool, &ev, n, 1.0, paths, key);
-    let n = n.max(1) as f64;
-    let mean = weights.iter().map(|&f| f as f64).sum::<f64>() / n;
-    let square = weights.iter().map(|&f| f as f64 * f as f64).sum::<f64>() / n;
-    (mean, ((square - mean * mean).max(0.0) / n).sqrt(), counters)
+    let (weights, luminances, counters) = bootstrap(pool, &ev, n, 1.0, paths, importance, key);
+    let target = mean_and_error(&weights);
+    let plain = if importance.is_some() { mean_and_error(&luminances) } else { target };
+    (target, plain, counters)
+}
+
+/// Two-stage Metropolis' first stage: the luminance of `n` independent BDPT samples (the
+/// streams `key(FIRST_STAGE_STREAM, i)`, each through a uniformly random film position)
+/// summed over the cells of `grid`, with the work the samples took.
+pub(crate) fn bdpt_luminance_cells(
+    scene: &Scene,
+    opts: &RenderOptions,
+    pool: &rayon::ThreadPool,
+    n: usize,
+    (min_edges, dirac_two_edges): (usize, bool),
+    grid: Grid,
+    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+) -> (Vec<f64>, Counters) {
+    let ev = evaluator(scene, opts, MltBase::Bdpt);
+    let chunk = 1024usize;
+    let parts: Vec<(Vec<f64>, Counters)> = pool.install(|| {
+        (0..n.div_ceil(chunk))
+            .into_par_iter()
+            .map(|k| {
+                crate::accel::embree::set_flush_denormals();
+                let mut scratch = Scratch::default();
+                let mut out = Contributions { min_edges, dirac_two_edges, ..Default::default() };
+                let mut c = Counters::default();
+                let mut sums = vec![0.0f64; grid.len()];
+                for i in k * chunk..((k + 1) * chunk).min(n) {
+                    let mut rng = PrimarySampler::new(&key(FIRST_STAGE_STREAM, i as u64), 1.0);
+                    rng.start_iteration(true);
+                    if ev.eval(&mut rng, &mut scratch, &mut out, &mut c) > 0.0 {
+                        for s in &out.splats {
+                            let l = luminance(s.value) as f64;
+                            if l.is_finite() && l > 0.0 {
+                                sums[grid.cell_of(s.pos)] += l;
+                            }
+                        }
+                    }
+                }
+                (sums, c)
+            })
+            .collect()
+    });
+    let mut counters = Counters::default();
+    let mut sums = vec![0.0f64; grid.len()];
+    for (part, c) in parts {
+        for (s, p) in sums.iter_mut().zip(part) {
+            *s += p;
+        }
+        counters += c;
+    }
+    (sums, counters)
+}
+
+/// Two-stage Metropolis' first stage in batches of `n` BDPT samples, more of them with a
+/// time budget until `fraction` of it has passed since `start` (one batch at least): the
+/// map (`None` when they found no light), the samples and their work.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn first_stage(
+    scene: &Scene,
+    opts: &RenderOptions,
+    pool: &rayon::ThreadPool,
+    n: usize,
+    paths: (usize, bool),
+    start: Instant,
+    fraction: f64,
+    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+) -> (Option<Importance>, u64, Counters) {
+    let grid = Grid::new(scene.film.width, scene.film.height, opts.mlt.first_stage_reduction);
+    let mut sums = vec![0.0f64; grid.len()];
+    let mut counters = Counters::default();
+    let batches = in_batches(opts, start, fraction, |batch| {
+        let offset = batch * n as u64;
+        let (part, c) = bdpt_luminance_cells(scene, opts, pool, n, paths, grid, &|s, i| key(s, i + offset));
+        for (s, p) in sums.iter_mut().zip(part) {
+            *s += p;
+        }
+        counters += c;
+    });
+    let samples = batches * n as u64;
+    (Importance::from_cells(grid, &sums, samples), samples, counters)
+}
+
+/// Runs `batch(0)`, `batch(1)`, … : one batch, and with a time budget more until `fraction`
+/// of it has passed since `start` (or the render is stopped). The number of batches.
+pub(crate) fn in_batches(opts: &RenderOptions, start: Instant, fraction: f64, mut batch: impl FnMut(u64)) -> u64 {
+    let until = match opts.budget {
+        Budget::Time(t) => t * fraction,
+        Budget::Spp(_) => 0.0,
+    };
+    let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+    let mut batches = 0u64;
+    while batches == 0 || (start.elapsed().as_secs_f64() < until && !stopped()) {
+        batch(batches);
+        batches += 1;
+    }
+    batches
 }
 
 /// The estimator the chains drive, with the scene's depth limits.
@@ -502,6 +680,7 @@ fn evaluator<'a>(scene: &'a Scene, opts: &RenderOptions, base: MltBase) -> Evalu
 }
 
 const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
+const FIRST_STAGE_STREAM: u64 = 0x6669_7273;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 
 /// Renders with PSSMLT: all of the budget, or for `iterations` `A..B` (a chunk of a
@@ -540,8 +719,25 @@ pub fn render(
         k
     };
 
+    // Two-stage Metropolis: a first stage of as many BDPT samples as the bootstrap has. Its
+    // streams are the render's, not a chunk's: every chunk of a distributed render has the
+    // same map, so that the parts' histograms and normalisations merge.
+    let mut counters = Counters::default();
+    let (importance, first_stage_samples) = if mo.two_stage {
+        let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];
+        let (map, n, c) = first_stage(scene, opts, &pool, mo.bootstrap, (0, false), start, 0.0, &render_key);
+        counters += c;
+        (map, n)
+    } else {
+        (None, 0)
+    };
+    let importance = importance.as_ref();
     // Bootstrap: independent samples estimate b and give the chains their start states.
-    let (weights, mut counters) = bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, (0, false), &key);
+    let (weights, luminances, c) =
+        bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, (0, false), importance, &key);
+    counters += c;
+    // Two-stage Metropolis: the bootstrap's mean luminance, to which the image is scaled.
+    let plain = importance.map(|_| mean_and_error(&luminances).0);
     let b = weights.iter().map(|&f| f as f64).sum::<f64>() / weights.len() as f64;
     let bootstrap_seconds = start.elapsed().as_secs_f64();
     let mut film = Film::new(w, h, scene.film.filter);
@@ -550,12 +746,14 @@ pub fn render(
         bootstrap_normalisation: b,
         bootstrap_samples: weights.len() as u64,
         chains: mo.chains,
+        first_stage_samples,
         bootstrap_seconds,
         ..Default::default()
     };
     let mut snapshots = Vec::new();
     let mut interrupted = stopped();
     let mut longest = Stay::default();
+    let mut image = None;
     if b > 0.0 && !interrupted {
         let dist = Distribution1D::new(&weights);
         let total = match opts.budget {
@@ -570,7 +768,7 @@ pub fn render(
                 let mut rng = PrimarySampler::new(&key(BOOTSTRAP_STREAM, j as u64), mo.large_step_prob);
                 rng.start_iteration(true);
                 let mut scratch = Scratch::default();
-                let mut current = Contributions::default();
+                let mut current = Contributions { importance, ..Default::default() };
                 let mut counters = Counters::default();
                 let f = ev.eval(&mut rng, &mut scratch, &mut current, &mut counters);
                 rng.accept();
@@ -585,7 +783,8 @@ pub fn render(
                     counters,
                     stats: MltStats::default(),
                     large_sum: 0.0,
-                    proposed: Contributions::default(),
+                    large_luminance: 0.0,
+                    proposed: Contributions { importance, ..Default::default() },
                     buf: Vec::new(),
                     stays: Stays::default(),
                 }
@@ -604,12 +803,10 @@ pub fn render(
             &mut film,
             |ch, film| ch.step(&ev, bf, film),
             &mut snapshots,
-            |chains, f| {
-                let rescale = (refined_normalisation(chains, b, n_boot) / b) as f32;
-                f.develop().into_iter().map(|p| p * rescale).collect()
-            },
+            |chains, f| develop_chains(chains, &f, b, plain, n_boot).0,
         );
         stats.normalisation = refined_normalisation(&chains, b, n_boot);
+        stats.mean_luminance = plain.map_or(stats.normalisation, |l| refined_luminance(&chains, l, n_boot));
         longest = stays::longest(chains.iter().map(|c| &c.stays));
         for ch in &chains {
             counters += ch.counters;
@@ -620,6 +817,7 @@ pub fn render(
         }
         stats.mutations = done;
         film.light_paths = done;
+        image = Some(develop_chains(&chains, &film, b, plain, n_boot));
     }
     let seconds = start.elapsed().as_secs_f64();
     let ratio = |a: u64, p: u64| if p == 0 { 0.0 } else { a as f64 / p as f64 };
@@ -628,10 +826,13 @@ pub fn render(
     stats.mutations_per_second = stats.mutations as f64 / (seconds - bootstrap_seconds).max(1e-9);
     let spp = (stats.mutations / pixels) as u32;
     // The chains splatted with the bootstrap's b; the final b also counts the large steps.
-    let rescale = if b > 0.0 { (stats.normalisation / b) as f32 } else { 0.0 };
-    let image: Vec<Rgb> = film.develop().into_iter().map(|p| p * rescale).collect();
-    // Each mutation put the final `b` into the rescaled image.
-    stats.longest_stay = LongestStay::measure(longest, &image, (w, h), stats.normalisation, stats.mutations);
+    let (image, s) = image.unwrap_or_else(|| {
+        let s = if b > 0.0 { 1.0 } else { 0.0 };
+        (film.develop().into_iter().map(|p| p * s as f32).collect(), s)
+    });
+    // Each mutation put the bootstrap's `b` (times the map there), so scaled, into the image.
+    let b_there = b * s * importance.map_or(1.0, |m| m.pixel(longest.pixel) as f64);
+    stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b_there, stats.mutations);
     let bidir = (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone());
     Ok(super::chains_output(
         scene,
@@ -655,6 +856,45 @@ pub fn render(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn two_stage_normalisation_is_the_image_over_the_map() {
+        // b' = E[Σ luminance / I(position)] over the bootstrap's samples must be the
+        // image's mean of luminance over the map, the image rendered independently (BDPT
+        // at 2 048 spp, box filter so that each sample stays in its pixel); a map varying
+        // 20-fold across a Cornell box makes the weighting matter, and the plain mean
+        // luminance (the map left out) is the negative control.
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-ply/cornell_mi.xml");
+        let load = crate::scene::LoadOptions { resolution: Some((16, 16)), ..Default::default() };
+        let scene = Scene::load(&path, &load).unwrap();
+        assert!(matches!(scene.film.filter, crate::film::Filter::Box { radius } if radius <= 0.5));
+        let grid = Grid::new(16, 16, 8);
+        let pixels = 256.0;
+        let sums: Vec<f64> = [1.0, 20.0, 5.0, 0.5].iter().map(|m| m * 64.0 / pixels).collect();
+        let map = Importance::from_cells(grid, &sums, 1).unwrap();
+        let mut opts = RenderOptions::new(super::super::IntegratorKind::Bdpt, Budget::Spp(2048));
+        opts.seed = 3;
+        opts.threads = 2;
+        let image = super::super::render(&scene, &opts).unwrap().image;
+        let over_map: f64 = image
+            .iter()
+            .enumerate()
+            .map(|(i, p)| luminance(*p) as f64 / map.pixel(((i % 16) as i32, (i / 16) as i32)) as f64)
+            .sum::<f64>()
+            / pixels;
+        let plain = image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / pixels;
+        let pool = super::super::thread_pool(2).unwrap();
+        let key = |s: u64, i: u64| vec![17, s, i];
+        let ((b, e), (l, le), _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, (0, false), Some(&map), &key);
+        // The image's own noise (2 048 spp) is far below the bootstrap's.
+        assert!((b - over_map).abs() < 4.0 * e + 0.005 * over_map, "b' {b} ± {e} against the image's {over_map}");
+        assert!((plain - over_map).abs() > 10.0 * e, "the map must matter here: {plain} against {over_map} ± {e}");
+        let ((b0, e0), same, _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, (0, false), None, &key);
+        assert!((b0 - plain).abs() < 4.0 * e0 + 0.005 * plain, "b {b0} ± {e0} against the image's {plain}");
+        assert_eq!(same, (b0, e0));
+        // The same samples' plain mean luminance, beside b'.
+        assert!((l - plain).abs() < 4.0 * le + 0.005 * plain, "mean luminance {l} ± {le} against the image's {plain}");
+    }
 
     /// Probability mass of landing within `r` of `to` when perturbing `from`, by sampling.
     fn mass(from: f32, to: f32, r: f32, n: usize, seed: u64, step: impl Fn(f32, f32) -> f32) -> f64 {

@@ -9,6 +9,7 @@ pub mod mlt;
 pub mod path;
 pub(crate) mod render_loop;
 pub mod stays;
+pub mod two_stage;
 
 use crate::film::Film;
 use crate::math::Rgb;
@@ -234,7 +235,7 @@ impl RenderOptions {
             progress: false,
             stop: None,
             bidir: BidirOptions::default(),
-            mlt: mlt::MltOptions::default(),
+            mlt: mlt::MltOptions::for_integrator(integrator),
             strategy_images: false,
             checkpoints: Vec::new(),
         }

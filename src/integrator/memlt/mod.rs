@@ -21,10 +21,11 @@ pub mod multichain;
 pub mod path;
 
 use super::stays::{LongestStay, Stay, Stays, near, pixel_of};
+use super::two_stage::Importance;
 use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::integrator::bidir::Vertex;
-use crate::math::luminance;
+use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
 use crate::scene::Scene;
 use bidirectional::Lengths;
@@ -121,6 +122,13 @@ pub struct MemltStats {
     pub max_edges: usize,
     /// The longest any chain's current path stayed in one pixel.
     pub longest_stay: Option<LongestStay>,
+    /// Two-stage Metropolis: the first stage's BDPT samples (0 without it). `normalisation`
+    /// is then the mean of luminance over the first stage's map, not the mean luminance.
+    pub first_stage_samples: u64,
+    /// The bootstrap's mean luminance of the chains' paths, with its standard error: the
+    /// chains' part of the image has this mean (`normalisation` without a first stage).
+    pub mean_luminance: f64,
+    pub mean_luminance_error: f64,
 }
 
 /// The path lengths a scene's integrator settings allow.
@@ -182,6 +190,16 @@ fn scalar(m: &Measured) -> f64 {
     if l.is_finite() && l > 0.0 { l } else { 0.0 }
 }
 
+/// The chains' target: the scalar contribution, over the first stage's map at the path's
+/// film position in two-stage Metropolis.
+#[inline]
+fn target(m: &Measured, importance: Option<&Importance>) -> f64 {
+    match importance {
+        None => scalar(m),
+        Some(map) => scalar(m) / map.at(m.raster) as f64,
+    }
+}
+
 /// One Markov chain (its splats go to the film of the worker that runs it).
 struct Chain {
     rng: Sampler,
@@ -199,7 +217,7 @@ struct Chain {
 
 /// What a chain's steps need besides the scene.
 #[derive(Clone, Copy)]
-struct StepSettings {
+struct StepSettings<'a> {
     lengths: Lengths,
     radii: lens::Radii,
     /// `b`, the luminance each splat carries.
@@ -208,12 +226,14 @@ struct StepSettings {
     lambda: f64,
     /// The manifold perturbation's `θ_diff`, in radians.
     theta_diff: f64,
+    /// Two-stage Metropolis: the first stage's map.
+    importance: Option<&'a Importance>,
 }
 
 impl Chain {
     /// One step: a proposal, both paths splatted with their expected weights (each with
     /// luminance `b`), the proposal accepted or not.
-    fn step(&mut self, scene: &Scene, set: &StepSettings, film: &mut Film) {
+    fn step(&mut self, scene: &Scene, set: &StepSettings<'_>, film: &mut Film) {
         let StepSettings { lengths, radii, b, .. } = *set;
         self.counters.samples += 1;
         // A mutator chosen uniformly among those that suit the current path; the proposal
@@ -249,7 +269,7 @@ impl Chain {
         self.proposed[m as usize] += 1;
         let (a, proposal) = match proposal {
             Some(p) => {
-                let fy = if lengths.covers(&p.path) { scalar(&p.measured) } else { 0.0 };
+                let fy = if lengths.covers(&p.path) { target(&p.measured, set.importance) } else { 0.0 };
                 let suits_y = suitable(scene, &p.path, set.enabled);
                 let n_y = suits_y.iter().flatten().count();
                 let num = fy * p.backward * n_x as f64;
@@ -296,40 +316,54 @@ const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
 
 /// `b` and its standard error from the BDPT bootstrap: `--bootstrap` samples, and with a
 /// time budget (of a whole render) more batches of as many until `--bootstrap-fraction` of
-/// the time has passed since `start`. Also the number of batches.
+/// the time has passed since `start`; the same samples' mean luminance and its standard
+/// error (with a first stage's map `b` is the mean of luminance over it); and the number of
+/// batches, with the work the samples took.
 fn normalisation(
     scene: &Scene,
     opts: &RenderOptions,
     pool: &rayon::ThreadPool,
     lengths: Lengths,
     start: Instant,
+    importance: Option<&Importance>,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
-    counters: &mut Counters,
-) -> (f64, f64, usize) {
+) -> ((f64, f64), (f64, f64), usize, Counters) {
     let n = opts.mlt.bootstrap;
-    let until = match opts.budget {
-        Budget::Time(t) => t * opts.mlt.bootstrap_fraction,
-        Budget::Spp(_) => 0.0,
-    };
-    let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
-    let (mut sum, mut variance, mut batches) = (0.0, 0.0, 0usize);
-    while batches == 0 || (start.elapsed().as_secs_f64() < until && !stopped()) {
-        let offset = (batches * n) as u64;
-        let (b, e, c) = super::mlt::bdpt_normalisation(
+    let (mut sum, mut variance, mut counters) = ([0.0; 2], [0.0; 2], Counters::default());
+    let batches = super::mlt::in_batches(opts, start, opts.mlt.bootstrap_fraction, |batch| {
+        let offset = batch * n as u64;
+        let (target, plain, c) = super::mlt::bdpt_normalisation(
             scene,
             opts,
             pool,
             n,
             (lengths.min + usize::from(lengths.direct_separate), lengths.direct_separate),
+            importance,
             &|s, i| key(s ^ BOOTSTRAP_STREAM, i + offset),
         );
-        *counters += c;
-        sum += b;
-        variance += e * e;
-        batches += 1;
-    }
+        counters += c;
+        for (i, (m, e)) in [target, plain].into_iter().enumerate() {
+            sum[i] += m;
+            variance[i] += e * e;
+        }
+    });
     let k = batches as f64;
-    (sum / k, variance.sqrt() / k, batches)
+    let estimate = |i: usize| (sum[i] / k, variance[i].sqrt() / k);
+    (estimate(0), estimate(1), batches as usize, counters)
+}
+
+/// Two-stage Metropolis' final scale: the chains' part of `image` (what it adds to `direct`,
+/// the direct-light pass's image) scaled so that its mean luminance is `luminance`, the
+/// bootstrap's estimate of it (Mitsuba 0.6 develops its two-stage image so): the image's
+/// brightness then rests on the plain mean luminance, as in one stage, rather than on the
+/// noisier mean of luminance over the map and the chains' time-average of the map. Also
+/// the factor.
+fn rescaled(image: Vec<Rgb>, direct: &[Rgb], luminance: f64) -> (Vec<Rgb>, f64) {
+    let n = image.len().max(1) as f64;
+    let chains: f64 = image.iter().zip(direct).map(|(p, d)| crate::math::luminance(*p - *d) as f64).sum::<f64>() / n;
+    let s = if chains > 0.0 && luminance > 0.0 { luminance / chains } else { 1.0 };
+    let image = image.into_iter().zip(direct).map(|(p, d)| *d + (p - *d) * s as f32).collect();
+    (image, s)
 }
 const SEED_STREAM: u64 = 0x7365_6564;
 const CHAIN_STREAM: u64 = 0x6368_6169;
@@ -435,9 +469,27 @@ pub fn render(
             0,
             iterations,
             (Stay::default(), 0.0),
+            None,
         );
     }
-    let (b, b_error, boot_batches) = normalisation(scene, opts, &pool, lengths, start, &key, &mut counters);
+    // Two-stage Metropolis: the first stage takes the first half of the bootstrap's time;
+    // its streams are the render's, not a chunk's, so that every chunk has the same map.
+    let paths = (lengths.min + usize::from(lengths.direct_separate), lengths.direct_separate);
+    let (importance, first_stage_samples) = if opts.mlt.two_stage {
+        let fraction = opts.mlt.bootstrap_fraction / 2.0;
+        let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];
+        let (map, n, c) = super::mlt::first_stage(scene, opts, &pool, n_boot, paths, start, fraction, &render_key);
+        counters += c;
+        (map, n)
+    } else {
+        (None, 0)
+    };
+    let importance = importance.as_ref();
+    let ((b, b_error), mean_luminance, boot_batches, c) =
+        normalisation(scene, opts, &pool, lengths, start, importance, &key);
+    counters += c;
+    // The direct light's image, beside which two-stage Metropolis scales the chains' part.
+    let rescale = importance.map(|_| (base.develop(), mean_luminance.0));
     // Start-path candidates and their weights f / p.
     let chunk = 1024usize;
     let parts: Vec<(Vec<f32>, Counters)> = pool.install(|| {
@@ -450,7 +502,7 @@ pub fn render(
                     .map(|i| {
                         let mut rng = Sampler::new(&key(SEED_STREAM, i as u64));
                         independent_path(scene, lengths, &mut rng, &mut counters)
-                            .map_or(0.0, |(_, m, p)| (scalar(&m) / p) as f32)
+                            .map_or(0.0, |(_, m, p)| (target(&m, importance) / p) as f32)
                     })
                     .collect();
                 (ws, counters)
@@ -473,6 +525,9 @@ pub fn render(
         bootstrap_seconds,
         min_edges: lengths.min,
         max_edges: lengths.max,
+        first_stage_samples,
+        mean_luminance: mean_luminance.0,
+        mean_luminance_error: mean_luminance.1,
         ..Default::default()
     };
     let mut snapshots = Vec::new();
@@ -491,7 +546,7 @@ pub fn render(
                 .ok_or_else(|| Error::Usage("a start path could not be regenerated".into()))?;
             chains.push(Chain {
                 rng: Sampler::new(&key(CHAIN_STREAM ^ 1, i)),
-                f: scalar(&current),
+                f: target(&current, importance),
                 suits: suitable(scene, &path, on),
                 path,
                 current,
@@ -514,6 +569,7 @@ pub fn render(
             enabled: on,
             lambda: opts.mlt.lambda,
             theta_diff: opts.mlt.theta_diff.to_radians(),
+            importance,
         };
         (done, interrupted) = super::run_chains(
             &pool,
@@ -525,7 +581,10 @@ pub fn render(
             &mut base,
             |ch, film| ch.step(scene, &set, film),
             &mut snapshots,
-            |_, f| f.develop(),
+            |_, f| match &rescale {
+                Some((direct, l)) => rescaled(f.develop(), direct, *l).0,
+                None => f.develop(),
+            },
         );
     }
     let longest = super::stays::longest(chains.iter().map(|c| &c.stays));
@@ -553,7 +612,23 @@ pub fn render(
         .collect();
     let seconds = start.elapsed().as_secs_f64();
     stats.mutations_per_second = done as f64 / (seconds - stats.bootstrap_seconds).max(1e-9);
-    finish(scene, opts, threads, base, stats, counters, start, snapshots, interrupted, done, iterations, (longest, b))
+    // What one mutation's splat carries around the longest stay's pixel.
+    let b_there = b * importance.map_or(1.0, |m| m.pixel(longest.pixel) as f64);
+    finish(
+        scene,
+        opts,
+        threads,
+        base,
+        stats,
+        counters,
+        start,
+        snapshots,
+        interrupted,
+        done,
+        iterations,
+        (longest, b_there),
+        rescale,
+    )
 }
 
 /// The render's output: the film (direct light and the chains' splats over `done`
@@ -572,6 +647,7 @@ fn finish(
     done: u64,
     iterations: Option<std::ops::Range<u32>>,
     (longest, b): (Stay, f64),
+    rescale: Option<(Vec<Rgb>, f64)>,
 ) -> Result<RenderOutput, crate::error::Error> {
     let (w, h) = (scene.film.width, scene.film.height);
     let pixels = w as u64 * h as u64;
@@ -579,8 +655,11 @@ fn finish(
     stats.mutations = done;
     let seconds = start.elapsed().as_secs_f64();
     let spp = (done / pixels) as u32;
-    let image = film.develop();
-    stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b, done);
+    let (image, s) = match &rescale {
+        Some((direct, l)) if done > 0 => rescaled(film.develop(), direct, *l),
+        _ => (film.develop(), 1.0),
+    };
+    stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b * s, done);
     Ok(super::chains_output(
         scene,
         opts,

@@ -35,7 +35,7 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
 fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
     let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
     let pool = super::super::thread_pool(2).unwrap();
-    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, (min, false), &|s, i| vec![11, s, i]).0
+    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, (min, false), None, &|s, i| vec![11, s, i]).0.0
 }
 
 /// `|a - b|` in standard errors.
@@ -441,7 +441,9 @@ fn chains_beside_the_direct_pass_take_the_two_edge_paths_through_dirac_lobes() {
     let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
     let pool = super::super::thread_pool(2).unwrap();
     let b = |dirac: bool| {
-        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 400_000, (3, dirac), &|s, i| vec![31, s, i]).0
+        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 400_000, (3, dirac), None, &|s, i| vec![31, s, i])
+            .0
+            .0
     };
     let chains = mean_and_error(4_000_000, |i| {
         let mut rng = Sampler::new(&[33, i as u64]);
