@@ -12,6 +12,10 @@
 //! `--bootstrap` independent samples. `--chains` chains (64), each with its own seed, run the
 //! same number of mutations; the worker threads splat them into films of their own, whose
 //! exact sums make the image independent of the thread count.
+//!
+//! With `--two-stage true` (off by default) the scalar contribution is each luminance over a
+//! first stage's map of the image at its film position ([`super::two_stage`]), and the image
+//! is scaled to the mean luminance. The BDPT bootstrap and the first stage also serve MEMLT.
 
 use super::bidir::bdpt::{Bdpt, Connector, Scratch};
 use super::bidir::mis::{Counts, Heuristic};

@@ -11,6 +11,11 @@
 //! luminances, and splats both paths with their expected weights. `--chains` chains (64),
 //! each with its own seed, run the same number of mutations; the worker threads splat them
 //! into films of their own, whose exact sums make the image independent of the thread count.
+//!
+//! By default the chains run two-stage Metropolis ([`super::two_stage`]): their target is
+//! the luminance over a first stage's map of the image, `b` the mean of that, the start
+//! paths drawn in proportion to it, and the chains' part of the image is finally scaled to
+//! the bootstrap's plain mean luminance. `--two-stage false` gives the plain luminance.
 
 pub mod bidirectional;
 pub mod caustic;
