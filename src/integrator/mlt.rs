@@ -340,12 +340,17 @@ impl Contributions<'_> {
             self.splats.push(Splat { pos: self.pos, value: self.pixel, layer: 0 });
         }
         self.pixel = Rgb::ZERO;
-        let plain: f32 = self.splats.iter().map(|s| luminance(s.value).max(0.0)).sum();
-        self.luminance = if plain.is_finite() { plain } else { 0.0 };
-        let f: f32 = match self.importance {
-            None => plain,
-            Some(m) => self.splats.iter().map(|s| luminance(s.value).max(0.0) / m.at(s.pos)).sum(),
+        let (plain, f) = match self.importance {
+            None => {
+                let plain: f32 = self.splats.iter().map(|s| luminance(s.value).max(0.0)).sum();
+                (plain, plain)
+            }
+            Some(m) => self.splats.iter().fold((0.0f32, 0.0f32), |(plain, f), s| {
+                let l = luminance(s.value).max(0.0);
+                (plain + l, f + l / m.at(s.pos))
+            }),
         };
+        self.luminance = if plain.is_finite() { plain } else { 0.0 };
         if f.is_finite() { f } else { 0.0 }
     }
 }
@@ -493,6 +498,50 @@ fn develop_chains(chains: &[Chain], film: &Film, b: f64, l: Option<f64>, n_boot:
     (image.into_iter().map(|p| p * s as f32).collect(), s)
 }
 
+/// Runs `n` independent samples of the estimator in parallel, in chunks of 1024: sample
+/// `i` a large step of `rng(i)`, its contributions in `out()`'s. Each chunk folds its
+/// samples, in order, into an accumulator from `init` with `add` (the sample's scalar
+/// contribution and its contributions). The accumulators in chunk order, and the work.
+fn sample_chunks<'a, T: Send>(
+    pool: &rayon::ThreadPool,
+    ev: &Evaluator,
+    n: usize,
+    out: &(dyn Fn() -> Contributions<'a> + Sync),
+    rng: &(dyn Fn(u64) -> PrimarySampler + Sync),
+    init: impl Fn() -> T + Sync,
+    add: impl Fn(&mut T, f32, &Contributions) + Sync,
+) -> (Vec<T>, Counters) {
+    let chunk = 1024usize;
+    let parts: Vec<(T, Counters)> = pool.install(|| {
+        (0..n.div_ceil(chunk))
+            .into_par_iter()
+            .map(|k| {
+                crate::accel::embree::set_flush_denormals();
+                let mut scratch = Scratch::default();
+                let mut contributions = out();
+                let mut c = Counters::default();
+                let mut acc = init();
+                for i in k * chunk..((k + 1) * chunk).min(n) {
+                    let mut rng = rng(i as u64);
+                    rng.start_iteration(true);
+                    let f = ev.eval(&mut rng, &mut scratch, &mut contributions, &mut c);
+                    add(&mut acc, f, &contributions);
+                }
+                (acc, c)
+            })
+            .collect()
+    });
+    let mut counters = Counters::default();
+    let accs = parts
+        .into_iter()
+        .map(|(acc, c)| {
+            counters += c;
+            acc
+        })
+        .collect();
+    (accs, counters)
+}
+
 /// Runs `n` independent samples of the estimator (large steps from the streams
 /// `key(BOOTSTRAP_STREAM, i)`), in parallel; their scalar contributions in order (over the
 /// first stage's map where there is one) and, with a map, their plain luminances (else
@@ -506,36 +555,22 @@ fn bootstrap(
     importance: Option<&Importance>,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
 ) -> (Vec<f32>, Vec<f32>, Counters) {
-    let chunk = 1024usize;
-    let parts: Vec<(Vec<(f32, f32)>, Counters)> = pool.install(|| {
-        (0..n.div_ceil(chunk))
-            .into_par_iter()
-            .map(|k| {
-                crate::accel::embree::set_flush_denormals();
-                let mut scratch = Scratch::default();
-                let mut out = Contributions { min_edges, dirac_two_edges, importance, ..Default::default() };
-                let mut c = Counters::default();
-                let fs = (k * chunk..((k + 1) * chunk).min(n))
-                    .map(|i| {
-                        let mut rng = PrimarySampler::new(&key(BOOTSTRAP_STREAM, i as u64), large_step_prob);
-                        rng.start_iteration(true);
-                        let f = ev.eval(&mut rng, &mut scratch, &mut out, &mut c);
-                        (f, out.luminance)
-                    })
-                    .collect();
-                (fs, c)
-            })
-            .collect()
-    });
-    let mut counters = Counters::default();
+    let (parts, counters) = sample_chunks(
+        pool,
+        ev,
+        n,
+        &|| Contributions { min_edges, dirac_two_edges, importance, ..Default::default() },
+        &|i| PrimarySampler::new(&key(BOOTSTRAP_STREAM, i), large_step_prob),
+        Vec::new,
+        |fs: &mut Vec<(f32, f32)>, f, out| fs.push((f, out.luminance)),
+    );
     let mut weights = Vec::with_capacity(n);
     let mut luminances = Vec::with_capacity(if importance.is_some() { n } else { 0 });
-    for (fs, c) in parts {
+    for fs in parts {
         weights.extend(fs.iter().map(|p| p.0));
         if importance.is_some() {
             luminances.extend(fs.iter().map(|p| p.1));
         }
-        counters += c;
     }
     (weights, luminances, counters)
 }
@@ -570,59 +605,11 @@ pub(crate) fn bdpt_normalisation(
     (target, plain, counters)
 }
 
-/// Two-stage Metropolis' first stage: the luminance of `n` independent BDPT samples (the
-/// streams `key(FIRST_STAGE_STREAM, i)`, each through a uniformly random film position)
-/// summed over the cells of `grid`, with the work the samples took.
-pub(crate) fn bdpt_luminance_cells(
-    scene: &Scene,
-    opts: &RenderOptions,
-    pool: &rayon::ThreadPool,
-    n: usize,
-    (min_edges, dirac_two_edges): (usize, bool),
-    grid: Grid,
-    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
-) -> (Vec<f64>, Counters) {
-    let ev = evaluator(scene, opts, MltBase::Bdpt);
-    let chunk = 1024usize;
-    let parts: Vec<(Vec<f64>, Counters)> = pool.install(|| {
-        (0..n.div_ceil(chunk))
-            .into_par_iter()
-            .map(|k| {
-                crate::accel::embree::set_flush_denormals();
-                let mut scratch = Scratch::default();
-                let mut out = Contributions { min_edges, dirac_two_edges, ..Default::default() };
-                let mut c = Counters::default();
-                let mut sums = vec![0.0f64; grid.len()];
-                for i in k * chunk..((k + 1) * chunk).min(n) {
-                    let mut rng = PrimarySampler::new(&key(FIRST_STAGE_STREAM, i as u64), 1.0);
-                    rng.start_iteration(true);
-                    if ev.eval(&mut rng, &mut scratch, &mut out, &mut c) > 0.0 {
-                        for s in &out.splats {
-                            let l = luminance(s.value) as f64;
-                            if l.is_finite() && l > 0.0 {
-                                sums[grid.cell_of(s.pos)] += l;
-                            }
-                        }
-                    }
-                }
-                (sums, c)
-            })
-            .collect()
-    });
-    let mut counters = Counters::default();
-    let mut sums = vec![0.0f64; grid.len()];
-    for (part, c) in parts {
-        for (s, p) in sums.iter_mut().zip(part) {
-            *s += p;
-        }
-        counters += c;
-    }
-    (sums, counters)
-}
-
-/// Two-stage Metropolis' first stage in batches of `n` BDPT samples, more of them with a
-/// time budget until `fraction` of it has passed since `start` (one batch at least): the
-/// map (`None` when they found no light), the samples and their work.
+/// Two-stage Metropolis' first stage: batches of `n` independent BDPT samples (the streams
+/// `key(FIRST_STAGE_STREAM, i)`, each through a uniformly random film position), more of
+/// them with a time budget until `fraction` of it has passed since `start` (one batch at
+/// least), their luminance summed over the cells of the first stage's grid: the map (`None`
+/// when they found no light), the samples and their work.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn first_stage(
     scene: &Scene,
@@ -635,13 +622,34 @@ pub(crate) fn first_stage(
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
 ) -> (Option<Importance>, u64, Counters) {
     let grid = Grid::new(scene.film.width, scene.film.height, opts.mlt.first_stage_reduction);
+    let ev = evaluator(scene, opts, MltBase::Bdpt);
+    let (min_edges, dirac_two_edges) = paths;
     let mut sums = vec![0.0f64; grid.len()];
     let mut counters = Counters::default();
     let batches = in_batches(opts, start, fraction, |batch| {
         let offset = batch * n as u64;
-        let (part, c) = bdpt_luminance_cells(scene, opts, pool, n, paths, grid, &|s, i| key(s, i + offset));
-        for (s, p) in sums.iter_mut().zip(part) {
-            *s += p;
+        let (parts, c) = sample_chunks(
+            pool,
+            &ev,
+            n,
+            &|| Contributions { min_edges, dirac_two_edges, ..Default::default() },
+            &|i| PrimarySampler::new(&key(FIRST_STAGE_STREAM, i + offset), 1.0),
+            || vec![0.0f64; grid.len()],
+            |cells, f, out| {
+                if f > 0.0 {
+                    for s in &out.splats {
+                        let l = luminance(s.value) as f64;
+                        if l.is_finite() && l > 0.0 {
+                            cells[grid.cell_of(s.pos)] += l;
+                        }
+                    }
+                }
+            },
+        );
+        for part in parts {
+            for (s, p) in sums.iter_mut().zip(part) {
+                *s += p;
+            }
         }
         counters += c;
     });
@@ -742,7 +750,7 @@ pub fn render(
     counters += c;
     // Two-stage Metropolis: the bootstrap's mean luminance, to which the image is scaled.
     let plain = importance.map(|_| mean_and_error(&luminances).0);
-    let b = weights.iter().map(|&f| f as f64).sum::<f64>() / weights.len() as f64;
+    let b = mean_and_error(&weights).0;
     let bootstrap_seconds = start.elapsed().as_secs_f64();
     let mut film = Film::new(w, h, scene.film.filter);
     let mut stats = MltStats {
