@@ -18,11 +18,7 @@ fn memlt(scene: &Scene, spp: u32, seed: u64, direct_samples: i32) -> RenderOutpu
 }
 
 fn memlt_with(scene: &Scene, spp: u32, seed: u64, set: &dyn Fn(&mut RenderOptions)) -> RenderOutput {
-    let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(spp));
-    o.seed = seed;
-    o.threads = 2;
-    set(&mut o);
-    integrator::render(scene, &o).unwrap()
+    render_with(scene, IntegratorKind::Memlt, spp, seed, 2, set)
 }
 
 fn check(scene: &Scene, reference_name: &str, ref_noise: f64, spp: u32, direct_samples: i32, what: &str) {

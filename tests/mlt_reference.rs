@@ -25,32 +25,27 @@ fn pssmlt_cornell_ply() {
     check(&scene, "cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr", 8.0e-5, 16, "cornell-ply, PSSMLT, 2 × 16 spp");
 }
 
-#[test]
-fn pssmlt_veach_ajar() {
-    let scene = load(
+fn veach_ajar() -> Scene {
+    load(
         &root().join("scenes/veach-ajar/scene.xml"),
         &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
         Backend::Embree,
-    );
-    check(&scene, "veach-ajar.exr", 4.5e-3, 64, "veach-ajar, PSSMLT, 2 × 64 spp");
+    )
+}
+
+#[test]
+fn pssmlt_veach_ajar() {
+    check(&veach_ajar(), "veach-ajar.exr", 4.5e-3, 64, "veach-ajar, PSSMLT, 2 × 64 spp");
 }
 
 #[test]
 fn pssmlt_veach_ajar_two_stage() {
     // Two-stage Metropolis (MEMLT's default): the chains' target luminance over a first
     // stage's map, the image scaled to the bootstrap's mean luminance.
-    let scene = load(
-        &root().join("scenes/veach-ajar/scene.xml"),
-        &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
-        Backend::Embree,
-    );
+    let scene = veach_ajar();
     let reference = reference("veach-ajar.exr");
     let run = |seed| {
-        let mut o = RenderOptions::new(IntegratorKind::Pssmlt, Budget::Spp(64));
-        o.seed = seed;
-        o.threads = 2;
-        o.mlt.two_stage = true;
-        let out = integrator::render(&scene, &o).unwrap();
+        let out = render_with(&scene, IntegratorKind::Pssmlt, 64, seed, 2, &|o| o.mlt.two_stage = true);
         assert!(out.stats.mlt.unwrap().first_stage_samples > 0);
         image(out)
     };

@@ -27,9 +27,22 @@ pub fn load_at(path: &Path, defines: &[(&str, &str)], resolution: Option<(u32, u
 }
 
 pub fn render(scene: &Scene, kind: IntegratorKind, spp: u32, seed: u64, threads: usize) -> RenderOutput {
+    render_with(scene, kind, spp, seed, threads, &|_| {})
+}
+
+/// As [`render`], with the options changed by `set` first.
+pub fn render_with(
+    scene: &Scene,
+    kind: IntegratorKind,
+    spp: u32,
+    seed: u64,
+    threads: usize,
+    set: &dyn Fn(&mut RenderOptions),
+) -> RenderOutput {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
     o.seed = seed;
     o.threads = threads;
+    set(&mut o);
     integrator::render(scene, &o).unwrap()
 }
 
