@@ -1,4 +1,5 @@
-//! Lights at infinity (`constant`, `envmap`) and directional lights in every integrator,
+//! Lights at infinity (`constant`, `envmap`) and directional lights in every integrator
+//! (MEMLT with its direct-light pass and with the direct light in its chains),
 //! against analytic answers: empty space under a constant sky is the sky; a convex diffuse
 //! object of albedo ρ under radiance `L` reflects `ρ L`; a diffuse plane under a directional
 //! light of irradiance `E` at angle θ has radiance `ρ E cos θ / π`. The bidirectional
@@ -30,6 +31,14 @@ fn methods() -> Vec<(String, RenderOptions)> {
     let mut o = options(Pssmlt);
     o.mlt.bootstrap = 20_000;
     out.push(("Pssmlt".into(), o));
+    // MEMLT with its direct-light pass (the path tracer's), and with the direct light in
+    // the chains, so that every path length is the chains' own.
+    for direct in [16, -1] {
+        let mut o = options(Memlt);
+        o.mlt.bootstrap = 20_000;
+        o.mlt.direct_samples = direct;
+        out.push((if direct > 0 { "Memlt".into() } else { "Memlt, direct light in the chains".into() }, o));
+    }
     out
 }
 
@@ -37,7 +46,7 @@ fn options(kind: IntegratorKind) -> RenderOptions {
     // Light tracing and the Markov chains are the noisiest here: more samples.
     let spp = match kind {
         IntegratorKind::Lighttrace => 1024,
-        IntegratorKind::Pssmlt => 256,
+        IntegratorKind::Pssmlt | IntegratorKind::Memlt => 256,
         _ => 64,
     };
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
@@ -90,7 +99,7 @@ fn empty_space_under_a_constant_sky_is_the_sky_in_every_integrator() {
     let mut failures = Vec::new();
     for (name, o) in methods() {
         let out = integrator::render(&scene, &o).unwrap();
-        if name == "Pssmlt" {
+        if name == "Pssmlt" || name.starts_with("Memlt,") {
             // The chains' pixels are as noisy as their visits; their mean is the sky.
             if let Err(e) = close(&name, mean_where(&out.image, |_, _| true).0, l, 0.01) {
                 failures.push(e);
@@ -232,7 +241,8 @@ fn renders_under_lights_at_infinity_do_not_depend_on_the_thread_count() {
         o.threads = 2;
         let two = integrator::render(&scene, &o).unwrap().image;
         let bits = |i: &[Vec3]| i.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
-        // PSSMLT runs one chain per thread: its image depends on the thread count by design.
+        // PSSMLT runs one chain per thread: its image depends on the thread count by design
+        // (MEMLT's chains do not).
         if name != "Pssmlt" {
             assert!(bits(&one) == bits(&two), "{name}: 1 and 2 threads differ");
         }

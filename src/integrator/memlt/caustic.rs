@@ -4,7 +4,8 @@
 //! light-side end `x_m` by a small angle, re-traces the chain through the same lobes to a
 //! new rough vertex and joins it to the pinhole. As in Mitsuba 0.6 the chain may be empty
 //! (`(L|D) D E`): the perturbation then moves the point the camera sees from the light's
-//! side, keeping the rest of the path.
+//! side, keeping the rest of the path. The light must be one with a position: a light at
+//! infinity sends its light along its own directions, which no turn may change.
 //!
 //! The angle has density `∝ 1/θ` between `θ1` and `θ2`, in a uniform azimuth around the
 //! current direction: the image-space radii of the lens perturbation (0.1 pixel, 5% of the
@@ -36,7 +37,8 @@ pub fn suits(scene: &Scene, x: &[Vertex]) -> Option<usize> {
     while m >= 1 && x[m].delta {
         m -= 1;
     }
-    (!x[m].delta && connectible(scene, &x[m])).then_some(m)
+    // The direction leaving a light at infinity is the light's own: nothing to turn.
+    (!x[m].delta && !x[m].infinite && connectible(scene, &x[m])).then_some(m)
 }
 
 /// The angles `[θ1, θ2]` for a path: the radii's angles at the camera, times the eye edge's

@@ -11,7 +11,7 @@
 //! lobes' discrete probabilities taken out. Only that Jacobian enters the acceptance.
 
 use super::bidirectional::Proposal;
-use super::path::{connectible, contribution, join, pdf_from_camera, pdf_from_lobe, retrace};
+use super::path::{connectible, contribution, join, pdf_from_camera, pdf_from_lobe, retrace, settle_sky};
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::sampling::Random;
@@ -103,6 +103,7 @@ pub fn propose<R: Random>(
     for i in (m..k).rev() {
         y[i] = retrace(scene, &mut ray, x, i, i > m, counters)?;
     }
+    settle_sky(scene, &mut y);
     if !join(scene, &y[m - 1], &y[m], counters) {
         return None;
     }

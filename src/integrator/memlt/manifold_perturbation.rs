@@ -20,6 +20,9 @@
 //! (the walk back from the new point must find the current one; the pinhole, the other
 //! end, has no area to move on).
 //!
+//! A light at infinity is no plan's `a`, `b` or `c`: the direction it sends light along is
+//! its own, and its edge has no length for a chain to be walked along.
+//!
 //! Which vertices count as specular is drawn before the plan ([`Treatment`]): Dirac ones
 //! always, diffuse ones never, a glossy one with a probability set by its lobe's width
 //! against `--theta-diff` ([`manifold::nonspecular_probability`]); the probability of the
@@ -209,13 +212,18 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
         VertexKind::Surface => connectible(scene, &x[a]) && !specular(a),
         VertexKind::Sky => false,
     };
-    if !ok_start || (toward_light && a == 0) || (!toward_light && a == k) {
+    // A light at infinity stays out of the plans: its direction is the light's own and its
+    // edge has no length to walk along.
+    if !ok_start || (toward_light && a == 0) || (!toward_light && a == k) || (x[0].infinite && a == 0) {
         return None;
     }
     let step = |i: usize| if toward_light { i.checked_sub(1) } else { (i < k).then_some(i + 1) };
     let mut b = step(a)?;
     while specular(b) {
         b = step(b)?;
+    }
+    if b == 0 && x[0].infinite {
+        return None;
     }
     if b == 0 {
         // The moved ray must find the light: not a point or spot light's position.
@@ -229,7 +237,7 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
         c = step(c)?;
     }
     // A specular chain cannot end at the pinhole: it has no area to find it on.
-    if c == k && c.abs_diff(b) > 1 {
+    if (c == k && c.abs_diff(b) > 1) || (c == 0 && x[0].infinite) {
         return None;
     }
     (x[c].kind != VertexKind::Surface || connectible(scene, &x[c])).then_some(Plan {
@@ -247,6 +255,7 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
 pub fn position_plan(scene: &Scene, x: &[Vertex], treatment: &Treatment) -> Option<Plan> {
     let k = x.len() - 1;
     let ok = hittable_light(scene, &x[0])
+        && !x[0].infinite
         && k >= 2
         && x[1].kind == VertexKind::Surface
         && connectible(scene, &x[1])

@@ -12,6 +12,9 @@
 //! each with its own seed, run the same number of mutations; the worker threads splat them
 //! into films of their own, whose exact sums make the image independent of the thread count.
 //!
+//! Every kind of light the renderer has may light the scene: lights at infinity enter a
+//! path as a vertex in their direction ([`path`]).
+//!
 //! By default the chains run two-stage Metropolis ([`super::two_stage`]): their target is
 //! the luminance over a first stage's map of the image, `b` the mean of that, the start
 //! paths drawn in proportion to it, and the chains' part of the image is finally scaled to
@@ -386,13 +389,6 @@ pub fn render(
     let n_boot = opts.mlt.bootstrap;
     opts.mlt.check_counts()?;
     super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
-    if scene.lights.iter().any(|l| l.at_infinity()) {
-        return Err(Error::Usage(format!(
-            "{}: the memlt integrator handles area, point and spot lights; this scene has a directional light or \
-             light from infinity (constant, envmap, sky or sun)",
-            scene.path.display()
-        )));
-    }
     let direct = opts.mlt.direct_samples;
     if direct == 0 || direct < -1 {
         return Err(Error::Usage(format!(

@@ -15,7 +15,7 @@
 
 use super::bidirectional::Proposal;
 use super::lens::Radii;
-use super::path::{area_factor, connectible, contribution, join, ray_from, retrace};
+use super::path::{area_factor, connectible, contribution, join, ray_from, retrace, settle_sky};
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::math::Frame;
@@ -86,6 +86,7 @@ pub fn propose<R: Random>(
             ray = ray_from(&y[i], Frame::from_normal(old).to_world(local));
         }
     }
+    settle_sky(scene, &mut y);
     if !join(scene, &y[l], &y[l + 1], counters) {
         return None;
     }

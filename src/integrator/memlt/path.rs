@@ -9,6 +9,19 @@
 //! take the position by its discrete probability (the light's, chosen by power), and no
 //! walk from the camera can reach it (its camera-side density is zero).
 //!
+//! Light from infinity (`constant`, `envmap`, sky, sun, `directional`) arrives along a direction: such a
+//! path's `x_0` is a vertex at infinity (`Vertex::infinite`) whose geometric normal is the
+//! unit direction from `x_1` towards the light, and whose position is kept on that line,
+//! beyond the scene ([`settle_sky`]), so that a shadow ray and the directions between
+//! positions find it. In the measures of the bidirectional core (pbrt-v4's): its edge to
+//! `x_1` has no distance and no cosine at `x_0` (`G = |cos θ_1|`), the light walk's density
+//! of `x_0` is the solid-angle density of its direction over every light at infinity that
+//! rays can hit, each chosen by power (the radiance it carries is theirs summed; a
+//! directional light's direction is a Dirac one, taken by its light's probability as a point
+//! light's position is), and that of `x_1` given
+//! `x_0` is the disk's `1 / (π R²)` times `|cos θ_1|` ([`disk_pdf`]); a camera walk whose
+//! last ray leaves the scene reaches it with the solid-angle density of that ray.
+//!
 //! A path scatters at a vertex either through a Dirac lobe (`Vertex::delta`: a mirror, glass,
 //! a smooth coating's reflection) or through the rest of its BSDF. Both `f` and the densities
 //! take a Dirac lobe by its coefficient and its discrete probability: the delta functions a
@@ -21,15 +34,22 @@
 use crate::accel::Ray;
 use crate::bsdf::{At, Bsdf, BsdfSample, TransportMode};
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind, light_origin_pdf, visible};
+use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf, light_origin_pdf, visible};
 use crate::math::{Rgb, offset_origin};
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 
-/// Unit direction from `a` to `b` and their squared distance.
+/// Unit direction from `a` to `b` and their squared distance; towards or from a vertex at
+/// infinity its direction, and a distance of one (its edge's geometric factor has none).
 #[inline]
 fn towards(a: &Vertex, b: &Vertex) -> (Vec3, f32) {
+    if b.infinite {
+        return (b.ng, 1.0);
+    }
+    if a.infinite {
+        return (-a.ng, 1.0);
+    }
     let d = b.p - a.p;
     let d2 = d.length_squared();
     (d / d2.sqrt(), d2)
@@ -53,6 +73,38 @@ pub fn delta_lobe(bsdf: &Bsdf, lo: Vec3, li: Vec3, at: At, mode: TransportMode) 
 /// The direction a Dirac lobe of `bsdf` takes `lo` to, reflecting or transmitting as asked.
 pub fn delta_direction(bsdf: &Bsdf, lo: Vec3, at: At, reflection: bool) -> Option<Vec3> {
     delta_sample(bsdf, lo, at, reflection, TransportMode::Radiance).map(|s| s.wi)
+}
+
+/// The position of a vertex at infinity seen from `from` in the unit direction `d`: on the
+/// line, beyond the scene by some of its diameters (as the bidirectional core's
+/// [`Vertex::sky`] places it).
+#[inline]
+fn sky_point(scene: &Scene, from: Vec3, d: Vec3) -> Vec3 {
+    from + d * (2.0 * (scene.bounds.radius + (from - scene.bounds.center).length()) + 1.0)
+}
+
+/// A light vertex at infinity in the unit direction `d` (towards the light) from `from`:
+/// of light `l` when that is a directional light (a Dirac direction of its own), else of
+/// the scene's first light that rays leaving the scene find (a path sees all of those
+/// along `d`, and its densities are their mixture, so the index only marks the vertex as a
+/// light). `None` when the scene has no such light.
+pub fn sky_vertex(scene: &Scene, l: Option<usize>, from: Vec3, d: Vec3) -> Option<Vertex> {
+    let l = match l {
+        Some(l) if scene.lights[l].is_unreachable() => l,
+        _ => *scene.infinite_lights.first()?,
+    };
+    let mut v = Vertex::light(l, sky_point(scene, from, d), d, Vec2::ZERO, Rgb::ONE, 0.0);
+    v.infinite = true;
+    Some(v)
+}
+
+/// Puts the position of a path's light vertex at infinity back on the line from `x_1`
+/// along its direction, after `x_1` moved.
+#[inline]
+pub fn settle_sky(scene: &Scene, v: &mut [Vertex]) {
+    if v.len() >= 2 && v[0].infinite {
+        v[0].p = sky_point(scene, v[1].p, v[0].ng);
+    }
 }
 
 /// Whether a deterministic connection can end at vertex `v` of a path: the light, the
@@ -101,11 +153,16 @@ pub fn contribution(scene: &Scene, v: &[Vertex]) -> Option<Measured> {
     let VertexKind::Light(l) = v[0].kind else { return None };
     let conn = scene.camera.connect(v[k - 1].p)?;
     let (w, _) = towards(&v[0], &v[1]);
-    let mut f = scene.lights[l as usize].emitted(v[0].ng, v[0].uv, w) * conn.pdf_dir;
+    let le = if v[0].infinite {
+        v[0].infinite_emission(scene)
+    } else {
+        scene.lights[l as usize].emitted(v[0].ng, v[0].uv, w)
+    };
+    let mut f = le * conn.pdf_dir;
     let mut g = 1.0f64;
     for i in 0..k {
         let (w, d2) = towards(&v[i], &v[i + 1]);
-        g *= (v[i].cos_area(w) * v[i + 1].cos_area(w)) as f64 / d2 as f64;
+        g *= (cos_at(&v[i], w) * v[i + 1].cos_area(w)) as f64 / d2 as f64;
     }
     for i in 1..k {
         if f == Rgb::ZERO {
@@ -115,6 +172,12 @@ pub fn contribution(scene: &Scene, v: &[Vertex]) -> Option<Measured> {
     }
     let f = f * g as f32;
     (f != Rgb::ZERO && f.is_finite()).then_some(Measured { f, raster: conn.raster })
+}
+
+/// `|cos|` at a path's vertex towards `w`: 1 at infinity (no cosine on that side of its edge).
+#[inline]
+fn cos_at(x: &Vertex, w: Vec3) -> f32 {
+    if x.infinite { 1.0 } else { x.cos_area(w) }
 }
 
 /// Solid-angle density of `x` scattering from `wo` (its own side) into `wi`, in `mode`,
@@ -149,17 +212,19 @@ pub fn area_factor(v: &[Vertex], j: usize, from: usize) -> f64 {
     let cos = if x.kind == VertexKind::Surface && x.delta && j + 1 < v.len() {
         x.cos_area(towards(x, &v[j + 1]).0)
     } else {
-        x.cos_area(w)
+        cos_at(x, w)
     };
     cos as f64 / d2 as f64
 }
 
 /// Area density of `x_j` generated by a walk from the light: for `j = 0` a light chosen by
-/// power and a point on it, else from `x_{j-1}` (emission or importance-mode BSDF sampling,
-/// given `x_{j-2}`).
+/// power and a point on it (at infinity: a direction), else from `x_{j-1}` (emission, a
+/// point on the disk facing a light at infinity, or importance-mode BSDF sampling, given
+/// `x_{j-2}`).
 pub fn pdf_from_light(scene: &Scene, v: &[Vertex], j: usize) -> f64 {
     if j == 0 {
         return match v[0].kind {
+            VertexKind::Light(_) if v[0].infinite => v[0].pdf_light_origin(scene) as f64,
             VertexKind::Light(l) => light_origin_pdf(scene, l as usize) as f64,
             _ => 0.0,
         };
@@ -167,6 +232,7 @@ pub fn pdf_from_light(scene: &Scene, v: &[Vertex], j: usize) -> f64 {
     let x = &v[j - 1];
     let (w, _) = towards(x, &v[j]);
     let solid = match x.kind {
+        VertexKind::Light(_) if x.infinite => disk_pdf(scene),
         VertexKind::Light(l) => scene.lights[l as usize].pdf_emission_direction(x.ng, w),
         VertexKind::Surface => lobe_pdf(scene, x, towards(x, &v[j - 2]).0, w, TransportMode::Importance),
         _ => 0.0,
@@ -174,18 +240,19 @@ pub fn pdf_from_light(scene: &Scene, v: &[Vertex], j: usize) -> f64 {
     solid as f64 * area_factor(v, j, j - 1)
 }
 
-/// Whether a ray can find the light vertex `x`: not at a point or spot light's position.
+/// Whether a ray can find the light vertex `x`: not at a point or spot light's position,
+/// nor in a directional light's direction.
 #[inline]
 pub fn hittable_light(scene: &Scene, x: &Vertex) -> bool {
     match x.kind {
-        VertexKind::Light(l) => !scene.lights[l as usize].is_delta_position(),
+        VertexKind::Light(l) => !scene.lights[l as usize].is_unreachable(),
         _ => false,
     }
 }
 
 /// Area density of `x_j` generated by a walk from the pinhole: from `x_{j+1}` (a uniform
 /// film position, or radiance-mode BSDF sampling given `x_{j+2}`). Zero for the position
-/// of a point or spot light, which no ray finds.
+/// of a point or spot light and a directional light's direction, which no ray finds.
 pub fn pdf_from_camera(scene: &Scene, v: &[Vertex], j: usize) -> f64 {
     if j == 0 && !hittable_light(scene, &v[0]) {
         return 0.0;
@@ -201,20 +268,33 @@ pub fn pdf_from_camera(scene: &Scene, v: &[Vertex], j: usize) -> f64 {
 }
 
 /// Traces `n` vertices from `ray` into `out`, sampling each one's BSDF in `mode` (from the
-/// direction the walk arrived along) for the next ray, all but the last. `false` when a ray
-/// leaves the scene or a BSDF gives no direction.
+/// direction the walk arrived along) for the next ray, all but the last. With `to_sky`, a
+/// last ray that leaves the scene ends the walk at the lights at infinity (a vertex there;
+/// `to_sky` is for a camera walk that is to end on a light). `false` when a ray leaves the
+/// scene otherwise, or a BSDF gives no direction.
+#[allow(clippy::too_many_arguments)]
 pub fn walk<R: Random>(
     scene: &Scene,
     mut ray: Ray,
     n: usize,
     mode: TransportMode,
+    to_sky: bool,
     rng: &mut R,
     out: &mut Vec<Vertex>,
     counters: &mut Counters,
 ) -> bool {
     for i in 0..n {
         counters.extension_rays += 1;
-        let Some(si) = scene.intersect(&ray) else { return false };
+        let Some(si) = scene.intersect(&ray) else {
+            if to_sky
+                && i + 1 == n
+                && let Some(v) = sky_vertex(scene, None, ray.o, ray.d)
+            {
+                out.push(v);
+                return true;
+            }
+            return false;
+        };
         let b = scene.bsdf_index(&si);
         let bsdf = &scene.bsdfs[b];
         let mut v = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
@@ -272,6 +352,10 @@ pub fn leave<R: Random>(
         VertexKind::Camera => {
             let res = Vec2::new(scene.film.width as f32, scene.film.height as f32);
             Some(scene.camera.generate_ray(u2 * res))
+        }
+        VertexKind::Light(_) if x.infinite => {
+            // A point on the disk facing the light, the ray along the light's direction.
+            Some(Ray::new(crate::light::disk_point(&scene.bounds, x.ng, u2), -x.ng))
         }
         VertexKind::Light(l) => {
             scene.lights[l as usize].sample_emission_direction(x.ng, u2).map(|(d, _)| ray_from(x, d))
@@ -368,20 +452,34 @@ pub fn regenerate<R: Random>(
             let (l, pmf, _) = scene.light_sampler.sample(rng.next_1d())?;
             let u1 = rng.next_1d();
             let (u_pos, u_dir) = (rng.next_2d(), rng.next_2d());
-            let es = scene.lights[l].sample_emission(&scene.shapes, u1, u_pos, u_dir)?;
-            if pmf <= 0.0 || es.pdf_dir <= 0.0 {
+            if pmf <= 0.0 {
                 return None;
             }
-            let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::ONE, 0.0);
-            let ray = ray_from(&y0, es.d);
-            light.push(y0);
-            ray
+            if scene.lights[l].at_infinity() {
+                // A direction from the light's distribution, a point on the disk facing it.
+                let (wi, pdf_dir, _) = scene.lights[l].sample_infinite_direction(u_dir)?;
+                if pdf_dir <= 0.0 {
+                    return None;
+                }
+                let p = crate::light::disk_point(&scene.bounds, wi, u_pos);
+                light.push(sky_vertex(scene, Some(l), p, wi)?);
+                Ray::new(p, -wi)
+            } else {
+                let es = scene.lights[l].sample_emission(&scene.shapes, u1, u_pos, u_dir)?;
+                if es.pdf_dir <= 0.0 {
+                    return None;
+                }
+                let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::ONE, 0.0);
+                let ray = ray_from(&y0, es.d);
+                light.push(y0);
+                ray
+            }
         } else {
             let j = if a >= 2 { a - 2 } else { a - 1 };
             leave(scene, &mut light, a - 1, j, TransportMode::Importance, rng)?
         };
         let more = s - usize::from(a == 0);
-        if more > 0 && !walk(scene, ray, more, TransportMode::Importance, rng, &mut light, counters) {
+        if more > 0 && !walk(scene, ray, more, TransportMode::Importance, false, rng, &mut light, counters) {
             return None;
         }
     }
@@ -390,16 +488,23 @@ pub fn regenerate<R: Random>(
         let c = camera.len();
         let j = if c >= 2 { c - 2 } else { c - 1 };
         let ray = leave(scene, &mut camera, c - 1, j, TransportMode::Radiance, rng)?;
-        if !walk(scene, ray, t, TransportMode::Radiance, rng, &mut camera, counters) {
+        if !walk(scene, ray, t, TransportMode::Radiance, light.is_empty(), rng, &mut camera, counters) {
             return None;
         }
     }
     if light.is_empty() {
         // The camera walk ends on the light the path starts from.
         let end = camera.last_mut()?;
-        *end = as_light(scene, end)?;
+        if !end.infinite {
+            *end = as_light(scene, end)?;
+        }
     } else {
         let (n, m) = (light.len(), camera.len());
+        if light[0].infinite {
+            // On the line from the light walk's next vertex, or from the join's other end.
+            let next = if n >= 2 { light[1].p } else { camera[m - 1].p };
+            light[0].p = sky_point(scene, next, light[0].ng);
+        }
         light[n - 1].delta = false;
         camera[m - 1].delta = false;
         if !join(scene, &light[n - 1], &camera[m - 1], counters) {
@@ -407,6 +512,7 @@ pub fn regenerate<R: Random>(
         }
     }
     light.extend(camera.into_iter().rev());
+    settle_sky(scene, &mut light);
     Some(light)
 }
 

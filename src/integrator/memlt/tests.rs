@@ -457,3 +457,73 @@ fn chains_beside_the_direct_pass_take_the_two_edge_paths_through_dirac_lobes() {
     assert!(sigmas(chains, with) < 4.0 && chains.1 < 0.02 * with, "chains' paths: {chains:?} against BDPT's {with}");
     assert!(sigmas(chains, without) > 6.0, "the mirror's two-edge paths were not missed: {chains:?} against {without}");
 }
+
+/// A glass ball and a rough metal ball on a diffuse floor before a diffuse wall, open to a
+/// constant sky and lit by a directional light at 40° from the zenith: paths whose light vertex lies at
+/// infinity, in a direction rays can find (the sky) or in a Dirac one (the directional
+/// light), through rough and Dirac vertices (the directional light's caustic under the
+/// glass ball).
+fn sky() -> Scene {
+    let shapes = r#"<emitter type="constant"><rgb name="radiance" value="0.4, 0.5, 0.6"/></emitter>
+<emitter type="directional"><vector name="direction" value="-0.45, -0.54, -0.71"/><rgb name="irradiance" value="3"/></emitter>
+<shape type="rectangle"><transform name="to_world"><scale value="3"/></transform><bsdf type="diffuse"/></shape>
+<shape type="rectangle"><transform name="to_world"><scale value="3"/><rotate x="1" angle="90"/><translate y="1.5" z="1"/></transform>
+  <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf></shape>
+<shape type="sphere"><point name="center" x="-0.3" y="0" z="0.5"/><float name="radius" value="0.5"/>
+  <bsdf type="dielectric"><float name="int_ior" value="1.5"/></bsdf></shape>
+<shape type="sphere"><point name="center" x="0.9" y="0.3" z="0.35"/><float name="radius" value="0.35"/>
+  <bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></shape>"#;
+    inline_scene("sky.xml", (5, 50.0), ("0.3, -3.5, 2.2", "0.2, 0, 0.3"), (24, 18), shapes)
+}
+
+#[test]
+fn whole_path_density_holds_for_lights_at_infinity() {
+    // The generator's `f / p` against BDPT's estimate under the sky and the directional
+    // light. A density that counts the light walk's whole-path split twice where the light
+    // is at infinity must be caught.
+    let scene = sky();
+    let lengths = lengths(&scene);
+    let b = bdpt_reference(&scene, lengths.min);
+    let run = |skew: bool| {
+        mean_and_error(1_200_000, |i| {
+            let mut rng = Sampler::new(&[37, i as u64]);
+            let Some((y, m, p)) = independent_path(&scene, lengths, &mut rng, &mut Counters::default()) else {
+                return 0.0;
+            };
+            let k = y.len() - 1;
+            let p = if skew && y[0].infinite {
+                // The light walk's whole-path split counted twice.
+                let light: f64 = (0..k).map(|j| path::pdf_from_light(&scene, &y, j)).product();
+                p + seed_length_pmf(lengths, k) * light / (k + 1) as f64
+            } else {
+                p
+            };
+            if p > 0.0 { scalar(&m) / p } else { 0.0 }
+        })
+    };
+    let good = run(false);
+    assert!(sigmas(good, b) < 4.0 && good.1 < 0.02 * b, "lights at infinity: {good:?} against BDPT's {b}");
+    let skewed = run(true);
+    assert!(sigmas(skewed, b) > 6.0, "a split counted twice was not caught: {skewed:?} against {b}");
+}
+
+#[test]
+fn every_mutator_is_in_detailed_balance_under_lights_at_infinity() {
+    // The bidirectional mutation regenerates the light's direction and the point on the
+    // disk it enters from, or a camera walk leaving the scene; the lens and multi-chain
+    // perturbations join moved vertices to the kept direction; the caustic and manifold
+    // perturbations work on the paths' other vertices (a light at infinity stays out of
+    // their plans).
+    let scene = sky();
+    for m in [Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::Manifold] {
+        let n = match m {
+            Mutator::Bidirectional => 4_800_000,
+            Mutator::MultiChain => 4_000_000,
+            _ => 300_000,
+        };
+        let (good, se) = balance(&scene, m, false, (50.0, 1.0, n));
+        assert!(good.abs() < 4.0 * se && se < 0.03, "{m:?}: E[r] - P(r > 0) = {good} ± {se} of P(r > 0)");
+        let (skewed, se) = balance(&scene, m, true, (50.0, 1.0, n));
+        assert!(skewed.abs() > 6.0 * se, "{m:?}: a skewed forward density was not caught: {skewed} ± {se}");
+    }
+}
