@@ -565,7 +565,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
             .collect();
         eprintln!(
-            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors, {} moved the light point; bootstrap {:.2} s",
+            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors, {} moved the light point, {} the line light from infinity arrives along; bootstrap {:.2} s",
             m.normalisation,
             m.normalisation_error,
             m.seed_normalisation,
@@ -580,6 +580,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.manifold_walks.irreversible,
             m.manifold_walks.glossy,
             m.manifold_walks.light_points,
+            m.manifold_walks.sky_points,
             m.bootstrap_seconds
         );
         print_first_stage(m.first_stage_samples, m.mean_luminance);

@@ -20,8 +20,16 @@
 //! (the walk back from the new point must find the current one; the pinhole, the other
 //! end, has no area to move on).
 //!
-//! A light at infinity is no plan's `a`, `b` or `c`: the direction it sends light along is
-//! its own, and its edge has no length for a chain to be walked along.
+//! Under a light at infinity (`x_0` a direction) no plan starts at `x_0` (the direction it
+//! sends light along is its own) or walks a chain to it (its edge has no length to walk
+//! along); a plan towards the light may end there (`b = 0`: the moved ray leaves the scene,
+//! and the light is found in its direction, a density per unit solid angle). The position
+//! plan moves the line the light arrives along instead of `x_0`: displaced across its
+//! direction by a Gaussian of deviation `R / (√2 λ)` (the density of the disk the light
+//! walk enters from, `1 / (π R²)`, times `λ²` at its peak), it finds `x_1` and is followed
+//! through the path's Dirac lobes to `b`; `|cos θ_1|` takes the offset's density to `x_1`'s
+//! area, and the area factors of a walk from there on to `b`'s (a sun's caustic through
+//! glass moves so).
 //!
 //! Which vertices count as specular is drawn before the plan ([`Treatment`]): Dirac ones
 //! always, diffuse ones never, a glossy one with a probability set by its lobe's width
@@ -45,12 +53,12 @@
 use super::bidirectional::Proposal;
 use super::path::{
     area_factor, as_light, connectible, contribution, hittable_light, join, lobe_pdf, pdf_from_light, ray_from,
-    reflects, retrace, surface_vertex,
+    reflects, retrace, settle_sky, sky_vertex, surface_vertex,
 };
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind};
+use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf};
 use crate::integrator::manifold::{self, Half, Scatter, TracedChain};
 use crate::math::Frame;
 use crate::sampling::{Random, square_to_gaussian_2d, square_to_gaussian_2d_pdf, square_to_von_mises_fisher};
@@ -112,6 +120,8 @@ pub struct WalkStats {
     pub glossy: u64,
     /// Perturbations that moved the light point on its surface.
     pub light_points: u64,
+    /// Perturbations that moved the line a light at infinity arrives along.
+    pub sky_points: u64,
 }
 
 impl std::ops::AddAssign for WalkStats {
@@ -121,6 +131,7 @@ impl std::ops::AddAssign for WalkStats {
         self.irreversible += o.irreversible;
         self.glossy += o.glossy;
         self.light_points += o.light_points;
+        self.sky_points += o.sky_points;
     }
 }
 
@@ -212,8 +223,8 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
         VertexKind::Surface => connectible(scene, &x[a]) && !specular(a),
         VertexKind::Sky => false,
     };
-    // A light at infinity stays out of the plans: its direction is the light's own and its
-    // edge has no length to walk along.
+    // A light at infinity starts no plan (the direction it sends light along is its own)
+    // and ends no walk (its edge has no length to walk along).
     if !ok_start || (toward_light && a == 0) || (!toward_light && a == k) || (x[0].infinite && a == 0) {
         return None;
     }
@@ -222,11 +233,9 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
     while specular(b) {
         b = step(b)?;
     }
-    if b == 0 && x[0].infinite {
-        return None;
-    }
     if b == 0 {
-        // The moved ray must find the light: not a point or spot light's position.
+        // The moved ray must find the light: not a point or spot light's position, nor a
+        // directional light's direction (a light at infinity it finds by leaving the scene).
         return hittable_light(scene, &x[0]).then_some(Plan { a, toward_light, b, c: None, position: false });
     }
     if b == k || !connectible(scene, &x[b]) {
@@ -251,16 +260,46 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
 
 /// The plan that moves the light point on its surface, where the path admits it: an area
 /// light's point whose neighbour `x_1` is a rough vertex it is joined to (not the pinhole: a
-/// path of one edge is the direct light's, or moves with the camera's plans).
+/// path of one edge is the direct light's, or moves with the camera's plans). Under a light
+/// at infinity the line the light arrives along moves instead, its direction kept: `x_1`
+/// is the first surface on the displaced line, the light follows the path's Dirac lobes (and
+/// kept half-vectors) from there to `b`, the first non-specular vertex after `x_0`, which is
+/// joined to `c`, the first non-specular vertex after it (through a specular chain walked
+/// onto its manifold where there is one).
 pub fn position_plan(scene: &Scene, x: &[Vertex], treatment: &Treatment) -> Option<Plan> {
     let k = x.len() - 1;
-    let ok = hittable_light(scene, &x[0])
-        && !x[0].infinite
-        && k >= 2
-        && x[1].kind == VertexKind::Surface
-        && connectible(scene, &x[1])
-        && !treatment.specular(1);
-    ok.then_some(Plan { a: 0, toward_light: false, b: 0, c: Some(1), position: true })
+    if !x[0].infinite {
+        let ok = hittable_light(scene, &x[0])
+            && k >= 2
+            && x[1].kind == VertexKind::Surface
+            && connectible(scene, &x[1])
+            && !treatment.specular(1);
+        return ok.then_some(Plan { a: 0, toward_light: false, b: 0, c: Some(1), position: true });
+    }
+    let mut b = 1;
+    while b < k && treatment.specular(b) {
+        b += 1;
+    }
+    if b >= k || x[b].kind != VertexKind::Surface || !connectible(scene, &x[b]) {
+        return None;
+    }
+    let mut c = b + 1;
+    while c < k && treatment.specular(c) {
+        c += 1;
+    }
+    // A specular chain cannot end at the pinhole: it has no area to find it on.
+    let ok = (c < k || c == b + 1) && (x[c].kind != VertexKind::Surface || connectible(scene, &x[c]));
+    ok.then_some(Plan { a: 0, toward_light: false, b, c: Some(c), position: true })
+}
+
+/// The line a light at infinity (direction `w` towards the light) arrives at `x1` along,
+/// moved across `w` by `offset` (in the frame of `w`): the ray along it from beyond the
+/// scene.
+fn displaced_sky_ray(scene: &Scene, x1: glam::Vec3, w: glam::Vec3, offset: glam::Vec2) -> Ray {
+    let f = Frame::from_normal(w);
+    let q = x1 + f.s * offset.x + f.t * offset.y;
+    let r = scene.bounds.radius + (q - scene.bounds.center).length();
+    Ray::new(q + w * (2.0 * r + 1.0), -w)
 }
 
 /// Every plan a path admits under a treatment, in a fixed order.
@@ -294,7 +333,10 @@ fn displaced_light_point(scene: &Scene, x0: &Vertex, offset: glam::Vec2, counter
 /// The Gaussian position perturbation's standard deviation at a light point: its density
 /// peaks at the light walk's density of the point times `λ²`.
 fn position_sigma(scene: &Scene, x: &[Vertex], lambda: f64) -> f64 {
-    1.0 / (2.0 * std::f64::consts::PI * pdf_from_light(scene, x, 0) * lambda * lambda).sqrt()
+    // Under a light at infinity, the density of the point on the disk the light walk
+    // enters from.
+    let p = if x[0].infinite { disk_pdf(scene) as f64 } else { pdf_from_light(scene, x, 0) };
+    1.0 / (2.0 * std::f64::consts::PI * p * lambda * lambda).sqrt()
 }
 
 /// The area density with which [`displaced_light_point`] moves `from` to `to`, deviation
@@ -302,6 +344,14 @@ fn position_sigma(scene: &Scene, x: &[Vertex], lambda: f64) -> f64 {
 /// the two normals.
 fn position_density(from: &Vertex, to: &Vertex, sigma: f64) -> f64 {
     square_to_gaussian_2d_pdf(tangent_offset(from, to), sigma as f32) as f64 * from.ng.dot(to.ng).abs() as f64
+}
+
+/// The offset between the lines through `from` and `to` along `w`, in the frame
+/// [`displaced_sky_ray`] displaces them in.
+fn across(w: glam::Vec3, from: glam::Vec3, to: glam::Vec3) -> glam::Vec2 {
+    let f = Frame::from_normal(w);
+    let rel = to - from;
+    glam::Vec2::new(rel.dot(f.s), rel.dot(f.t))
 }
 
 /// The offset of `to` from `from` in the plane of `from`'s geometric normal, in the frame
@@ -495,7 +545,24 @@ pub fn propose<R: Random>(
     let mut kappa_x = 0.0;
     // The position perturbation's deviation at the current light point (plans that move it).
     let sigma_x = if plan.position { position_sigma(scene, x, lambda) } else { 0.0 };
-    if plan.position {
+    if plan.position && x[0].infinite {
+        // The line the light arrives at `x_1` along, displaced across its direction, and
+        // the light followed through the same Dirac lobes to the new `b`.
+        walks.sky_points += 1;
+        let offset = square_to_gaussian_2d(rng.next_2d(), sigma_x as f32);
+        let mut ray = displaced_sky_ray(scene, x[1].p, x[0].ng, offset);
+        for i in 1..=b {
+            y[i] = if treatment.glossy(x, i) {
+                retrace_glossy(scene, &mut ray, x, i, counters)?
+            } else {
+                retrace(scene, &mut ray, x, i, i != b, counters)?
+            };
+        }
+        settle_sky(scene, &mut y);
+        if !connectible(scene, &y[b]) {
+            return None;
+        }
+    } else if plan.position {
         // The light point moved on its surface.
         walks.light_points += 1;
         let offset = square_to_gaussian_2d(rng.next_2d(), sigma_x as f32);
@@ -506,13 +573,22 @@ pub fn propose<R: Random>(
         let mut ray = ray_from(&x[a], Frame::from_normal(wx).to_world(local));
         // From `a` through the same Dirac lobes and kept half-vectors to the new `b`.
         for i in plan.span(a, b) {
-            y[i] = if treatment.glossy(x, i) {
+            y[i] = if i == 0 && x[0].infinite {
+                // The ray must leave the scene: the light at infinity in its direction.
+                counters.extension_rays += 1;
+                if scene.intersect(&ray).is_some() {
+                    return None;
+                }
+                sky_vertex(scene, None, ray.o, ray.d)?
+            } else if treatment.glossy(x, i) {
                 retrace_glossy(scene, &mut ray, x, i, counters)?
             } else {
                 retrace(scene, &mut ray, x, i, i != b, counters)?
             };
         }
-        if b == 0 {
+        if b == 0 && x[0].infinite {
+            settle_sky(scene, &mut y);
+        } else if b == 0 {
             y[0] = as_light(scene, &y[0])?;
         } else if !connectible(scene, &y[b]) {
             return None;
@@ -542,7 +618,18 @@ pub fn propose<R: Random>(
     }
     // The reverse move must be planned the same way (and a moved light point must be found
     // again from the new one).
-    if plan.position {
+    if plan.position && x[0].infinite {
+        if position_plan(scene, &y, &treatment) != Some(plan) {
+            return None;
+        }
+        let w = x[0].ng;
+        counters.extension_rays += 1;
+        let back = scene.intersect(&displaced_sky_ray(scene, y[1].p, w, across(w, y[1].p, x[1].p)))?;
+        let scale = 1.0 + x[1].p.abs().max_element();
+        if ((back.p - x[1].p).length() as f64) > 1e-3 * sigma_x + 1e-5 * scale as f64 {
+            return None;
+        }
+    } else if plan.position {
         if position_plan(scene, &y, &treatment) != Some(plan) {
             return None;
         }
@@ -558,8 +645,14 @@ pub fn propose<R: Random>(
     let (p_x, p_y) =
         (plan_probability(&plan, camera_x, n_x), plan_probability(&plan, camera_plan(scene, &y, &treatment), n_y));
     let measured = contribution(scene, &y)?;
-    // The densities of the moved vertex: the light point's position, or `a`'s direction.
-    let (moved_x, moved_y) = if plan.position {
+    // The densities of the moved vertex: the line's offset across a light at infinity's
+    // direction (the Jacobian's factor `|cos θ_1|` takes it to `x_1`'s area), the light
+    // point's position, or `a`'s direction.
+    let (moved_x, moved_y) = if plan.position && x[0].infinite {
+        let offset = across(x[0].ng, x[1].p, y[1].p);
+        let gaussian = square_to_gaussian_2d_pdf(offset, sigma_x as f32) as f64;
+        (gaussian, gaussian)
+    } else if plan.position {
         (position_density(&x[0], &y[0], sigma_x), position_density(&y[0], &x[0], position_sigma(scene, &y, lambda)))
     } else {
         let wy = (y[next].p - y[a].p).normalize();

@@ -527,3 +527,29 @@ fn every_mutator_is_in_detailed_balance_under_lights_at_infinity() {
         assert!(skewed.abs() > 6.0 * se, "{m:?}: a skewed forward density was not caught: {skewed} ± {se}");
     }
 }
+
+/// A glass ball over a diffuse floor under a directional light alone: the camera sees the
+/// ball's caustic (light, two refractions, floor, pinhole).
+fn sun_caustic() -> Scene {
+    let shapes = r#"<emitter type="directional"><vector name="direction" value="-0.3, -0.2, -0.93"/><rgb name="irradiance" value="3"/></emitter>
+<shape type="rectangle"><transform name="to_world"><scale value="3"/></transform><bsdf type="diffuse"/></shape>
+<shape type="sphere"><point name="center" x="0" y="0" z="0.8"/><float name="radius" value="0.5"/>
+  <bsdf type="dielectric"><float name="int_ior" value="1.5"/></bsdf></shape>"#;
+    inline_scene("sun-caustic.xml", (4, 40.0), ("0.3, -3.0, 2.5", "-0.3, 0, 0.2"), (24, 18), shapes)
+}
+
+#[test]
+fn the_sky_point_perturbation_is_in_detailed_balance() {
+    // The manifold perturbation's moves of the line light from infinity arrives along
+    // (displaced across the light's direction, the direction kept), the light followed
+    // from the surface it finds to the next rough vertex (through the glass ball's two
+    // refractions for the caustic), joined to the vertex after that or walked to it through
+    // the ball, with their Gaussian densities both ways.
+    for scene in [sky(), sun_caustic()] {
+        let only = |w: &manifold_perturbation::WalkStats| w.sky_points > 0;
+        let (good, se) = balance_of(&scene, Mutator::Manifold, false, (50.0, 1.0, 600_000), only);
+        assert!(good.abs() < 4.0 * se && se < 0.03, "E[r] - P(r > 0) = {good} ± {se} of P(r > 0)");
+        let (skewed, se) = balance_of(&scene, Mutator::Manifold, true, (50.0, 1.0, 600_000), only);
+        assert!(skewed.abs() > 6.0 * se, "a skewed forward density was not caught: {skewed} ± {se}");
+    }
+}
