@@ -551,7 +551,7 @@ pub fn propose<R: Random>(
         walks.sky_points += 1;
         let offset = square_to_gaussian_2d(rng.next_2d(), sigma_x as f32);
         let mut ray = displaced_sky_ray(scene, x[1].p, x[0].ng, offset);
-        for i in 1..=b {
+        for i in plan.span(0, b) {
             y[i] = if treatment.glossy(x, i) {
                 retrace_glossy(scene, &mut ray, x, i, counters)?
             } else {
