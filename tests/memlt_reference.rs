@@ -147,6 +147,16 @@ fn memlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
 }
 
 #[test]
+fn memlt_living_room() {
+    // An envmap through windows, leaves cut out by a texture's alpha, glass, glossy
+    // surfaces: Bitterli's file as published, at 320×180.
+    let scene = LIVING_ROOM.scene();
+    let a = image(memlt(&scene, 64, 1, 16));
+    let b = image(memlt(&scene, 64, 2, 16));
+    LIVING_ROOM.check(&a, &b, "MEMLT, 2 × 64 spp");
+}
+
+#[test]
 fn memlt_sunlit_room() {
     // The sun and the sky through a window: paths whose light vertex lies at infinity,
     // started from the disk facing the sun or the sky, found by camera walks leaving the
