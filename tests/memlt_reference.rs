@@ -40,6 +40,15 @@ fn check_with(
     v.check(what, 0.01, 1.3).unwrap();
 }
 
+/// Two renders (seeds 1 and 2, the direct light separate) of a test case of `common`
+/// against its reference ([`Case::check`]).
+fn check_case(case: &Case, spp: u32, what: &str) {
+    let scene = case.scene();
+    let a = image(memlt(&scene, spp, 1, 16));
+    let b = image(memlt(&scene, spp, 2, 16));
+    case.check(&a, &b, what);
+}
+
 const CORNELL: &str = "cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr";
 
 fn cornell_ply() -> Scene {
@@ -150,10 +159,7 @@ fn memlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
 fn memlt_living_room() {
     // An envmap through windows, leaves cut out by a texture's alpha, glass, glossy
     // surfaces: Bitterli's file as published, at 320×180.
-    let scene = LIVING_ROOM.scene();
-    let a = image(memlt(&scene, 64, 1, 16));
-    let b = image(memlt(&scene, 64, 2, 16));
-    LIVING_ROOM.check(&a, &b, "MEMLT, 2 × 64 spp");
+    check_case(&LIVING_ROOM, 64, "MEMLT, 2 × 64 spp");
 }
 
 #[test]
@@ -161,10 +167,7 @@ fn memlt_sunlit_room() {
     // The sun and the sky through a window: paths whose light vertex lies at infinity,
     // started from the disk facing the sun or the sky, found by camera walks leaving the
     // room, joined to moved vertices by the lens and multi-chain perturbations.
-    let scene = SUNLIT_ROOM.scene();
-    let a = image(memlt(&scene, 64, 1, 16));
-    let b = image(memlt(&scene, 64, 2, 16));
-    SUNLIT_ROOM.check(&a, &b, "MEMLT, 2 × 64 spp");
+    check_case(&SUNLIT_ROOM, 64, "MEMLT, 2 × 64 spp");
 }
 
 #[test]

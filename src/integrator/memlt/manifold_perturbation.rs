@@ -58,7 +58,7 @@ use super::path::{
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf};
+use crate::integrator::bidir::{Vertex, VertexKind, beyond_scene, disk_pdf};
 use crate::integrator::manifold::{self, Half, Scatter, TracedChain};
 use crate::math::Frame;
 use crate::sampling::{Random, square_to_gaussian_2d, square_to_gaussian_2d_pdf, square_to_von_mises_fisher};
@@ -296,10 +296,8 @@ pub fn position_plan(scene: &Scene, x: &[Vertex], treatment: &Treatment) -> Opti
 /// moved across `w` by `offset` (in the frame of `w`): the ray along it from beyond the
 /// scene.
 fn displaced_sky_ray(scene: &Scene, x1: glam::Vec3, w: glam::Vec3, offset: glam::Vec2) -> Ray {
-    let f = Frame::from_normal(w);
-    let q = x1 + f.s * offset.x + f.t * offset.y;
-    let r = scene.bounds.radius + (q - scene.bounds.center).length();
-    Ray::new(q + w * (2.0 * r + 1.0), -w)
+    let q = displaced(w, x1, offset);
+    Ray::new(beyond_scene(scene, q, w), -w)
 }
 
 /// Every plan a path admits under a treatment, in a fixed order.
@@ -314,8 +312,7 @@ pub fn plans<'a>(scene: &'a Scene, x: &'a [Vertex], treatment: &'a Treatment) ->
 /// light vertex there, `None` when neither direction finds the same light first.
 fn displaced_light_point(scene: &Scene, x0: &Vertex, offset: glam::Vec2, counters: &mut Counters) -> Option<Vertex> {
     let VertexKind::Light(l) = x0.kind else { return None };
-    let f = Frame::from_normal(x0.ng);
-    let q = x0.p + f.s * offset.x + f.t * offset.y;
+    let q = displaced(x0.ng, x0.p, offset);
     let eps = 1e-4 * (1.0 + q.abs().max_element());
     let mut best: Option<(f32, Vertex)> = None;
     for d in [-x0.ng, x0.ng] {
@@ -343,22 +340,22 @@ fn position_sigma(scene: &Scene, x: &[Vertex], lambda: f64) -> f64 {
 /// `sigma`: the Gaussian's density of the offset in `from`'s plane times the cosine between
 /// the two normals.
 fn position_density(from: &Vertex, to: &Vertex, sigma: f64) -> f64 {
-    square_to_gaussian_2d_pdf(tangent_offset(from, to), sigma as f32) as f64 * from.ng.dot(to.ng).abs() as f64
+    square_to_gaussian_2d_pdf(across(from.ng, from.p, to.p), sigma as f32) as f64 * from.ng.dot(to.ng).abs() as f64
 }
 
-/// The offset between the lines through `from` and `to` along `w`, in the frame
-/// [`displaced_sky_ray`] displaces them in.
+/// `p` moved by `offset` in the plane across the unit `w`, in `w`'s frame: how the light
+/// point ([`displaced_light_point`], across its normal) and the line a light at infinity
+/// arrives along ([`displaced_sky_ray`], across its direction) are displaced.
+fn displaced(w: glam::Vec3, p: glam::Vec3, offset: glam::Vec2) -> glam::Vec3 {
+    let f = Frame::from_normal(w);
+    p + f.s * offset.x + f.t * offset.y
+}
+
+/// The offset of `to` from `from` across the unit `w`, in the frame [`displaced`] moves
+/// points in.
 fn across(w: glam::Vec3, from: glam::Vec3, to: glam::Vec3) -> glam::Vec2 {
     let f = Frame::from_normal(w);
     let rel = to - from;
-    glam::Vec2::new(rel.dot(f.s), rel.dot(f.t))
-}
-
-/// The offset of `to` from `from` in the plane of `from`'s geometric normal, in the frame
-/// [`displaced_light_point`] displaces `from` in.
-fn tangent_offset(from: &Vertex, to: &Vertex) -> glam::Vec2 {
-    let f = Frame::from_normal(from.ng);
-    let rel = to.p - from.p;
     glam::Vec2::new(rel.dot(f.s), rel.dot(f.t))
 }
 
@@ -511,6 +508,43 @@ fn retrace_glossy(scene: &Scene, ray: &mut Ray, x: &[Vertex], i: usize, counters
     Some(v)
 }
 
+/// Follows the moved `ray` through `x`'s Dirac lobes and kept half-vectors to the new `b`
+/// (from `a`, or from beyond the scene for a light at infinity's displaced line), writing
+/// the vertices it finds into `y`: the light at `b = 0` (at infinity the ray must leave the
+/// scene), else a vertex that can take a connection. `None` when the ray does not get there.
+fn follow(
+    scene: &Scene,
+    mut ray: Ray,
+    x: &[Vertex],
+    y: &mut [Vertex],
+    plan: &Plan,
+    treatment: &Treatment,
+    counters: &mut Counters,
+) -> Option<()> {
+    let (a, b) = (plan.a, plan.b);
+    for i in plan.span(a, b) {
+        y[i] = if i == 0 && x[0].infinite {
+            counters.extension_rays += 1;
+            if scene.intersect(&ray).is_some() {
+                return None;
+            }
+            sky_vertex(scene, None, ray.o, ray.d)?
+        } else if treatment.glossy(x, i) {
+            retrace_glossy(scene, &mut ray, x, i, counters)?
+        } else {
+            retrace(scene, &mut ray, x, i, i != b, counters)?
+        };
+    }
+    // A light at infinity back on the line from the (possibly moved) `x_1`.
+    settle_sky(scene, y);
+    if b == 0 && !x[0].infinite {
+        y[0] = as_light(scene, &y[0])?;
+    } else if b > 0 && !connectible(scene, &y[b]) {
+        return None;
+    }
+    Some(())
+}
+
 /// Proposes a manifold perturbation of `x`, with `lambda` the lobe's sharpness and
 /// `theta_diff` (radians) the half-vector change glossy lobes are judged against.
 pub fn propose<R: Random>(
@@ -550,18 +584,8 @@ pub fn propose<R: Random>(
         // the light followed through the same Dirac lobes to the new `b`.
         walks.sky_points += 1;
         let offset = square_to_gaussian_2d(rng.next_2d(), sigma_x as f32);
-        let mut ray = displaced_sky_ray(scene, x[1].p, x[0].ng, offset);
-        for i in plan.span(0, b) {
-            y[i] = if treatment.glossy(x, i) {
-                retrace_glossy(scene, &mut ray, x, i, counters)?
-            } else {
-                retrace(scene, &mut ray, x, i, i != b, counters)?
-            };
-        }
-        settle_sky(scene, &mut y);
-        if !connectible(scene, &y[b]) {
-            return None;
-        }
+        let ray = displaced_sky_ray(scene, x[1].p, x[0].ng, offset);
+        follow(scene, ray, x, &mut y, &plan, &treatment, counters)?;
     } else if plan.position {
         // The light point moved on its surface.
         walks.light_points += 1;
@@ -570,29 +594,8 @@ pub fn propose<R: Random>(
     } else {
         kappa_x = concentration(scene, x, &plan, lambda);
         let local = square_to_von_mises_fisher(rng.next_2d(), kappa_x as f32);
-        let mut ray = ray_from(&x[a], Frame::from_normal(wx).to_world(local));
-        // From `a` through the same Dirac lobes and kept half-vectors to the new `b`.
-        for i in plan.span(a, b) {
-            y[i] = if i == 0 && x[0].infinite {
-                // The ray must leave the scene: the light at infinity in its direction.
-                counters.extension_rays += 1;
-                if scene.intersect(&ray).is_some() {
-                    return None;
-                }
-                sky_vertex(scene, None, ray.o, ray.d)?
-            } else if treatment.glossy(x, i) {
-                retrace_glossy(scene, &mut ray, x, i, counters)?
-            } else {
-                retrace(scene, &mut ray, x, i, i != b, counters)?
-            };
-        }
-        if b == 0 && x[0].infinite {
-            settle_sky(scene, &mut y);
-        } else if b == 0 {
-            y[0] = as_light(scene, &y[0])?;
-        } else if !connectible(scene, &y[b]) {
-            return None;
-        }
+        let ray = ray_from(&x[a], Frame::from_normal(wx).to_world(local));
+        follow(scene, ray, x, &mut y, &plan, &treatment, counters)?;
     }
     // From `c` through the specular chain to the new `b`.
     let mut chains = None;
@@ -633,7 +636,7 @@ pub fn propose<R: Random>(
         if position_plan(scene, &y, &treatment) != Some(plan) {
             return None;
         }
-        let back = displaced_light_point(scene, &y[0], tangent_offset(&y[0], &x[0]), counters)?;
+        let back = displaced_light_point(scene, &y[0], across(y[0].ng, y[0].p, x[0].p), counters)?;
         let scale = 1.0 + x[0].p.abs().max_element();
         if ((back.p - x[0].p).length() as f64) > 1e-3 * sigma_x + 1e-5 * scale as f64 {
             return None;

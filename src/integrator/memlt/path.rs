@@ -34,7 +34,7 @@
 use crate::accel::Ray;
 use crate::bsdf::{At, Bsdf, BsdfSample, TransportMode};
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf, light_origin_pdf, visible};
+use crate::integrator::bidir::{Vertex, VertexKind, beyond_scene, disk_pdf, light_origin_pdf, visible};
 use crate::math::{Rgb, offset_origin};
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -75,14 +75,6 @@ pub fn delta_direction(bsdf: &Bsdf, lo: Vec3, at: At, reflection: bool) -> Optio
     delta_sample(bsdf, lo, at, reflection, TransportMode::Radiance).map(|s| s.wi)
 }
 
-/// The position of a vertex at infinity seen from `from` in the unit direction `d`: on the
-/// line, beyond the scene by some of its diameters (as the bidirectional core's
-/// [`Vertex::sky`] places it).
-#[inline]
-fn sky_point(scene: &Scene, from: Vec3, d: Vec3) -> Vec3 {
-    from + d * (2.0 * (scene.bounds.radius + (from - scene.bounds.center).length()) + 1.0)
-}
-
 /// A light vertex at infinity in the unit direction `d` (towards the light) from `from`:
 /// of light `l` when that is a directional light (a Dirac direction of its own), else of
 /// the scene's first light that rays leaving the scene find (a path sees all of those
@@ -93,7 +85,7 @@ pub fn sky_vertex(scene: &Scene, l: Option<usize>, from: Vec3, d: Vec3) -> Optio
         Some(l) if scene.lights[l].is_unreachable() => l,
         _ => *scene.infinite_lights.first()?,
     };
-    let mut v = Vertex::light(l, sky_point(scene, from, d), d, Vec2::ZERO, Rgb::ONE, 0.0);
+    let mut v = Vertex::light(l, beyond_scene(scene, from, d), d, Vec2::ZERO, Rgb::ONE, 0.0);
     v.infinite = true;
     Some(v)
 }
@@ -103,7 +95,7 @@ pub fn sky_vertex(scene: &Scene, l: Option<usize>, from: Vec3, d: Vec3) -> Optio
 #[inline]
 pub fn settle_sky(scene: &Scene, v: &mut [Vertex]) {
     if v.len() >= 2 && v[0].infinite {
-        v[0].p = sky_point(scene, v[1].p, v[0].ng);
+        v[0].p = beyond_scene(scene, v[1].p, v[0].ng);
     }
 }
 
@@ -286,9 +278,11 @@ pub fn walk<R: Random>(
     for i in 0..n {
         counters.extension_rays += 1;
         let Some(si) = scene.intersect(&ray) else {
+            // Placed on the line from the walk's last vertex, as `settle_sky` places it.
+            let from = out.last().map_or(ray.o, |v| v.p);
             if to_sky
                 && i + 1 == n
-                && let Some(v) = sky_vertex(scene, None, ray.o, ray.d)
+                && let Some(v) = sky_vertex(scene, None, from, ray.d)
             {
                 out.push(v);
                 return true;
@@ -503,7 +497,7 @@ pub fn regenerate<R: Random>(
         if light[0].infinite {
             // On the line from the light walk's next vertex, or from the join's other end.
             let next = if n >= 2 { light[1].p } else { camera[m - 1].p };
-            light[0].p = sky_point(scene, next, light[0].ng);
+            light[0].p = beyond_scene(scene, next, light[0].ng);
         }
         light[n - 1].delta = false;
         camera[m - 1].delta = false;
@@ -512,7 +506,6 @@ pub fn regenerate<R: Random>(
         }
     }
     light.extend(camera.into_iter().rev());
-    settle_sky(scene, &mut light);
     Some(light)
 }
 
