@@ -16,6 +16,10 @@ and `high_quality_edges` stripped in memory; pcbpt reads the file as it is, with
     cargo build --release
     python3 scripts/bench_vs_mitsuba.py --spp 64 --threads 2
     python3 scripts/bench_vs_mitsuba.py --scene staircase2 --spp 16 --threads 2
+
+`--binary` may be given more than once (e.g. the plain release build and the profile-guided
+one of scripts/build_pgo.sh): every binary then runs in the same alternation, and each gets
+its own rows. `--rr5 false` leaves out the runs at Mitsuba's rr_depth 5.
 """
 import argparse
 import os
@@ -64,23 +68,36 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--variant", default="scalar_rgb")
-    ap.add_argument("--binary", default=os.path.join(ROOT, "target", "release", "pcbpt"))
+    ap.add_argument("--binary", action="append",
+                    help="pcbpt binary to measure; repeatable (default: target/release/pcbpt)")
+    ap.add_argument("--rr5", choices=["true", "false"], default="true",
+                    help="also run pcbpt at Mitsuba's rr_depth 5")
     a = ap.parse_args()
-    if not os.path.exists(a.binary):
-        sys.exit(f"{a.binary} not found: run `cargo build --release` first")
+    binaries = a.binary or [os.path.join(ROOT, "target", "release", "pcbpt")]
+    for b in binaries:
+        if not os.path.exists(b):
+            sys.exit(f"{b} not found: run `cargo build --release` (or scripts/build_pgo.sh) first")
+    rr_depths = [3, 5] if a.rr5 == "true" else [3]
     rel, resolution, (w, h), what = SCENES[a.scene]
     scene_path = os.path.join(ROOT, rel)
     samples = w * h * a.spp
-    mts, ours, ours5 = [], [], []
+    mts = []
+    ours = {(b, rr): [] for b in binaries for rr in rr_depths}
     for _ in range(a.repeats):
         mts.append(mitsuba_seconds(scene_path, resolution, a.spp, a.threads, a.variant))
-        ours.append(pcbpt_seconds(a.binary, scene_path, resolution, a.spp, a.threads, 3))
-        ours5.append(pcbpt_seconds(a.binary, scene_path, resolution, a.spp, a.threads, 5))
-    m, p, p5 = min(mts), min(ours), min(ours5)
+        for b in binaries:
+            for rr in rr_depths:
+                ours[(b, rr)].append(pcbpt_seconds(b, scene_path, resolution, a.spp, a.threads, rr))
+    m = min(mts)
     print(f"{a.scene} {w}x{h}, {a.spp} spp, {what}, {a.threads} threads, best of {a.repeats}")
     print(f"Mitsuba 3 ({a.variant}) path (rr_depth 5): {m:.3f} s, {samples / m / 1e6:.3f} M samples/s")
-    print(f"pcbpt path (rr_depth 3, default):      {p:.3f} s, {samples / p / 1e6:.3f} M samples/s, ratio {m / p:.2f}x")
-    print(f"pcbpt path (rr_depth 5, as Mitsuba):   {p5:.3f} s, {samples / p5 / 1e6:.3f} M samples/s, ratio {m / p5:.2f}x")
+    for b in binaries:
+        name = os.path.relpath(b, ROOT) if len(binaries) > 1 else "pcbpt"
+        for rr in rr_depths:
+            p = min(ours[(b, rr)])
+            which = "rr_depth 3, default" if rr == 3 else "rr_depth 5, as Mitsuba"
+            print(f"{name} path ({which}): {p:.3f} s, {samples / p / 1e6:.3f} M samples/s, ratio {m / p:.2f}x "
+                  f"(all runs: {', '.join(f'{t:.3f}' for t in ours[(b, rr)])})")
 
 
 if __name__ == "__main__":

@@ -67,13 +67,17 @@ impl PathTracer {
                 let d = ray.d.normalize();
                 for &light_index in &scene.infinite_lights {
                     let light = &scene.lights[light_index];
-                    let le = light.eval_infinite(d);
+                    // The density only where the weight needs it (after a non-Dirac bounce).
+                    let (le, pdf) = if depth > 0 && !prev_delta {
+                        light.eval_pdf_infinite(d)
+                    } else {
+                        (light.eval_infinite(d), 0.0)
+                    };
                     if le == Rgb::ZERO {
                         continue;
                     }
-                    let w = self.emission_weight(depth, prev_delta, prev_pdf, || {
-                        scene.light_sampler.pmf(light_index) * light.pdf_infinite(d)
-                    });
+                    let w = self
+                        .emission_weight(depth, prev_delta, prev_pdf, || scene.light_sampler.pmf(light_index) * pdf);
                     l += beta * le * w;
                 }
                 break;

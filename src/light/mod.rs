@@ -72,13 +72,24 @@ impl EnvMap {
         if sin_t <= 0.0 { 0.0 } else { self.distribution.pdf(uv) / (2.0 * PI * PI * sin_t) }
     }
 
-    fn sample(&self, u: Vec2) -> Option<(Vec3, f32)> {
+    /// Radiance and solid-angle density for direction `d`, its map coordinates computed once.
+    fn eval_pdf(&self, d: Vec3) -> (Rgb, f32) {
+        let uv = self.uv(d);
+        let sin_t = (uv.y * PI).sin();
+        let pdf = if sin_t <= 0.0 { 0.0 } else { self.distribution.pdf(uv) / (2.0 * PI * PI * sin_t) };
+        (self.bitmap.eval(uv) * self.scale, pdf)
+    }
+
+    /// A direction towards the map, its solid-angle density and the radiance arriving along
+    /// it (looked up at the sampled map coordinates, not at the direction's, which are the
+    /// same up to rounding and cost a trigonometric round trip).
+    fn sample(&self, u: Vec2) -> Option<(Vec3, f32, Rgb)> {
         let (uv, pdf_uv) = self.distribution.sample(u);
         let sin_t = (uv.y * PI).sin();
         if sin_t <= 0.0 || pdf_uv <= 0.0 {
             return None;
         }
-        Some((self.direction(uv), pdf_uv / (2.0 * PI * PI * sin_t)))
+        Some((self.direction(uv), pdf_uv / (2.0 * PI * PI * sin_t), self.bitmap.eval(uv) * self.scale))
     }
 }
 
@@ -156,6 +167,16 @@ impl Light {
             Light::Sky(s) => s.eval(d),
             Light::Sun(s) => s.eval(d),
             _ => Rgb::ZERO,
+        }
+    }
+
+    /// [`Light::eval_infinite`] and [`Light::pdf_infinite`] together, sharing the work of
+    /// both (an environment map's coordinates of `d`).
+    #[inline]
+    pub fn eval_pdf_infinite(&self, d: Vec3) -> (Rgb, f32) {
+        match self {
+            Light::Envmap(e) => e.eval_pdf(d),
+            _ => (self.eval_infinite(d), self.pdf_infinite(d)),
         }
     }
 
@@ -316,8 +337,7 @@ impl Light {
             Light::Directional { direction, irradiance } => Some((-*direction, 1.0, *irradiance)),
             Light::Constant { radiance } => Some((square_to_uniform_sphere(u), UNIFORM_SPHERE_PDF, *radiance)),
             Light::Envmap(e) => {
-                let (wi, pdf) = e.sample(u)?;
-                let li = e.eval(wi);
+                let (wi, pdf, li) = e.sample(u)?;
                 (li != Rgb::ZERO && pdf > 0.0).then_some((wi, pdf, li))
             }
             Light::Sky(s) => {

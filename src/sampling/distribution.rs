@@ -8,10 +8,10 @@ pub struct Distribution1D {
     /// environment map's row is sampled at random: each separate array read is a miss).
     entries: Vec<Entry>,
     total: f64,
-    /// For more than [`GUIDE_MIN`] entries, `guide[j]` is the number of entries whose CMF is
-    /// at most `j / g` (`g + 1` of them, one bucket per [`GUIDE_STRIDE`] entries): a sample
-    /// counts CMF entries only between the guide entries around `u` (a few adjacent cache
-    /// lines, read at once) instead of a binary search over the whole CMF (one cache miss
+    /// For more than [`GUIDE_MIN`] entries, `guide[j]` is the number of entries whose CMF
+    /// lies in a bucket below `j` (`g + 2` of them for `g` buckets, one bucket per
+    /// [`GUIDE_STRIDE`] entries, see [`bucket`]): a sample counts CMF entries only within the
+    /// bucket of `u` (about two adjacent cache lines, read at once) instead of a binary search over the whole CMF (one cache miss
     /// per halving), and finds the same index. The guide is small enough (256 bytes for a
     /// row of a 2048-pixel map) for all rows' guides to stay in cache. A near-uniform
     /// distribution needs none: its index is found by stepping from `⌊u · n⌋`.
@@ -30,22 +30,32 @@ enum Guide {
 }
 
 impl Guide {
-    /// The entries whose CMF may be the first above `u`, as a range `lo..hi`: those between
-    /// the guide entries one bucket below and one above the bucket `u · g` falls in (the
-    /// rounding of `u · g` and of the buckets' bounds moves either by far less than a
-    /// bucket, so the index cannot lie outside them); `None` without a guide.
+    /// The entries whose CMF may be the first above `u`, as a range `lo..hi`: those in the
+    /// bucket `u` falls in (see [`bucket`]); `None` without a guide.
     #[inline]
     fn around(&self, u: f32) -> Option<(usize, usize)> {
-        fn bracket(g: usize, at: impl Fn(usize) -> usize, u: f32) -> (usize, usize) {
-            let k = ((u * g as f32) as usize).min(g);
-            (at(k.saturating_sub(1)), at((k + 2).min(g)))
-        }
         match self {
             Guide::None | Guide::Uniform => None,
-            Guide::Short(g) => Some(bracket(g.len() - 1, |j| g[j] as usize, u)),
-            Guide::Long(g) => Some(bracket(g.len() - 1, |j| g[j] as usize, u)),
+            Guide::Short(g) => {
+                let k = bucket(u, g.len() - 2);
+                Some((g[k] as usize, g[k + 1] as usize))
+            }
+            Guide::Long(g) => {
+                let k = bucket(u, g.len() - 2);
+                Some((g[k] as usize, g[k + 1] as usize))
+            }
         }
     }
+}
+
+/// The guide bucket of a value `c` of `[0, 1]` among `g` buckets: `⌊c · g⌋` as `f32`
+/// arithmetic gives it (`g` for `c = 1`). It never decreases as `c` grows (a product with a
+/// positive constant and the floor are monotonic), so a CMF entry in a lower bucket than `u`
+/// is below `u` and one in a higher bucket is above it: only the entries of `u`'s own bucket
+/// need comparing, whatever the rounding.
+#[inline]
+fn bucket(c: f32, g: usize) -> usize {
+    ((c * g as f32) as usize).min(g)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -73,7 +83,7 @@ fn guide_table(cmf: &[f32]) -> Guide {
         return Guide::Uniform;
     }
     let g = n.div_ceil(GUIDE_STRIDE);
-    let counts = (0..=g).map(|j| cmf.partition_point(|&c| c <= j as f32 / g as f32));
+    let counts = (0..=g + 1).map(|j| cmf.partition_point(|&c| bucket(c, g) < j));
     match u16::try_from(n) {
         Ok(_) => Guide::Short(counts.map(|c| c as u16).collect()),
         Err(_) => Guide::Long(counts.map(|c| c as u32).collect()),
