@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Builds a profile-guided release binary of pcbpt: an instrumented build renders a training
 # suite, LLVM merges the counts, and a second build optimises with them (branch layout,
-# inlining and code placement from measured frequencies). The same source and the same
-# images as `cargo build --release` (the compiler's choices change, not the arithmetic:
-# `tests/pgo_identity.sh` style checks are in BENCHMARKS.md), only faster.
+# inlining and code placement from measured frequencies). The same source as
+# `cargo build --release` and the same images, bit for bit (the compiler's choices of
+# layout change, not the floating-point arithmetic; BENCHMARKS.md shows the check), only
+# faster: BENCHMARKS.md, "Path tracer against Mitsuba 3 on the real scenes".
 #
 #   scripts/build_pgo.sh            # writes target/pgo/release/pcbpt
 #
@@ -57,8 +58,12 @@ for scene in scenes/cornell-box/scene.xml scenes/veach-mis/scene.xml scenes/veac
 done
 
 "$profdata" merge -o "$gen_target/merged.profdata" "$data"
+# Cargo does not see a profile's contents change, only the flags: the file is named by its
+# hash, so a new profile (new sources, new training) always rebuilds.
+profile="$gen_target/merged-$(sha256sum "$gen_target/merged.profdata" | cut -c1-16).profdata"
+mv "$gen_target/merged.profdata" "$profile"
 
 echo "build_pgo: optimised build ($target)" >&2
-RUSTFLAGS="${RUSTFLAGS:-} -Cprofile-use=$gen_target/merged.profdata" \
+RUSTFLAGS="${RUSTFLAGS:-} -Cprofile-use=$profile" \
   cargo build --release --target-dir "$target" --bin pcbpt
 echo "build_pgo: $target/release/pcbpt" >&2
