@@ -57,6 +57,7 @@ for scene in scenes/cornell-box/scene.xml scenes/veach-mis/scene.xml scenes/veac
   train "$scene" pcbpt 2 --resolution 160x90
 done
 
+rm -f "$gen_target"/merged-*.profdata
 "$profdata" merge -o "$gen_target/merged.profdata" "$data"
 # Cargo does not see a profile's contents change, only the flags: the file is named by its
 # hash, so a new profile (new sources, new training) always rebuilds.

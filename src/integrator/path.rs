@@ -39,12 +39,14 @@ impl PathTracer {
     /// needed).
     #[inline]
     fn emission_weight(&self, segments: u32, prev_delta: bool, prev_pdf: f32, pdf_light: impl FnOnce() -> f32) -> f32 {
-        if segments == 0 {
-            if self.hide_emitters { 0.0 } else { 1.0 }
-        } else if prev_delta {
-            if self.dirac_emission { 1.0 } else { 0.0 }
-        } else {
+        if weighs_against_light_sampling(segments, prev_delta) {
             power_heuristic(prev_pdf, pdf_light())
+        } else if segments == 0 {
+            if self.hide_emitters { 0.0 } else { 1.0 }
+        } else if self.dirac_emission {
+            1.0
+        } else {
+            0.0
         }
     }
 
@@ -67,8 +69,8 @@ impl PathTracer {
                 let d = ray.d.normalize();
                 for &light_index in &scene.infinite_lights {
                     let light = &scene.lights[light_index];
-                    // The density only where the weight needs it (after a non-Dirac bounce).
-                    let (le, pdf) = if depth > 0 && !prev_delta {
+                    // The density only where the weight needs it.
+                    let (le, pdf) = if weighs_against_light_sampling(depth, prev_delta) {
                         light.eval_pdf_infinite(d)
                     } else {
                         (light.eval_infinite(d), 0.0)
@@ -152,6 +154,15 @@ impl PathTracer {
         l
     }
 }
+
+/// Whether emission reached after `segments` earlier segments, the last one sampled from a
+/// Dirac lobe or not, is weighted against light sampling (which needs the light's density):
+/// not when seen directly by the camera, nor through a Dirac lobe.
+#[inline]
+fn weighs_against_light_sampling(segments: u32, prev_delta: bool) -> bool {
+    segments > 0 && !prev_delta
+}
+
 /// The path tracer in the render loop: no state between iterations.
 impl Iterative for PathTracer {
     type Pass = ();

@@ -23,6 +23,16 @@ pub struct Bounds {
     pub radius: f32,
 }
 
+impl Bounds {
+    /// The point on the line from `p` in the unit direction `d` some scene diameters beyond
+    /// the scene: where a vertex at infinity in that direction is placed (next-event
+    /// estimation's shadow rays end there, and the bidirectional integrators' sky vertices).
+    #[inline]
+    pub fn beyond(&self, p: Vec3, d: Vec3) -> Vec3 {
+        p + d * (2.0 * (self.radius + (p - self.center).length()) + 1.0)
+    }
+}
+
 /// A lat-long environment map (Mitsuba 3's `envmap`), importance-sampled by luminance.
 #[derive(Debug)]
 pub struct EnvMap {
@@ -63,21 +73,28 @@ impl EnvMap {
     }
 
     fn eval(&self, d: Vec3) -> Rgb {
-        self.bitmap.eval(self.uv(d)) * self.scale
+        self.radiance_at(self.uv(d))
     }
 
     fn pdf(&self, d: Vec3) -> f32 {
-        let uv = self.uv(d);
+        self.pdf_at(self.uv(d))
+    }
+
+    /// Solid-angle density of [`EnvMap::sample`] at map coordinates `uv`.
+    fn pdf_at(&self, uv: Vec2) -> f32 {
         let sin_t = (uv.y * PI).sin();
         if sin_t <= 0.0 { 0.0 } else { self.distribution.pdf(uv) / (2.0 * PI * PI * sin_t) }
+    }
+
+    /// Radiance at map coordinates `uv`.
+    fn radiance_at(&self, uv: Vec2) -> Rgb {
+        self.bitmap.eval(uv) * self.scale
     }
 
     /// Radiance and solid-angle density for direction `d`, its map coordinates computed once.
     fn eval_pdf(&self, d: Vec3) -> (Rgb, f32) {
         let uv = self.uv(d);
-        let sin_t = (uv.y * PI).sin();
-        let pdf = if sin_t <= 0.0 { 0.0 } else { self.distribution.pdf(uv) / (2.0 * PI * PI * sin_t) };
-        (self.bitmap.eval(uv) * self.scale, pdf)
+        (self.radiance_at(uv), self.pdf_at(uv))
     }
 
     /// A direction towards the map, its solid-angle density and the radiance arriving along
@@ -89,7 +106,7 @@ impl EnvMap {
         if sin_t <= 0.0 || pdf_uv <= 0.0 {
             return None;
         }
-        Some((self.direction(uv), pdf_uv / (2.0 * PI * PI * sin_t), self.bitmap.eval(uv) * self.scale))
+        Some((self.direction(uv), pdf_uv / (2.0 * PI * PI * sin_t), self.radiance_at(uv)))
     }
 }
 
@@ -206,7 +223,7 @@ impl Light {
         u1: f32,
         u: Vec2,
     ) -> Option<LightSample> {
-        let far = |wi: Vec3| reference + wi * (2.0 * (bounds.radius + (reference - bounds.center).length()) + 1.0);
+        let far = |wi: Vec3| bounds.beyond(reference, wi);
         match self {
             Light::Area { shape, .. } => {
                 let (ps, pdf) = shapes[*shape].sample_direction(reference, u1, u)?;

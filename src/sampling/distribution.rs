@@ -11,8 +11,8 @@ pub struct Distribution1D {
     /// For more than [`GUIDE_MIN`] entries, `guide[j]` is the number of entries whose CMF
     /// lies in a bucket below `j` (`g + 2` of them for `g` buckets, one bucket per
     /// [`GUIDE_STRIDE`] entries, see [`bucket`]): a sample counts CMF entries only within the
-    /// bucket of `u` (about two adjacent cache lines, read at once) instead of a binary search over the whole CMF (one cache miss
-    /// per halving), and finds the same index. The guide is small enough (256 bytes for a
+    /// bucket of `u` (about two adjacent cache lines, read at once) instead of a binary
+    /// search over the whole CMF (one cache miss per halving), and finds the same index. The guide is small enough (256 bytes for a
     /// row of a 2048-pixel map) for all rows' guides to stay in cache. A near-uniform
     /// distribution needs none: its index is found by stepping from `⌊u · n⌋`.
     guide: Guide,
@@ -34,16 +34,14 @@ impl Guide {
     /// bucket `u` falls in (see [`bucket`]); `None` without a guide.
     #[inline]
     fn around(&self, u: f32) -> Option<(usize, usize)> {
+        fn within(len: usize, at: impl Fn(usize) -> usize, u: f32) -> (usize, usize) {
+            let k = bucket(u, len - 2);
+            (at(k), at(k + 1))
+        }
         match self {
             Guide::None | Guide::Uniform => None,
-            Guide::Short(g) => {
-                let k = bucket(u, g.len() - 2);
-                Some((g[k] as usize, g[k + 1] as usize))
-            }
-            Guide::Long(g) => {
-                let k = bucket(u, g.len() - 2);
-                Some((g[k] as usize, g[k + 1] as usize))
-            }
+            Guide::Short(g) => Some(within(g.len(), |j| g[j] as usize, u)),
+            Guide::Long(g) => Some(within(g.len(), |j| g[j] as usize, u)),
         }
     }
 }

@@ -132,7 +132,7 @@ impl Vertex {
 
     /// The vertex where a camera walk leaves the scene at `p` in the unit direction `d`.
     pub fn sky(scene: &Scene, p: Vec3, d: Vec3, beta: Rgb) -> Vertex {
-        let far = beyond_scene(scene, p, d);
+        let far = scene.bounds.beyond(p, d);
         Vertex {
             kind: VertexKind::Sky,
             connectible: false,
@@ -425,13 +425,6 @@ impl Connection {
         let camera_end = pt.end(scene, -w, TransportMode::Radiance);
         Some(Connection { w, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
     }
-}
-
-/// The point on the line from `p` in the unit direction `d` some scene diameters beyond the
-/// scene: where a vertex at infinity in that direction is placed.
-#[inline]
-pub fn beyond_scene(scene: &Scene, p: Vec3, d: Vec3) -> Vec3 {
-    p + d * (2.0 * (scene.bounds.radius + (p - scene.bounds.center).length()) + 1.0)
 }
 
 /// Density of the direction `wi` (towards the light) over the lights at infinity that rays

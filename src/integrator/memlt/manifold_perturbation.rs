@@ -58,7 +58,7 @@ use super::path::{
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind, beyond_scene, disk_pdf};
+use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf};
 use crate::integrator::manifold::{self, Half, Scatter, TracedChain};
 use crate::math::Frame;
 use crate::sampling::{Random, square_to_gaussian_2d, square_to_gaussian_2d_pdf, square_to_von_mises_fisher};
@@ -297,7 +297,7 @@ pub fn position_plan(scene: &Scene, x: &[Vertex], treatment: &Treatment) -> Opti
 /// scene.
 fn displaced_sky_ray(scene: &Scene, x1: glam::Vec3, w: glam::Vec3, offset: glam::Vec2) -> Ray {
     let q = displaced(w, x1, offset);
-    Ray::new(beyond_scene(scene, q, w), -w)
+    Ray::new(scene.bounds.beyond(q, w), -w)
 }
 
 /// Every plan a path admits under a treatment, in a fixed order.

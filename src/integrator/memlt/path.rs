@@ -34,7 +34,7 @@
 use crate::accel::Ray;
 use crate::bsdf::{At, Bsdf, BsdfSample, TransportMode};
 use crate::integrator::Counters;
-use crate::integrator::bidir::{Vertex, VertexKind, beyond_scene, disk_pdf, light_origin_pdf, visible};
+use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf, light_origin_pdf, visible};
 use crate::math::{Rgb, offset_origin};
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -85,7 +85,7 @@ pub fn sky_vertex(scene: &Scene, l: Option<usize>, from: Vec3, d: Vec3) -> Optio
         Some(l) if scene.lights[l].is_unreachable() => l,
         _ => *scene.infinite_lights.first()?,
     };
-    let mut v = Vertex::light(l, beyond_scene(scene, from, d), d, Vec2::ZERO, Rgb::ONE, 0.0);
+    let mut v = Vertex::light(l, scene.bounds.beyond(from, d), d, Vec2::ZERO, Rgb::ONE, 0.0);
     v.infinite = true;
     Some(v)
 }
@@ -95,7 +95,7 @@ pub fn sky_vertex(scene: &Scene, l: Option<usize>, from: Vec3, d: Vec3) -> Optio
 #[inline]
 pub fn settle_sky(scene: &Scene, v: &mut [Vertex]) {
     if v.len() >= 2 && v[0].infinite {
-        v[0].p = beyond_scene(scene, v[1].p, v[0].ng);
+        v[0].p = scene.bounds.beyond(v[1].p, v[0].ng);
     }
 }
 
@@ -497,7 +497,7 @@ pub fn regenerate<R: Random>(
         if light[0].infinite {
             // On the line from the light walk's next vertex, or from the join's other end.
             let next = if n >= 2 { light[1].p } else { camera[m - 1].p };
-            light[0].p = beyond_scene(scene, next, light[0].ng);
+            light[0].p = scene.bounds.beyond(next, light[0].ng);
         }
         light[n - 1].delta = false;
         camera[m - 1].delta = false;
