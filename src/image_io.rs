@@ -1,10 +1,11 @@
 //! Reading and writing images: linear float RGB as OpenEXR (`exr`), sRGB 8-bit as PNG
-//! (`image`), chosen by the file extension. Every output is written to a temporary file
+//! (`image`), chosen by the file extension; `image` also reads JPEG, Radiance HDR (`.hdr`),
+//! TGA and BMP. Every output is written to a temporary file
 //! beside the target and renamed over it, so a killed process never leaves a truncated
 //! image behind.
 //!
-//! Built with `--features oiio`, the formats these crates do not read (TIFF, Radiance HDR,
-//! TGA, tiled mip-mapped `.tx`, …) are read through the system OpenImageIO ([`oiio`]), and
+//! Built with `--features oiio`, the formats these crates do not read (TIFF, tiled
+//! mip-mapped `.tx`, …) are read through the system OpenImageIO ([`oiio`]), and
 //! `.tif`/`.tiff` outputs are written through it (32-bit float, linear). The environment
 //! variable `PCBPT_IMAGE_IO` picks the library ([`Library`]): `auto` (the default), `native`
 //! or `oiio` (OpenImageIO for every format, EXR/PNG/JPEG included).
@@ -25,8 +26,8 @@ pub mod oiio;
 /// `PCBPT_IMAGE_IO`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Library {
-    /// `exr` for EXR, `image` for PNG and JPEG, and (with `--features oiio`) OpenImageIO
-    /// for every other format and for TIFF output.
+    /// `exr` for EXR, `image` for PNG, JPEG, Radiance HDR, TGA and BMP, and (with
+    /// `--features oiio`) OpenImageIO for every other format and for TIFF output.
     Auto,
     /// Only `exr` and `image`.
     Native,
@@ -67,8 +68,11 @@ impl Library {
 /// Extensions of formats that only OpenImageIO reads here, for the error of a build without
 /// it.
 #[cfg(not(feature = "oiio"))]
-const OIIO_ONLY: &[&str] =
-    &["tif", "tiff", "tx", "hdr", "rgbe", "tga", "bmp", "dpx", "psd", "webp", "jp2", "dds", "gif"];
+const OIIO_ONLY: &[&str] = &["tif", "tiff", "tx", "rgbe", "dpx", "psd", "webp", "jp2", "dds", "gif"];
+
+/// Extensions `exr` and `image` read (whatever the build: one decoder per format, so builds
+/// with and without OpenImageIO render the same pixels).
+const NATIVE: &[&str] = &["exr", "png", "jpg", "jpeg", "hdr", "tga", "bmp"];
 
 fn extension(path: &Path) -> Option<String> {
     path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase())
@@ -85,7 +89,7 @@ enum Reader {
 fn reader(path: &Path, library: Library) -> Result<Reader> {
     let ext = extension(path);
     let native = if ext.as_deref() == Some("exr") { Reader::Exr } else { Reader::Image };
-    let native_format = matches!(ext.as_deref(), Some("exr" | "png" | "jpg" | "jpeg"));
+    let native_format = ext.as_deref().is_some_and(|e| NATIVE.contains(&e));
     match library.check()? {
         Library::Native => Ok(native),
         #[cfg(feature = "oiio")]
@@ -261,9 +265,9 @@ pub fn read_exr(path: &Path) -> Result<Image> {
     Ok(Image::new(w as u32, h as u32, px))
 }
 
-/// Reads an image as linear RGB with the library `PCBPT_IMAGE_IO` picks: EXR (linear),
-/// PNG/JPEG (sRGB, decoded to linear), and with `--features oiio` every format OpenImageIO
-/// reads.
+/// Reads an image as linear RGB with the library `PCBPT_IMAGE_IO` picks: EXR and Radiance
+/// HDR (linear), PNG, JPEG, TGA and BMP (sRGB, decoded to linear), and with `--features oiio`
+/// every format OpenImageIO reads.
 pub fn read(path: &Path) -> Result<Image> {
     read_as(path, false, Library::from_env()?, "image")
 }
@@ -387,7 +391,7 @@ mod tests {
     #[test]
     fn oiio_formats_name_the_file_and_the_feature() {
         let dir = tempfile::tempdir().unwrap();
-        for name in ["a.tif", "b.HDR", "c.tga", "d.tx"] {
+        for name in ["a.tif", "b.RGBE", "c.webp", "d.tx"] {
             let path = dir.path().join(name);
             std::fs::write(&path, b"not read").unwrap();
             let e = read(&path).unwrap_err().to_string();
@@ -397,6 +401,42 @@ mod tests {
         assert!(e.contains("out.tiff") && e.contains("--features oiio"), "{e}");
         let e = read_with(&dir.path().join("a.tif"), false, Library::Oiio).unwrap_err().to_string();
         assert!(e.contains("PCBPT_IMAGE_IO=oiio") && e.contains("--features oiio"), "{e}");
+    }
+
+    /// Radiance HDR, TGA and BMP are read by `image` in every build: HDR as stored (within its
+    /// shared-exponent rounding), TGA and BMP as sRGB like PNG; a damaged file names itself.
+    #[test]
+    fn hdr_tga_and_bmp_are_read_natively() {
+        let dir = tempfile::tempdir().unwrap();
+        let hdr = dir.path().join("sky.hdr");
+        let values = [Rgb::new(0.25, 1.5, 40.0), Rgb::new(3.0, 0.0, 0.125)];
+        let px: Vec<image::Rgb<f32>> = values.iter().map(|v| image::Rgb([v.x, v.y, v.z])).collect();
+        let file = std::io::BufWriter::new(std::fs::File::create(&hdr).unwrap());
+        image::codecs::hdr::HdrEncoder::new(file).encode(&px, 2, 1).unwrap();
+        for library in [Library::Auto, Library::Native] {
+            let back = read_with(&hdr, false, library).unwrap();
+            assert_eq!((back.width, back.height), (2, 1));
+            for (a, b) in values.iter().zip(&back.pixels) {
+                // One 8-bit mantissa per channel under a shared exponent.
+                assert!((*a - *b).abs().max_element() <= a.max_element() / 128.0, "{a} read as {b}");
+            }
+            // Float data is linear: `raw` changes nothing.
+            assert_eq!(read_with(&hdr, true, library).unwrap(), back);
+        }
+        let bytes = [10u8, 128, 255, 0, 64, 200];
+        let expect: Vec<Rgb> = bytes
+            .chunks(3)
+            .map(|c| Rgb::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0)
+            .map(|c| Rgb::new(srgb_to_linear(c.x), srgb_to_linear(c.y), srgb_to_linear(c.z)))
+            .collect();
+        for name in ["a.tga", "a.bmp", "a.png"] {
+            let path = dir.path().join(name);
+            image::RgbImage::from_raw(2, 1, bytes.to_vec()).unwrap().save(&path).unwrap();
+            assert_eq!(read(&path).unwrap().pixels, expect, "{name}");
+        }
+        std::fs::write(dir.path().join("bad.hdr"), b"#?RADIANCE\nnot an image").unwrap();
+        let e = read(&dir.path().join("bad.hdr")).unwrap_err().to_string();
+        assert!(e.contains("bad.hdr") && e.contains("cannot read"), "{e}");
     }
 
     #[test]

@@ -250,6 +250,37 @@ fn mip_mapped_bitmap_filters_are_bilinear_lookups_with_one_warning() {
     assert!(e.contains("legacy.xml:12:") && e.contains("unknown filter_type \"bogus\""), "{e}");
 }
 
+/// A mask's opacity given as a colour (Bitterli's kitchen: `<spectrum name="opacity"
+/// value="0.612066"/>`): a grey one is its value, without a warning; a coloured one counts by
+/// its luminance, with a warning naming the line; out of range stays an error.
+#[test]
+fn a_mask_opacity_given_as_a_colour_counts_by_its_luminance() {
+    let mask = |opacity: &str| format!(r#"<bsdf type="mask" id="m">{opacity}<bsdf type="diffuse"/></bsdf>"#);
+    let opacity_of = |s: &Scene| match s.bsdfs[0].opacity.as_deref() {
+        Some(pcbpt::texture::Opacity::Constant(a)) => *a,
+        o => panic!("{o:?}"),
+    };
+    for (version, prop) in [
+        ("0.5.0", r#"<spectrum name="opacity" value="0.612066"/>"#),
+        ("0.6.0", r#"<rgb name="opacity" value="0.25"/>"#),
+    ] {
+        let s = load(&scene(version, "", &mask(prop)), &opts()).unwrap();
+        let expect = if version == "0.5.0" { 0.612066 } else { 0.25 };
+        assert_eq!(opacity_of(&s), expect, "{version}");
+        assert!(s.stats.warnings.is_empty(), "{:?}", s.stats.warnings);
+    }
+    let s = load(&scene("0.6.0", "", &mask(r#"<rgb name="opacity" value="0.2, 0.5, 0.8"/>"#)), &opts()).unwrap();
+    let a = opacity_of(&s);
+    assert!((a - pcbpt::math::luminance(Vec3::new(0.2, 0.5, 0.8))).abs() < 1e-6, "{a}");
+    assert_eq!(s.stats.warnings.len(), 1, "{:?}", s.stats.warnings);
+    let w = &s.stats.warnings[0];
+    assert!(w.contains("legacy.xml:12:") && w.contains("coloured") && w.contains("luminance"), "{w}");
+    let e = err(load(&scene("0.6.0", "", &mask(r#"<rgb name="opacity" value="1.5, 1.5, 1.5"/>"#)), &opts()));
+    assert!(e.contains("legacy.xml:12:") && e.contains("between 0 and 1, got 1.5"), "{e}");
+    let e = err(load(&scene("0.6.0", "", &mask(r#"<string name="opacity" value="half"/>"#)), &opts()));
+    assert!(e.contains("legacy.xml:12:") && e.contains("expected rgb"), "{e}");
+}
+
 #[test]
 fn ids_nested_in_other_objects_can_be_referenced() {
     let body = r#"

@@ -1,6 +1,7 @@
 //! The OpenImageIO layer (`--features oiio`): every format it writes reads back as written;
-//! where `exr` or `image` read a file too, OpenImageIO gives the same pixels; TIFF, HDR, TGA
-//! and tiled mip-mapped `.tx` files read back as expected; bad files give an error naming
+//! where `exr` or `image` read a file too (EXR, PNG, JPEG, Radiance HDR, TGA), OpenImageIO
+//! gives the same pixels; TIFF, HDR, TGA and tiled mip-mapped `.tx` files read back as
+//! expected; bad files give an error naming
 //! the file; a scene with TIFF textures renders exactly like the same scene with PNG/EXR
 //! ones; and the command line picks the library by `PCBPT_IMAGE_IO`.
 #![cfg(feature = "oiio")]
@@ -188,10 +189,11 @@ fn tiff_hdr_tga_and_mipmapped_tx_read_back() {
     assert_eq!(oiio::info(&path("a8.tif")).unwrap().bits, 8);
     assert_eq!(image_io::read(&path("a8.tif")).unwrap(), quantized(&ldr));
 
-    // TGA: 8-bit sRGB.
+    // TGA: 8-bit sRGB, read by `image` (the default) and by OpenImageIO alike.
     oiio::write(&path("a.tga"), &ldr).unwrap();
     assert_eq!(oiio::info(&path("a.tga")).unwrap().format, "targa");
     assert_eq!(image_io::read(&path("a.tga")).unwrap(), quantized(&ldr));
+    assert_eq!(same_pixels(&path("a.tga")), quantized(&ldr));
 
     // Radiance HDR (RGBE): one shared exponent and an 8-bit mantissa per channel, so each
     // channel is off by less than one mantissa step, 2^e / 256 ≤ max(r, g, b) / 128.
@@ -207,6 +209,8 @@ fn tiff_hdr_tga_and_mipmapped_tx_read_back() {
     }
     eprintln!("HDR: largest error {worst:.5} of the pixel's largest channel (bound 1/128)");
     assert!(worst < 1.0 / 128.0 && worst > 0.0, "HDR error {worst}");
+    // Both decoders expand RGBE the same way (mantissa × 2^(exponent − 136)).
+    assert_eq!(same_pixels(&path("a.hdr")), back);
 
     // Tiled, mip-mapped `.tx` from a float TIFF and from an 8-bit one: the full-resolution
     // level is read, exactly.

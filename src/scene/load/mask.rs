@@ -34,7 +34,10 @@ impl Builder<'_> {
         Ok(bsdf)
     }
 
-    /// The `opacity` of a mask: a number in `[0, 1]` or a texture.
+    /// The `opacity` of a mask: a number in `[0, 1]`, a colour, or a texture. A colour
+    /// (Mitsuba 0.5/0.6 files give a `spectrum` or `rgb`) counts by its luminance, as Mitsuba
+    /// 3 reads a colour where it wants a number: a grey one is its value, and a coloured one
+    /// gets a warning (Mitsuba 0.6 made each channel an opacity of its own).
     fn opacity(&mut self, id: NodeId) -> Result<Opacity> {
         let node = self.doc.node(id);
         let nested: Vec<NodeId> = node
@@ -46,7 +49,21 @@ impl Builder<'_> {
                 c.node
             })
             .collect();
-        let value = node.float("opacity")?;
+        let value = match node.rgb("opacity")? {
+            Some(c) if c.x == c.y && c.y == c.z => Some(c.x),
+            Some(c) => {
+                let a = crate::math::luminance(c);
+                self.stats.warnings.push(format!(
+                    "{}: the mask's opacity ({}, {}, {}) is coloured: it counts by its luminance, {a}, as in Mitsuba 3 (Mitsuba 0.6 made each channel an opacity of its own)",
+                    node.prop_loc("opacity"),
+                    c.x,
+                    c.y,
+                    c.z
+                ));
+                Some(a)
+            }
+            None => None,
+        };
         match (value, nested.as_slice()) {
             (Some(_), [t, ..]) => {
                 Err(Error::input(&self.doc.node(*t).loc, "\"opacity\" is given both as a value and as a texture"))
