@@ -339,6 +339,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                     backend,
                     integrator_override: Some("the experiment's methods".into()),
                     resolution: s.resolution,
+                    threads: f.threads,
                     ..Default::default()
                 },
             )?;

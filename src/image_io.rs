@@ -285,15 +285,107 @@ pub fn read_with(path: &Path, raw: bool, library: Library) -> Result<Image> {
 }
 
 fn read_as(path: &Path, raw: bool, library: Library, what: &str) -> Result<Image> {
+    Ok(decode_as(path, raw, library, what)?.into_image())
+}
+
+/// Reads a texture as [`read_texture`] does, keeping 8-bit channels as bytes (what
+/// [`crate::texture::Bitmap`] stores them as): no pass over the texels in `f32`.
+pub fn read_texture_data(path: &Path, raw: bool) -> Result<TextureData> {
+    decode_as(path, raw, Library::from_env()?, "texture")
+}
+
+fn decode_as(path: &Path, raw: bool, library: Library, what: &str) -> Result<TextureData> {
     match reader(path, library)? {
-        Reader::Exr => read_exr(path),
+        Reader::Exr => Ok(TextureData::Linear(read_exr(path)?)),
         Reader::Image => {
             let img = image::open(path).map_err(|e| Error::in_file(path, format!("cannot read {what}: {e}")))?;
-            Ok(to_linear(img, raw))
+            Ok(TextureData::of(img, raw))
         }
         #[cfg(feature = "oiio")]
-        Reader::Oiio => Ok(to_linear(oiio::read(path)?, raw)),
+        Reader::Oiio => Ok(TextureData::of(oiio::read(path)?, raw)),
     }
+}
+
+/// Decoded pixels on their way to linear RGB: 8-bit channels as bytes, or linear floats.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TextureData {
+    /// Three bytes a texel, row-major from the top-left (grey repeated, alpha dropped); byte
+    /// `k` stands for `table[k]`.
+    Bytes {
+        width: u32,
+        height: u32,
+        rgb: Vec<u8>,
+        table: Box<[f32; 256]>,
+    },
+    Linear(Image),
+}
+
+impl TextureData {
+    /// Float data as stored; 8/16-bit data divided by its largest value, then decoded from
+    /// sRGB unless `raw`. Alpha is dropped, grey repeated.
+    fn of(img: image::DynamicImage, raw: bool) -> TextureData {
+        use image::ColorType as C;
+        if matches!(img.color(), C::L8 | C::La8 | C::Rgb8 | C::Rgba8) {
+            let table = byte_table(img.color(), !raw);
+            let rgb = img.into_rgb8();
+            let (width, height) = rgb.dimensions();
+            return TextureData::Bytes { width, height, rgb: rgb.into_raw(), table };
+        }
+        let float_data = matches!(img.color(), C::Rgb32F | C::Rgba32F);
+        let rgb = img.into_rgb32f();
+        let (w, h) = rgb.dimensions();
+        let decode = |v: f32| if raw || float_data { v } else { srgb_to_linear(v) };
+        let px = rgb.pixels().map(|p| Rgb::new(decode(p[0]), decode(p[1]), decode(p[2]))).collect();
+        TextureData::Linear(Image::new(w, h, px))
+    }
+
+    pub fn width(&self) -> u32 {
+        match self {
+            TextureData::Bytes { width, .. } => *width,
+            TextureData::Linear(img) => img.width,
+        }
+    }
+
+    pub fn height(&self) -> u32 {
+        match self {
+            TextureData::Bytes { height, .. } => *height,
+            TextureData::Linear(img) => img.height,
+        }
+    }
+
+    /// The pixels as linear RGB.
+    pub fn into_image(self) -> Image {
+        match self {
+            TextureData::Bytes { width, height, rgb, table } => {
+                let px = rgb
+                    .chunks_exact(3)
+                    .map(|c| Rgb::new(table[c[0] as usize], table[c[1] as usize], table[c[2] as usize]));
+                Image::new(width, height, px.collect())
+            }
+            TextureData::Linear(img) => img,
+        }
+    }
+}
+
+/// The linear values of the 256 values of an 8-bit channel of an image of colour type
+/// `color`: what `image` converts byte `k` to in `f32` (for grey data not always `k / 255`
+/// to the last bit), decoded from sRGB if `srgb`. Made by converting the 256 values, so a
+/// texture kept as bytes reads exactly as its `f32` conversion would.
+pub fn byte_table(color: image::ColorType, srgb: bool) -> Box<[f32; 256]> {
+    use image::{ColorType as C, DynamicImage as D, ImageBuffer as B};
+    let k: Vec<u8> = (0..=255).collect();
+    let spread = |n: usize| -> Vec<u8> { k.iter().flat_map(|&v| std::iter::repeat_n(v, n)).collect() };
+    let probe = match color {
+        C::L8 => D::ImageLuma8(B::from_raw(256, 1, k.clone()).expect("256 values")),
+        C::La8 => D::ImageLumaA8(B::from_raw(256, 1, spread(2)).expect("256 values")),
+        C::Rgba8 => D::ImageRgba8(B::from_raw(256, 1, spread(4)).expect("256 values")),
+        _ => D::ImageRgb8(B::from_raw(256, 1, spread(3)).expect("256 values")),
+    };
+    let f = probe.into_rgb32f();
+    Box::new(std::array::from_fn(|i| {
+        let v = f.get_pixel(i as u32, 0)[0];
+        if srgb { srgb_to_linear(v) } else { v }
+    }))
 }
 
 /// The alpha channel of an image, if it has one: `(width, height, alpha)`, row-major from
@@ -336,17 +428,6 @@ fn alpha_of(img: image::DynamicImage) -> Option<(u32, u32, Vec<f32>)> {
     let rgba = img.into_rgba32f();
     let (w, h) = rgba.dimensions();
     Some((w, h, rgba.pixels().map(|p| p[3]).collect()))
-}
-
-/// Linear RGB of decoded pixels: float data as stored; 8/16-bit data divided by its
-/// largest value, then decoded from sRGB unless `raw`. Alpha is dropped, grey repeated.
-fn to_linear(img: image::DynamicImage, raw: bool) -> Image {
-    let float_data = matches!(img.color(), image::ColorType::Rgb32F | image::ColorType::Rgba32F);
-    let rgb = img.into_rgb32f();
-    let (w, h) = rgb.dimensions();
-    let decode = |v: f32| if raw || float_data { v } else { srgb_to_linear(v) };
-    let px = rgb.pixels().map(|p| Rgb::new(decode(p[0]), decode(p[1]), decode(p[2]))).collect();
-    Image::new(w, h, px)
 }
 
 /// Inverse of [`linear_to_srgb`].
@@ -403,6 +484,44 @@ mod tests {
         assert!(e.contains("PCBPT_IMAGE_IO=oiio") && e.contains("--features oiio"), "{e}");
     }
 
+    /// Every byte value of every 8-bit colour type becomes what `image`'s `f32` conversion
+    /// and the sRGB curve give, bit for bit, whether kept as bytes or made linear.
+    #[test]
+    fn byte_tables_are_the_f32_conversion() {
+        let dir = tempfile::tempdir().unwrap();
+        let bytes: Vec<u8> = (0..=255).collect();
+        let grey = image::DynamicImage::ImageLuma8(image::GrayImage::from_raw(256, 1, bytes.clone()).unwrap());
+        let grey_alpha: Vec<u8> = bytes.iter().flat_map(|&v| [v, v.wrapping_mul(7)]).collect();
+        let rgba: Vec<u8> = bytes.iter().flat_map(|&v| [v, 255 - v, v.wrapping_mul(7), v.wrapping_mul(13)]).collect();
+        let images = [
+            grey.clone(),
+            image::DynamicImage::ImageLumaA8(image::ImageBuffer::from_raw(256, 1, grey_alpha).unwrap()),
+            image::DynamicImage::ImageRgba8(image::RgbaImage::from_raw(256, 1, rgba.clone()).unwrap()),
+            image::DynamicImage::ImageRgba8(image::RgbaImage::from_raw(256, 1, rgba).unwrap()).to_rgb8().into(),
+        ];
+        for img in images {
+            for raw in [false, true] {
+                let floats = img.clone().into_rgb32f();
+                let expect: Vec<Rgb> = floats
+                    .pixels()
+                    .map(|p| p.0.map(|v| if raw { v } else { srgb_to_linear(v) }))
+                    .map(|[r, g, b]| Rgb::new(r, g, b))
+                    .collect();
+                let data = TextureData::of(img.clone(), raw);
+                assert!(matches!(data, TextureData::Bytes { .. }));
+                let got = data.into_image().pixels;
+                let bits = |v: &[Rgb]| v.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&expect), "{:?}, raw {raw}", img.color());
+            }
+        }
+        // 16-bit data stays float.
+        let path = dir.path().join("a16.png");
+        image::DynamicImage::ImageRgb16(image::ImageBuffer::from_raw(1, 1, vec![0u16, 30000, 65535]).unwrap())
+            .save(&path)
+            .unwrap();
+        assert!(matches!(read_texture_data(&path, false).unwrap(), TextureData::Linear(_)));
+    }
+
     /// Radiance HDR, TGA and BMP are read by `image` in every build: HDR as stored (within its
     /// shared-exponent rounding), TGA and BMP as sRGB like PNG; a damaged file names itself.
     #[test]
@@ -456,13 +575,13 @@ mod tests {
     fn grey_and_alpha_become_rgb_like_the_image_crate() {
         // 2×1 grey+alpha, 8-bit: grey repeated, alpha dropped, sRGB decoded unless raw.
         let ga = image::DynamicImage::ImageLumaA8(image::ImageBuffer::from_raw(2, 1, vec![0, 7, 188, 255]).unwrap());
-        let img = to_linear(ga.clone(), false);
+        let img = TextureData::of(ga.clone(), false).into_image();
         assert_eq!(img.get(1, 0), Rgb::splat(srgb_to_linear(188.0 / 255.0)));
         assert_eq!(img.get(0, 0), Rgb::ZERO);
-        assert_eq!(to_linear(ga, true).get(1, 0), Rgb::splat(188.0 / 255.0));
+        assert_eq!(TextureData::of(ga, true).into_image().get(1, 0), Rgb::splat(188.0 / 255.0));
         // Float data is linear whatever `raw` says.
         let f =
             image::DynamicImage::ImageRgba32F(image::ImageBuffer::from_raw(1, 1, vec![0.25, 2.0, 0.5, 0.1]).unwrap());
-        assert_eq!(to_linear(f, false).get(0, 0), Rgb::new(0.25, 2.0, 0.5));
+        assert_eq!(TextureData::of(f, false).into_image().get(0, 0), Rgb::new(0.25, 2.0, 0.5));
     }
 }

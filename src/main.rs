@@ -367,6 +367,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             .and_then(|k| k.to_possible_value())
             .map(|v| format!("--integrator {}", v.get_name())),
         resolution: a.resolution,
+        threads: a.threads,
     };
     let mut scene = Scene::load(&a.scene, &load)?;
     if let Some(d) = a.max_depth {

@@ -69,17 +69,22 @@ impl Texels {
                 .map(|t| Some([table_index(&table, t.x)?, table_index(&table, t.y)?, table_index(&table, t.z)?, 0]))
                 .collect();
             if let Some(bytes) = bytes {
-                let blocks_per_row = width.div_ceil(BLOCK);
-                let mut blocks = vec![[0u8; 4]; blocks_per_row * height.div_ceil(BLOCK) * BLOCK * BLOCK];
-                for y in 0..height {
-                    for x in 0..width {
-                        blocks[block_index(blocks_per_row, x, y)] = bytes[y * width + x];
-                    }
-                }
-                return Texels::Byte { blocks, table, blocks_per_row };
+                return Texels::blocks(width, height, &bytes, table);
             }
         }
         Texels::Float(texels)
+    }
+
+    /// Bytes `texel(i)` of texel `i` (row-major) in blocks, standing for `table`'s values.
+    fn blocks(width: usize, height: usize, bytes: &[[u8; 4]], table: Box<[f32; 256]>) -> Texels {
+        let blocks_per_row = width.div_ceil(BLOCK);
+        let mut blocks = vec![[0u8; 4]; blocks_per_row * height.div_ceil(BLOCK) * BLOCK * BLOCK];
+        for y in 0..height {
+            for x in 0..width {
+                blocks[block_index(blocks_per_row, x, y)] = bytes[y * width + x];
+            }
+        }
+        Texels::Byte { blocks, table, blocks_per_row }
     }
 }
 
@@ -96,6 +101,36 @@ impl Bitmap {
         let mean = Rgb::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32);
         let texels = Texels::new(width as usize, height as usize, texels);
         Bitmap { width, height, texels, filter, wrap, mean }
+    }
+
+    /// A bitmap of 8-bit texels, three bytes each (row by row from the top), byte `k`
+    /// standing for `table[k]`: the bitmap of those values (as [`Bitmap::new`] keeps them,
+    /// or kept as bytes where it would keep them as `f32`), without a pass over them in `f32`.
+    pub fn from_bytes(
+        width: u32,
+        height: u32,
+        rgb: &[u8],
+        table: Box<[f32; 256]>,
+        filter: FilterType,
+        wrap: WrapMode,
+    ) -> Bitmap {
+        assert_eq!(rgb.len(), 3 * width as usize * height as usize, "byte count does not match the size");
+        let (w, h) = (width as usize, height as usize);
+        let blocks_per_row = w.div_ceil(BLOCK);
+        let mut blocks = vec![[0u8; 4]; blocks_per_row * h.div_ceil(BLOCK) * BLOCK * BLOCK];
+        // Summed in texel order, as `Bitmap::new` sums: the same mean to the last bit.
+        let mut sum = [0.0f64; 3];
+        for (y, row) in rgb.chunks_exact(3 * w.max(1)).enumerate() {
+            for (x, c) in row.chunks_exact(3).enumerate() {
+                for i in 0..3 {
+                    sum[i] += table[c[i] as usize] as f64;
+                }
+                blocks[block_index(blocks_per_row, x, y)] = [c[0], c[1], c[2], 0];
+            }
+        }
+        let n = (w * h).max(1) as f64;
+        let mean = Rgb::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32);
+        Bitmap { width, height, texels: Texels::Byte { blocks, table, blocks_per_row }, filter, wrap, mean }
     }
 
     /// Mean texel value.
@@ -370,7 +405,8 @@ mod tests {
     }
 
     /// What the image readers return for 8-bit files is on the tables: a JPEG (sRGB-decoded
-    /// and raw) is kept as bytes.
+    /// and raw) is kept as bytes, and the bitmap made from its bytes is the bitmap made from
+    /// its linear values.
     #[test]
     fn eight_bit_files_are_kept_as_bytes() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/staircase2/textures/Wallpaper.jpg");
@@ -379,6 +415,14 @@ mod tests {
             let b = Bitmap::new(img.width, img.height, img.pixels.clone(), FilterType::Bilinear, WrapMode::Repeat);
             assert!(b.is_compact(), "raw = {raw}");
             assert!(b.texels().eq(img.pixels.iter().copied()));
+            let crate::image_io::TextureData::Bytes { width, height, rgb, table } =
+                crate::image_io::read_texture_data(&path, raw).unwrap()
+            else {
+                panic!("a JPEG's texels are bytes")
+            };
+            let from_bytes = Bitmap::from_bytes(width, height, &rgb, table, FilterType::Bilinear, WrapMode::Repeat);
+            // Raw texels all on the sRGB table too would have picked that table: not here.
+            assert_eq!(from_bytes, b, "raw = {raw}");
         }
     }
 

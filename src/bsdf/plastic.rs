@@ -94,11 +94,17 @@ impl RoughPlasticParams {
         specular_sampling_weight: f32,
     ) -> RoughPlasticParams {
         let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-4);
-        let external: Vec<f32> =
-            (0..TRANSMITTANCE_RES).map(|i| interface_energy(&distribution, mu(i), eta).1).collect();
-        let internal = 2.0
-            * (0..TRANSMITTANCE_RES).map(|i| interface_energy(&distribution, mu(i), 1.0 / eta).0 * mu(i)).sum::<f32>()
-            / TRANSMITTANCE_RES as f32;
+        // Each grid point's two integrals in parallel; the sums in order, as one thread would.
+        use rayon::prelude::*;
+        let energies: Vec<(f32, f32)> = (0..TRANSMITTANCE_RES)
+            .into_par_iter()
+            .map(|i| {
+                (interface_energy(&distribution, mu(i), eta).1, interface_energy(&distribution, mu(i), 1.0 / eta).0)
+            })
+            .collect();
+        let external: Vec<f32> = energies.iter().map(|e| e.0).collect();
+        let internal =
+            2.0 * (0..TRANSMITTANCE_RES).map(|i| energies[i].1 * mu(i)).sum::<f32>() / TRANSMITTANCE_RES as f32;
         RoughPlasticParams {
             distribution,
             eta,

@@ -16,6 +16,7 @@ use crate::bsdf::plastic::{PlasticParams, RoughPlasticParams};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::error::Location;
 use crate::error::{Error, Result};
+use crate::image_io::TextureData;
 use crate::light::{Bounds, EnvMap, Light, LightSampler};
 use crate::math::Frame;
 use crate::math::Transform;
@@ -28,6 +29,7 @@ use std::time::Instant;
 
 mod mask;
 mod perturb;
+mod prefetch;
 mod sensor;
 mod sunsky;
 
@@ -57,14 +59,25 @@ impl Scene {
     /// Loads a Mitsuba XML scene and builds its accelerator.
     pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         let start = Instant::now();
-        Scene::from_document(xml::parse_file(path, &options.overrides)?, path, options, start)
+        let doc = xml::parse_file(path, &options.overrides)?;
+        Scene::on_threads(options, || Scene::from_document(doc, path, options, start))
     }
 
     /// Loads scene text as if read from `path` (messages name it; meshes, textures and
     /// includes resolve against its folder).
     pub fn load_str(text: &str, path: &Path, options: &LoadOptions) -> Result<Scene> {
         let start = Instant::now();
-        Scene::from_document(xml::parse_str(text, path, &options.overrides)?, path, options, start)
+        let doc = xml::parse_str(text, path, &options.overrides)?;
+        Scene::on_threads(options, || Scene::from_document(doc, path, options, start))
+    }
+
+    /// Runs `load` on a pool of `options.threads` threads (all cores for 0): the files read
+    /// ahead and the tables built in parallel use no more than the render will.
+    fn on_threads(options: &LoadOptions, load: impl FnOnce() -> Result<Scene> + Send) -> Result<Scene> {
+        if options.threads == 0 {
+            return load();
+        }
+        crate::integrator::thread_pool(options.threads)?.install(load)
     }
 
     fn from_document(doc: Document, path: &Path, options: &LoadOptions, start: Instant) -> Result<Scene> {
@@ -81,7 +94,10 @@ impl Scene {
             options,
             ignored: Vec::new(),
             read_as_bilinear: Vec::new(),
+            coatings: Vec::new(),
+            prefetched: prefetch::Prefetched::default(),
         };
+        b.prefetched = prefetch::Prefetched::read(&doc, &b.base);
         let mut sensor = None;
         let mut integrator = None;
         let root = doc.node(doc.root);
@@ -205,6 +221,11 @@ struct Builder<'d> {
     ignored: Vec<(String, String, Location)>,
     /// Bitmaps whose `filter_type` (`trilinear`, `ewa`) is read as bilinear lookups.
     read_as_bilinear: Vec<(String, Location)>,
+    /// Rough plastic coatings made so far: their tables depend on the distribution and the
+    /// index alone, and scenes reuse a few coatings across many materials.
+    coatings: Vec<RoughPlasticParams>,
+    /// The meshes and textures read ahead in parallel (`load/prefetch.rs`).
+    prefetched: prefetch::Prefetched,
 }
 
 /// The emitters at infinity that model the sun and the sky (`load/sunsky.rs`).
@@ -314,6 +335,31 @@ impl<'d> Builder<'d> {
         }
     }
 
+    /// A rough plastic's parameters, its coating's tables shared with an earlier material of
+    /// the same distribution and index (the same values as [`RoughPlasticParams::new`]).
+    fn coating(&mut self, distribution: Microfacet, eta: f32, nonlinear: bool, weight: f32) -> RoughPlasticParams {
+        let made = self.coatings.iter().find(|c| c.distribution == distribution && c.eta.to_bits() == eta.to_bits());
+        let params = match made {
+            Some(c) => RoughPlasticParams { nonlinear, specular_sampling_weight: weight, ..c.clone() },
+            None => RoughPlasticParams::new(distribution, eta, nonlinear, weight),
+        };
+        if made.is_none() {
+            self.coatings.push(params.clone());
+        }
+        params
+    }
+
+    /// The bitmap in the image file `path` (read ahead, or read now).
+    fn load_bitmap(&mut self, path: &Path, raw: bool, filter: FilterType, wrap: WrapMode) -> Result<Bitmap> {
+        let mut bitmap = match self.prefetched.take_texture(path, raw) {
+            Some(bitmap) => bitmap?,
+            None => read_bitmap(path, raw)?,
+        };
+        bitmap.filter = filter;
+        bitmap.wrap = wrap;
+        Ok(bitmap)
+    }
+
     fn texture_node(&mut self, id: NodeId) -> Result<Texture> {
         if let Some(t) = self.textures.get(&id) {
             return Ok(t.clone());
@@ -324,7 +370,8 @@ impl<'d> Builder<'d> {
             "bitmap" => {
                 let (path, filter, wrap) = self.bitmap_params(id)?;
                 let raw = node.boolean_or("raw", false)?;
-                let bitmap = load_bitmap(&path, raw, filter, wrap)
+                let bitmap = self
+                    .load_bitmap(&path, raw, filter, wrap)
                     .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
                 self.stats.files.push(path.clone());
                 Texture::Bitmap { bitmap: Arc::new(bitmap), to_uv }
@@ -561,7 +608,7 @@ impl<'d> Builder<'d> {
                     if distribution.alpha_u != distribution.alpha_v {
                         return Err(Error::input(&self.node(id).loc, "roughplastic is isotropic: give \"alpha\""));
                     }
-                    let params = RoughPlasticParams::new(distribution, eta, nonlinear, weight);
+                    let params = self.coating(distribution, eta, nonlinear, weight);
                     BsdfModel::RoughPlastic { params, diffuse_reflectance, specular_reflectance }
                 }
             }
@@ -594,7 +641,7 @@ impl<'d> Builder<'d> {
         let start = Instant::now();
         let bar = self.progress.file(&path, size);
         let loaded = if node.plugin == "obj" {
-            mesh::load_obj(&path)
+            self.prefetched.take_mesh(&path).unwrap_or_else(|| mesh::load_obj(&path))
         } else {
             mesh::load_ply_with_progress(&path, &mut |read| {
                 if let Some(b) = &bar {
@@ -801,7 +848,8 @@ impl<'d> Builder<'d> {
                 if !(scale >= 0.0 && scale.is_finite()) {
                     return Err(Error::input(&node.prop_loc("scale"), "scale must be finite and non-negative"));
                 }
-                let bitmap = load_bitmap(&path, false, FilterType::Bilinear, WrapMode::Repeat)
+                let bitmap = self
+                    .load_bitmap(&path, false, FilterType::Bilinear, WrapMode::Repeat)
                     .map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
                 self.stats.files.push(path.clone());
                 if bitmap.texels().any(|t| !t.is_finite() || t.min_element() < 0.0) {
@@ -829,15 +877,23 @@ impl<'d> Builder<'d> {
 
 /// Loads an image texture: 8-bit PNG/JPEG decoded from sRGB unless `raw`, EXR as linear;
 /// with `--features oiio`, every format OpenImageIO reads (see [`crate::image_io`]).
-fn load_bitmap(path: &Path, raw: bool, filter: FilterType, wrap: WrapMode) -> Result<Bitmap> {
+/// The bitmap in the image file `path` (bilinear, repeating; the caller sets both), its
+/// 8-bit texels kept as bytes.
+fn read_bitmap(path: &Path, raw: bool) -> Result<Bitmap> {
     if !path.is_file() {
         return Err(Error::in_file(path, "texture file does not exist"));
     }
-    let img = crate::image_io::read_texture(path, raw)?;
-    if img.width == 0 || img.height == 0 {
+    let data = crate::image_io::read_texture_data(path, raw)?;
+    if data.width() == 0 || data.height() == 0 {
         return Err(Error::in_file(path, "texture has no pixels"));
     }
-    Ok(Bitmap::new(img.width, img.height, img.pixels, filter, wrap))
+    let (filter, wrap) = (FilterType::Bilinear, WrapMode::Repeat);
+    Ok(match data {
+        TextureData::Bytes { width, height, rgb, table } => {
+            Bitmap::from_bytes(width, height, &rgb, table, filter, wrap)
+        }
+        TextureData::Linear(img) => Bitmap::new(img.width, img.height, img.pixels, filter, wrap),
+    })
 }
 
 /// A sphere around every shape and the camera position.
@@ -879,6 +935,72 @@ pub fn group_thousands(n: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::group_thousands;
+    use crate::bsdf::BsdfModel;
+    use crate::scene::{LoadOptions, Scene};
+    use crate::texture::{Bitmap, FilterType, Texture, WrapMode};
+
+    /// A file used by several textures (and once raw) gives each the bitmap that reading it
+    /// alone gives, with its own filter and wrap mode, whatever the number of threads that
+    /// read the files ahead; rough plastics of one coating share its tables and keep their
+    /// own weights.
+    #[test]
+    fn files_read_ahead_give_what_reading_them_alone_gives() {
+        let texture = |filter: &str, raw: bool| {
+            format!(
+                r#"<texture type="bitmap" name="reflectance"><string name="filename" value="textures/tiles.png"/><string name="filter_type" value="{filter}"/><boolean name="raw" value="{raw}"/></texture>"#
+            )
+        };
+        let text = format!(
+            r#"<scene version="3.0.0">
+    <sensor type="perspective"><float name="fov" value="40"/><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>
+    <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+    <bsdf type="diffuse">{}</bsdf>
+    <bsdf type="diffuse">{}</bsdf>
+    <bsdf type="diffuse">{}</bsdf>
+    <bsdf type="roughplastic"><float name="alpha" value="0.2"/><rgb name="diffuse_reflectance" value="0.8"/></bsdf>
+    <bsdf type="roughplastic"><float name="alpha" value="0.2"/><rgb name="diffuse_reflectance" value="0.1"/><boolean name="nonlinear" value="true"/></bsdf>
+</scene>"#,
+            texture("bilinear", false),
+            texture("nearest", false),
+            texture("bilinear", true)
+        );
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let path = root.join("scenes/materials/legacy.xml");
+        let png = root.join("scenes/materials/textures/tiles.png");
+        for threads in [1, 2, 3] {
+            let s = Scene::load_str(&text, &path, &LoadOptions { threads, ..Default::default() }).unwrap();
+            let bitmaps: Vec<&Bitmap> = s
+                .bsdfs
+                .iter()
+                .filter_map(|b| match &b.model {
+                    BsdfModel::Diffuse { reflectance: Texture::Bitmap { bitmap, .. } } => Some(&**bitmap),
+                    _ => None,
+                })
+                .collect();
+            let plastics: Vec<_> = s
+                .bsdfs
+                .iter()
+                .filter_map(|b| match &b.model {
+                    BsdfModel::RoughPlastic { params, .. } => Some(params),
+                    _ => None,
+                })
+                .collect();
+            assert_eq!((bitmaps.len(), plastics.len()), (3, 2));
+            for (i, filter, raw) in
+                [(0, FilterType::Bilinear, false), (1, FilterType::Nearest, false), (2, FilterType::Bilinear, true)]
+            {
+                let img = crate::image_io::read_texture(&png, raw).unwrap();
+                let alone = Bitmap::new(img.width, img.height, img.pixels, filter, WrapMode::Repeat);
+                assert_eq!(*bitmaps[i], alone, "texture {i}, {threads} threads");
+            }
+            let (a, b) = (plastics[0], plastics[1]);
+            assert!(std::sync::Arc::ptr_eq(&a.external_transmittance, &b.external_transmittance));
+            let alone =
+                crate::bsdf::plastic::RoughPlasticParams::new(a.distribution, a.eta, true, b.specular_sampling_weight);
+            assert_eq!(*b, alone);
+            assert!(!a.nonlinear && a.specular_sampling_weight != b.specular_sampling_weight);
+        }
+    }
 
     #[test]
     fn thousands_are_grouped() {

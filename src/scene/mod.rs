@@ -80,6 +80,8 @@ pub struct LoadOptions {
     pub integrator_override: Option<String>,
     /// The film size `(width, height)` instead of the scene's (`--resolution`).
     pub resolution: Option<(u32, u32)>,
+    /// Threads that read the scene's files and build its tables (`--threads`; 0 = all cores).
+    pub threads: usize,
 }
 
 /// Parses a film size `WxH` (`320x180`; `×` and `X` work too): both at least 1 and at most

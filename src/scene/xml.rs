@@ -310,12 +310,25 @@ pub fn camel_to_snake(s: &str) -> String {
 struct FileCtx {
     path: Arc<PathBuf>,
     upgrade: bool,
+    /// Byte offsets at which the file's lines start.
+    line_starts: Arc<Vec<usize>>,
 }
 
 impl FileCtx {
+    fn new(path: Arc<PathBuf>, upgrade: bool, text: &str) -> FileCtx {
+        let starts = std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect();
+        FileCtx { path, upgrade, line_starts: Arc::new(starts) }
+    }
+
+    /// The file and line:column of `node`, as roxmltree's `text_pos_at` gives them (line
+    /// and column from 1, the column in characters), found in the line index instead of by
+    /// counting from the start of the file.
     fn loc(&self, doc: &roxmltree::Document, node: roxmltree::Node) -> Location {
-        let pos = doc.text_pos_at(node.range().start);
-        Location { file: self.path.clone(), line: Some(pos.row), col: Some(pos.col) }
+        let pos = node.range().start;
+        let row = self.line_starts.partition_point(|&s| s <= pos);
+        let start = self.line_starts[row - 1];
+        let col = doc.input_text()[start..pos].chars().count() + 1;
+        Location { file: self.path.clone(), line: Some(row as u32), col: Some(col as u32) }
     }
 }
 
@@ -341,7 +354,7 @@ impl Parser {
     fn parse_root(&mut self, path: &Path, text: &str) -> Result<NodeId> {
         let doc = roxmltree::Document::parse(text).map_err(|e| xml_error(path, &e))?;
         let root = doc.root_element();
-        let ctx0 = FileCtx { path: Arc::new(path.to_path_buf()), upgrade: false };
+        let ctx0 = FileCtx::new(Arc::new(path.to_path_buf()), false, text);
         let loc = ctx0.loc(&doc, root);
         if root.tag_name().name() != "scene" {
             return Err(Error::input(
@@ -356,7 +369,7 @@ impl Parser {
         if major > 3 {
             return Err(Error::input(&loc, format!("scene version {version} is newer than this loader (3.x)")));
         }
-        let ctx = FileCtx { path: ctx0.path, upgrade: major < 2 };
+        let ctx = FileCtx { upgrade: major < 2, ..ctx0 };
         self.upgrade = ctx.upgrade;
         let id = self.new_node("scene", String::new(), None, loc);
         self.parse_children(&doc, root, id, &ctx)?;
@@ -508,7 +521,8 @@ impl Parser {
                     self.files.push(path.clone());
                     let inc = roxmltree::Document::parse(&text).map_err(|e| xml_error(&path, &e))?;
                     let r = inc.root_element();
-                    let rloc = FileCtx { path: Arc::new(path.clone()), upgrade: false }.loc(&inc, r);
+                    let ictx = FileCtx::new(Arc::new(path), false, &text);
+                    let rloc = ictx.loc(&inc, r);
                     if r.tag_name().name() != "scene" {
                         return Err(Error::input(&rloc, "an included file must have a <scene> root"));
                     }
@@ -516,7 +530,7 @@ impl Parser {
                         .attribute("version")
                         .and_then(parse_version)
                         .ok_or_else(|| Error::input(&rloc, "<scene> needs a valid \"version\" attribute"))?;
-                    let ictx = FileCtx { path: Arc::new(path), upgrade: v.0 < 2 };
+                    let ictx = FileCtx { upgrade: v.0 < 2, ..ictx };
                     self.include_depth += 1;
                     self.upgrade = ictx.upgrade;
                     self.parse_children(&inc, r, parent, &ictx)?;
@@ -877,6 +891,22 @@ fn xml_error(path: &Path, e: &roxmltree::Error) -> Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The line index gives every node the line and column roxmltree counts out itself.
+    #[test]
+    fn locations_are_roxmltree_positions() {
+        let text = "<scene version=\"3.0.0\">\r\n\t<!-- é ü 字 -->\n  <bsdf type=\"diffuse\" id=\"ä\"><rgb name=\"reflectance\" value=\"0.5\"/>\n</bsdf><shape type=\"sphere\"/>\n\n<shape type=\"obj\">  <string name=\"filename\" value=\"ö.obj\"/></shape></scene>";
+        let doc = roxmltree::Document::parse(text).unwrap();
+        let ctx = FileCtx::new(Arc::new(PathBuf::from("a.xml")), false, text);
+        let mut n = 0;
+        for node in doc.descendants() {
+            let expect = doc.text_pos_at(node.range().start);
+            let loc = ctx.loc(&doc, node);
+            assert_eq!((loc.line, loc.col), (Some(expect.row), Some(expect.col)), "{node:?}");
+            n += 1;
+        }
+        assert!(n > 8);
+    }
 
     #[test]
     fn camel_case_upgrade() {
