@@ -50,9 +50,8 @@ enum Texels {
 
 /// The linear values an 8-bit channel decodes to: sRGB-decoded, then raw (`k / 255`).
 fn byte_tables() -> [Box<[f32; 256]>; 2] {
-    let srgb = Box::new(std::array::from_fn(|k| crate::image_io::srgb_to_linear(k as f32 / 255.0)));
-    let raw = Box::new(std::array::from_fn(|k| k as f32 / 255.0));
-    [srgb, raw]
+    let rgb8 = image::ColorType::Rgb8;
+    [crate::image_io::byte_table(rgb8, true), crate::image_io::byte_table(rgb8, false)]
 }
 
 /// The byte whose table value is exactly `v`, if there is one (the table is increasing).
@@ -69,19 +68,20 @@ impl Texels {
                 .map(|t| Some([table_index(&table, t.x)?, table_index(&table, t.y)?, table_index(&table, t.z)?, 0]))
                 .collect();
             if let Some(bytes) = bytes {
-                return Texels::blocks(width, height, &bytes, table);
+                return Texels::blocks(width, height, |i| bytes[i], table);
             }
         }
         Texels::Float(texels)
     }
 
-    /// Bytes `texel(i)` of texel `i` (row-major) in blocks, standing for `table`'s values.
-    fn blocks(width: usize, height: usize, bytes: &[[u8; 4]], table: Box<[f32; 256]>) -> Texels {
+    /// The bytes `texel(i)` of texel `i` (row-major) laid out in blocks, standing for
+    /// `table`'s values.
+    fn blocks(width: usize, height: usize, texel: impl Fn(usize) -> [u8; 4], table: Box<[f32; 256]>) -> Texels {
         let blocks_per_row = width.div_ceil(BLOCK);
         let mut blocks = vec![[0u8; 4]; blocks_per_row * height.div_ceil(BLOCK) * BLOCK * BLOCK];
         for y in 0..height {
             for x in 0..width {
-                blocks[block_index(blocks_per_row, x, y)] = bytes[y * width + x];
+                blocks[block_index(blocks_per_row, x, y)] = texel(y * width + x);
             }
         }
         Texels::Byte { blocks, table, blocks_per_row }
@@ -115,22 +115,18 @@ impl Bitmap {
         wrap: WrapMode,
     ) -> Bitmap {
         assert_eq!(rgb.len(), 3 * width as usize * height as usize, "byte count does not match the size");
-        let (w, h) = (width as usize, height as usize);
-        let blocks_per_row = w.div_ceil(BLOCK);
-        let mut blocks = vec![[0u8; 4]; blocks_per_row * h.div_ceil(BLOCK) * BLOCK * BLOCK];
         // Summed in texel order, as `Bitmap::new` sums: the same mean to the last bit.
         let mut sum = [0.0f64; 3];
-        for (y, row) in rgb.chunks_exact(3 * w.max(1)).enumerate() {
-            for (x, c) in row.chunks_exact(3).enumerate() {
-                for i in 0..3 {
-                    sum[i] += table[c[i] as usize] as f64;
-                }
-                blocks[block_index(blocks_per_row, x, y)] = [c[0], c[1], c[2], 0];
+        for c in rgb.chunks_exact(3) {
+            for i in 0..3 {
+                sum[i] += table[c[i] as usize] as f64;
             }
         }
-        let n = (w * h).max(1) as f64;
+        let n = (width as usize * height as usize).max(1) as f64;
         let mean = Rgb::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32);
-        Bitmap { width, height, texels: Texels::Byte { blocks, table, blocks_per_row }, filter, wrap, mean }
+        let texel = |i: usize| [rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2], 0];
+        let texels = Texels::blocks(width as usize, height as usize, texel, table);
+        Bitmap { width, height, texels, filter, wrap, mean }
     }
 
     /// Mean texel value.

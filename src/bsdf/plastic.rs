@@ -11,6 +11,7 @@ use super::microfacet::Microfacet;
 use crate::math::{Rgb, reflect};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 use std::sync::Arc;
 
@@ -95,7 +96,6 @@ impl RoughPlasticParams {
     ) -> RoughPlasticParams {
         let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-4);
         // Each grid point's two integrals in parallel; the sums in order, as one thread would.
-        use rayon::prelude::*;
         let energies: Vec<(f32, f32)> = (0..TRANSMITTANCE_RES)
             .into_par_iter()
             .map(|i| {

@@ -311,13 +311,13 @@ struct FileCtx {
     path: Arc<PathBuf>,
     upgrade: bool,
     /// Byte offsets at which the file's lines start.
-    line_starts: Arc<Vec<usize>>,
+    line_starts: Vec<usize>,
 }
 
 impl FileCtx {
     fn new(path: Arc<PathBuf>, upgrade: bool, text: &str) -> FileCtx {
         let starts = std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect();
-        FileCtx { path, upgrade, line_starts: Arc::new(starts) }
+        FileCtx { path, upgrade, line_starts: starts }
     }
 
     /// The file and line:column of `node`, as roxmltree's `text_pos_at` gives them (line

@@ -1,23 +1,24 @@
 //! Reading a scene's files ahead, on all the loader's threads: before the builder walks the
 //! document, every OBJ mesh a `shape` names and every image a `bitmap` texture or an
-//! `envmap` names is read, decoded and laid out as a bitmap in parallel; the builder then takes each file from
-//! here where it would have read it. A scene of hundreds of OBJ files and a dozen JPEG
-//! textures (Bitterli's interiors) loads in a fraction of the time one thread takes.
+//! `envmap` names is read, decoded and laid out as a bitmap in parallel; the builder then
+//! takes each file from here where it would have read it. A scene of hundreds of OBJ files
+//! and a dozen JPEG textures (Bitterli's interiors) loads in a fraction of the time one
+//! thread takes.
 //!
 //! Nothing is decided here: a result (an error included) waits until the builder asks for
 //! its file, so a file no plugin uses is never an error, and the builder's messages name the
 //! line that uses the file as before. What the builder does not find here (a file it reads
-//! a second time, a PLY file, which is streamed with a progress bar) it reads itself.
+//! a second time, a PLY file, which is streamed with a progress bar, a mask's opacity
+//! bitmap, read for its alpha) it reads itself.
 
 use super::mesh::{self, TriangleMesh};
 use crate::error::Result;
-use crate::scene::xml::{Document, Node, Value};
+use crate::scene::xml::{Document, Node, NodeId, Value};
 use crate::texture::Bitmap;
 use rayon::prelude::*;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// One file to read ahead.
 enum File {
@@ -62,13 +63,19 @@ impl Prefetched {
     /// Reads every OBJ mesh and texture image the document names (relative to `base`), in
     /// parallel on the current thread pool.
     pub(super) fn read(doc: &Document, base: &Path) -> Prefetched {
+        // A mask's opacity bitmap is read for its alpha channel (`load/mask.rs`), not as a
+        // colour texture: decoding it here would be work for nothing.
+        let opacities: HashSet<NodeId> = (doc.nodes.iter())
+            .filter(|n| n.tag == "bsdf" && n.plugin == "mask")
+            .flat_map(|n| n.children.iter().filter(|c| c.name.as_deref() == Some("opacity")).map(|c| c.node))
+            .collect();
         let mut files: Vec<File> = Vec::new();
-        for node in &doc.nodes {
+        for (id, node) in doc.nodes.iter().enumerate() {
             let Some(filename) = string(node, "filename") else { continue };
             let path = base.join(filename);
             match (node.tag.as_str(), node.plugin.as_str()) {
                 ("shape", "obj") => files.push(File::Mesh(path)),
-                ("texture", "bitmap") => {
+                ("texture", "bitmap") if !opacities.contains(&id) => {
                     if let Some(raw) = boolean(node, "raw", false) {
                         files.push(File::Texture(path, raw));
                     }
@@ -77,34 +84,32 @@ impl Prefetched {
                 _ => {}
             }
         }
-        let mut seen = std::collections::HashSet::new();
+        let mut seen = HashSet::new();
         files.retain(|f| match f {
             File::Mesh(p) => p.is_file() && seen.insert((p.clone(), None)),
             File::Texture(p, raw) => p.is_file() && seen.insert((p.clone(), Some(*raw))),
         });
-        // Largest first, each thread taking the next file as it finishes one: a few large
-        // files among hundreds of small ones keep every thread busy to the end (rayon's
-        // halving of the list left one thread with the large ones).
+        // Largest first, each thread taking the next file from the queue as it finishes one:
+        // a few large files among hundreds of small ones keep every thread busy to the end
+        // (rayon's halving of the list left one thread with the large ones).
         let size = |f: &File| match f {
             File::Mesh(p) | File::Texture(p, _) => std::fs::metadata(p).map(|m| m.len()).unwrap_or(0),
         };
         files.sort_by_cached_key(|f| std::cmp::Reverse(size(f)));
-        let next = AtomicUsize::new(0);
-        let files: Vec<Mutex<Option<File>>> = files.into_iter().map(|f| Mutex::new(Some(f))).collect();
+        let queue = Mutex::new(files.into_iter());
+        let next = || queue.lock().unwrap_or_else(|e| e.into_inner()).next();
         let read: Vec<Read> = (0..rayon::current_num_threads())
             .into_par_iter()
             .with_max_len(1)
             .flat_map_iter(|_| {
                 std::iter::from_fn(|| {
-                    let slot = files.get(next.fetch_add(1, Ordering::Relaxed))?;
-                    let file = slot.lock().unwrap_or_else(|e| e.into_inner()).take()?;
-                    Some(match file {
+                    Some(match next()? {
                         File::Mesh(p) => {
                             let m = mesh::load_obj(&p);
                             Read::Mesh(p, m)
                         }
                         File::Texture(p, raw) => {
-                            let t = super::read_bitmap(&p, raw);
+                            let t = super::texture::read_bitmap(&p, raw);
                             Read::Texture(p, raw, t)
                         }
                     })
