@@ -54,7 +54,7 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
     let mut eorr = options(Eorr, 7, 11);
     eorr.bidir.eorr_pilot_spp = 4;
     cases.push(("Eorr with a 4-spp pilot".into(), eorr));
-    for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling] {
+    for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(Pcbpt, 7, 11);
         o.bidir.pc.mis = mis;
         o.bidir.pc.light_paths = 300;

@@ -21,7 +21,7 @@ fn methods() -> Vec<(String, RenderOptions)> {
     use IntegratorKind::*;
     let mut out: Vec<(String, RenderOptions)> =
         [Path, Lighttrace, Bdpt, Eorr, Lvc].into_iter().map(|k| (format!("{k:?}"), options(k))).collect();
-    for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling] {
+    for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(Pcbpt);
         o.bidir.pc.mis = mis;
         o.bidir.pc.light_paths = 200;

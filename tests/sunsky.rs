@@ -144,7 +144,7 @@ fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
         ("eorr", options(IntegratorKind::Eorr, 32)),
         ("lvc", options(IntegratorKind::Lvc, 32)),
     ];
-    for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling] {
+    for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(IntegratorKind::Pcbpt, 16);
         o.bidir.pc.mis = mis;
         methods.push(("pcbpt", o));

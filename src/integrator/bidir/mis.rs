@@ -192,12 +192,78 @@ pub trait StrategyCounts {
         false
     }
 
+    /// The correlation correction of the pool connections' counts (`--pc-mis correlated`),
+    /// `None` for counts used as they are.
+    fn correlation(&self) -> Option<Correlation> {
+        None
+    }
+
     /// The counts of the strategies `s'` of the path for which `needed(s')`, into `out[s']`.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
         let n = path.len();
         for (s, o) in out.iter_mut().enumerate().take(n) {
             if needed(s) {
                 *o = self.count(path, s, n - s);
+            }
+        }
+    }
+}
+
+/// The correction of pool connections' counts for correlation (`--pc-mis correlated`; the
+/// idea of Grittmann, Georgiev and Slusallek, "Correlation-aware multiple importance sampling
+/// for bidirectional rendering algorithms", CGF 2021, there for next-event estimation with
+/// several shadow rays): the `N` connections made from one camera vertex share its camera
+/// prefix, so where that prefix carries the randomness they are worth fewer than `N`
+/// independent samples. Each strategy `s' ≥ 2, t' ≥ 2` has its count multiplied by
+///
+/// `c = max(P_E / (P_E + P_L - P_E P_L), 1/N)`,
+///
+/// where `P_E = Π min(A pE(x_i), 1)` over the camera prefix's vertices beyond the primary
+/// hit, `P_L = Π min(A pL(x_i), 1) / N` over the light prefix, and `A` the area of the
+/// pixel's footprint at the primary hit, `1 / (W·H pE(x_{n-2}))`: `P` is how likely the
+/// prefix lands again within a footprint of where it is, 1 for a fully determined one
+/// (Dirac vertices count as determined). A fully determined camera prefix keeps `N`; a
+/// random camera prefix joined to a nearly determined light prefix counts as one sample.
+/// `c` is a function of the path's densities alone, the same whichever strategy sampled it,
+/// so the weights still sum to one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Correlation {
+    /// `W·H`.
+    pub pixels: f32,
+    /// `N`.
+    pub connections: f32,
+}
+
+impl Correlation {
+    /// The factors `c` of the strategies `0..n` of a path of `n` vertices whose densities
+    /// are `pl(i)`, `pe(i)`, into `out` (1 where a strategy is no pool connection).
+    pub fn factors(&self, n: usize, pl: impl Fn(usize) -> f32, pe: impl Fn(usize) -> f32, out: &mut [f32]) {
+        out[..n].fill(1.0);
+        if n < 4 {
+            return;
+        }
+        let area = 1.0 / (self.pixels * pe(n - 2));
+        if !(area.is_finite() && area > 0.0) {
+            return;
+        }
+        let prob = |p: f32| if p <= 0.0 { 1.0 } else { (area * p).min(1.0) };
+        // P_E of strategy s', over x_{s'}..x_{n-3}, from the camera end.
+        let mut p_e = 1.0f32;
+        for s in (2..=n - 2).rev() {
+            if s <= n - 3 {
+                p_e *= prob(pe(s));
+            }
+            out[s] = p_e;
+        }
+        let mut p_l = 1.0f32;
+        for (s, o) in out.iter_mut().enumerate().take(n - 1).skip(1) {
+            p_l *= prob(pl(s - 1));
+            if s >= 2 {
+                let pe_s = *o;
+                let p_l_n = p_l / self.connections;
+                let denom = pe_s + p_l_n - pe_s * p_l_n;
+                let c = if denom > 0.0 { pe_s / denom } else { 1.0 };
+                *o = c.max(1.0 / self.connections);
             }
         }
     }
@@ -338,6 +404,13 @@ fn weight_in<const N: usize>(
     let full = FullPath { light, camera };
     let (n, s) = (full.len(), light.len());
     let p = path_pdfs::<N>(scene, light, camera, conn);
+    if let Some(corr) = counts.correlation() {
+        let mut table = [0.0f32; N];
+        counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
+        let mut c = [1.0f32; N];
+        corr.factors(n, |i| p.pl[i], |i| p.pe[i], &mut c);
+        return weight_from_pdfs(&p, s, heuristic, &|i| table[i] * c[i]);
+    }
     if counts.path_dependent() {
         // Costly counts: all those the walk needs, evaluated together first.
         let mut table = [0.0f32; N];
@@ -398,6 +471,10 @@ pub fn brute_force_weights(
             }
         })
         .collect();
+    let mut corr = vec![1.0f32; n];
+    if let Some(c) = counts.correlation() {
+        c.factors(n, |i| pl[i] as f32, |i| pe[i] as f32, &mut corr);
+    }
     let nee = nee_ratio(scene, &path[0], path[1].p) as f64;
     let delta_light = matches!(path[0].kind, VertexKind::Light(l) if scene.lights[l as usize].is_unreachable());
     let at_infinity = path[0].at_infinity();
@@ -409,7 +486,7 @@ pub fn brute_force_weights(
             // Strategy s: the light subpath is path[0..s], the camera subpath the rest.
             let light: Vec<Vertex> = path[..s].to_vec();
             let camera: Vec<Vertex> = path[s..].iter().rev().copied().collect();
-            let c = counts.count(&FullPath { light: &light, camera: &camera }, s, n - s) as f64;
+            let c = counts.count(&FullPath { light: &light, camera: &camera }, s, n - s) as f64 * corr[s] as f64;
             let mut p = c * if s == 1 { nee } else { 1.0 };
             for (i, (l, e)) in pl.iter().zip(&pe).enumerate() {
                 p *= if i < s { *l } else { *e };

@@ -31,7 +31,7 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::cache_fit::CacheFit;
-use super::mis::{Counts, FullPath, Heuristic, StrategyCounts};
+use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use super::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, concentration_depth,
     draw_one_by_one,
@@ -74,6 +74,9 @@ pub enum PcMis {
     /// iteration's unoccluded pool connections from camera depth `t`: as if the draws were
     /// uniform over the vertices they reach.
     Harmonic,
+    /// `harmonic`'s counts corrected for the correlation of the `N` connections that share
+    /// one camera vertex's prefix ([`super::mis::Correlation`]).
+    Correlated,
 }
 
 /// How a draw inverts the blended PMF of a lookup. Both draw from exactly the same
@@ -243,6 +246,8 @@ pub struct PcCounts<'a> {
     pub connections_times_paths: f32,
     /// The previous iteration's cache (resampling weights), `None` for uniform.
     pub previous: Option<&'a Cache>,
+    /// The correlation correction of `--pc-mis correlated`.
+    pub correlation: Option<Correlation>,
 }
 
 impl<'a> PcCounts<'a> {
@@ -262,7 +267,7 @@ impl<'a> PcCounts<'a> {
         let n = opts.connections as f32;
         let connect = std::array::from_fn(|k| match opts.mis {
             _ if vbar <= 0.0 => 0.0,
-            PcMis::Harmonic => n * concentration[k] / vbar,
+            PcMis::Harmonic | PcMis::Correlated => n * concentration[k] / vbar,
             PcMis::Uniform | PcMis::Resampling => n / vbar,
         });
         PcCounts {
@@ -271,6 +276,7 @@ impl<'a> PcCounts<'a> {
             connect,
             connections_times_paths: n * m as f32,
             previous: previous.filter(|_| opts.mis == PcMis::Resampling),
+            correlation: (opts.mis == PcMis::Correlated).then_some(Correlation { pixels, connections: n }),
         }
     }
 
@@ -301,6 +307,10 @@ impl StrategyCounts for PcCounts<'_> {
 
     fn path_dependent(&self) -> bool {
         self.previous.is_some()
+    }
+
+    fn correlation(&self) -> Option<Correlation> {
+        self.correlation
     }
 
     /// Counts of a whole path with one pass for the light throughputs.
@@ -460,7 +470,10 @@ impl Iterative for PcbptRender {
     }
 
     fn warmup(&self, first: u32) -> Warmup {
-        Warmup { iterations: first.saturating_sub(1)..first, tiles: self.pc.opts.mis == PcMis::Harmonic }
+        Warmup {
+            iterations: first.saturating_sub(1)..first,
+            tiles: matches!(self.pc.opts.mis, PcMis::Harmonic | PcMis::Correlated),
+        }
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<(LightPool, Cache, CacheStats)> {

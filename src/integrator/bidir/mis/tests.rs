@@ -308,6 +308,7 @@ fn check_variant(variant: Variant, seed: u64) {
         ("pc harmonic", pc(PcMis::Harmonic, Some(&caches[0]), 3, 120)),
         ("pc resampling", pc(PcMis::Resampling, Some(&caches[0]), 3, 120)),
         ("pc resampling printed", pc(PcMis::Resampling, Some(&caches[1]), 5, 40)),
+        ("pc correlated", pc(PcMis::Correlated, Some(&caches[0]), 3, 120)),
     ];
     assert!(pc_options[0].1.previous.is_none() && pc_options[1].1.previous.is_none());
     assert!((pc_options[1].1.connect[0] / pc_options[0].1.connect[0] - 7.3).abs() < 1e-5);
@@ -315,7 +316,15 @@ fn check_variant(variant: Variant, seed: u64) {
     let mut checked = 0;
     let mut with_delta = 0;
     let mut resampled = Vec::new();
+    // Paths whose pool connections `--pc-mis correlated` weighs otherwise than `harmonic`.
+    let mut decorrelated = 0;
     for x in paths(&scene, seed, 300) {
+        if let Some((l, c)) =
+            subpaths(&scene, &x, 2).filter(|_| x.len() >= 5 && x[1].is_connectible() && x[2].is_connectible())
+        {
+            let w = |counts: &PcCounts| mis_weight(&scene, &l, &c, Heuristic::Balance, counts);
+            decorrelated += ((w(&pc_options[4].1) - w(&pc_options[1].1)).abs() > 1e-3) as usize;
+        }
         if x.len() >= 4 && !x.iter().any(|v| is_delta_surface(&scene, v)) {
             let (l, c) = subpaths(&scene, &x, 2).unwrap();
             resampled.push(pc_options[2].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
@@ -387,6 +396,7 @@ fn check_variant(variant: Variant, seed: u64) {
         let sun = paths(&scene, seed, 300).iter().filter(|x| from_sun(x)).count();
         assert!(sun > 10, "only {sun} paths from the sun");
     }
+    assert!(decorrelated > 10, "{variant:?}: the correlation changed only {decorrelated} weights");
     // The resampling counts follow the cached PMFs: far from constant.
     let (lo, hi) = resampled.iter().fold((f32::MAX, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
     assert!(resampled.len() > 20 && lo > 0.0 && hi > 20.0 * lo, "{variant:?}: resampling counts {lo}..{hi}");
@@ -561,4 +571,46 @@ fn unit_count_walk_is_the_general_walk_with_unit_counts() {
         weight_unit_counts(&p, 2, Heuristic::Power),
         weight_from_pdfs(&p, 2, Heuristic::Power, &|i| i as f32 + 1.0)
     );
+}
+
+/// `--pc-mis correlated`'s factors on constructed densities: a path of 6 vertices
+/// `x_0..x_5` (`x_5` the camera, `x_4` the primary hit) over a film of 100 pixels, so that
+/// the footprint's area is `A = 1 / (100 pE(x_4))`.
+#[test]
+fn correlation_factors_follow_the_prefixes_randomness() {
+    use super::Correlation;
+    let corr = Correlation { pixels: 100.0, connections: 4.0 };
+    let factors = |pl: [f32; 6], pe: [f32; 6]| {
+        let mut out = [0.0f32; 6];
+        corr.factors(6, |i| pl[i], |i| pe[i], &mut out);
+        out
+    };
+    // A = 1 / (100 * 0.01) = 1.
+    let pe_primary = 0.01;
+    // Strategies s' = 0, 1 and t' = 1 (s' = 5) are no pool connections; s' = 4 has no camera
+    // vertex beyond the primary hit, so its camera prefix is determined.
+    let f = factors([0.5; 6], [0.5, 0.5, 0.5, 0.5, pe_primary, 1.0]);
+    assert_eq!([f[0], f[1], f[5]], [1.0; 3]);
+    assert_eq!(f[4], 1.0);
+    // s' = 3: P_E = min(A pE(x_3), 1) = 0.5, P_L = 0.5³ / 4.
+    let (p_e, p_l) = (0.5f32, 0.125f32 / 4.0);
+    assert!((f[3] - p_e / (p_e + p_l - p_e * p_l)).abs() < 1e-6, "{f:?}");
+    // s' = 2: P_E = 0.25, P_L = 0.25 / 4.
+    let (p_e, p_l) = (0.25f32, 0.0625f32);
+    assert!((f[2] - p_e / (p_e + p_l - p_e * p_l)).abs() < 1e-6, "{f:?}");
+    // A random camera prefix joined to a determined light prefix counts as one sample.
+    let f = factors([2.0; 6], [1e-4, 1e-4, 1e-4, 1e-4, pe_primary, 1.0]);
+    assert_eq!(f[2], 0.25);
+    assert_eq!(f[3], 0.25);
+    // A determined camera prefix (densities above 1/A, or Dirac vertices) keeps all N.
+    let f = factors([1e-3; 6], [1e-3, 1e-3, 1e-3, 0.0, pe_primary, 1.0]);
+    assert_eq!(f[3], 1.0);
+    let f = factors([1e-3; 6], [1e-3, 1e-3, 5.0, 5.0, pe_primary, 1.0]);
+    assert_eq!(f[2], 1.0);
+    // Paths too short for a pool connection beyond the primary hit's, and a camera density
+    // of zero, leave the counts alone.
+    let mut out = [0.0f32; 3];
+    corr.factors(3, |_| 1.0, |_| 1.0, &mut out);
+    assert_eq!(out, [1.0; 3]);
+    assert_eq!(factors([1e-3; 6], [1e-4, 1e-4, 1e-4, 1e-4, 0.0, 1.0]), [1.0; 6]);
 }
