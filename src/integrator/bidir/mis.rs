@@ -255,16 +255,14 @@ impl Correlation {
             }
             out[s] = p_e;
         }
-        let mut p_l = 1.0f32;
-        for (s, o) in out.iter_mut().enumerate().take(n - 1).skip(1) {
+        // P_L of strategy s', over x_0..x_{s'-1}, from the light end; `out[s']` holds P_E.
+        let mut p_l = prob(pl(0));
+        for (s, o) in out.iter_mut().enumerate().take(n - 1).skip(2) {
             p_l *= prob(pl(s - 1));
-            if s >= 2 {
-                let pe_s = *o;
-                let p_l_n = p_l / self.connections;
-                let denom = pe_s + p_l_n - pe_s * p_l_n;
-                let c = if denom > 0.0 { pe_s / denom } else { 1.0 };
-                *o = c.max(1.0 / self.connections);
-            }
+            let (p_e, p_l) = (*o, p_l / self.connections);
+            let denom = p_e + p_l - p_e * p_l;
+            let c = if denom > 0.0 { p_e / denom } else { 1.0 };
+            *o = c.max(1.0 / self.connections);
         }
     }
 }
@@ -404,17 +402,16 @@ fn weight_in<const N: usize>(
     let full = FullPath { light, camera };
     let (n, s) = (full.len(), light.len());
     let p = path_pdfs::<N>(scene, light, camera, conn);
-    if let Some(corr) = counts.correlation() {
+    let correlation = counts.correlation();
+    if counts.path_dependent() || correlation.is_some() {
+        // Costly or corrected counts: all those the walk needs, evaluated together first.
         let mut table = [0.0f32; N];
         counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
-        let mut c = [1.0f32; N];
-        corr.factors(n, |i| p.pl[i], |i| p.pe[i], &mut c);
-        return weight_from_pdfs(&p, s, heuristic, &|i| table[i] * c[i]);
-    }
-    if counts.path_dependent() {
-        // Costly counts: all those the walk needs, evaluated together first.
-        let mut table = [0.0f32; N];
-        counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
+        if let Some(corr) = correlation {
+            let mut c = [1.0f32; N];
+            corr.factors(n, |i| p.pl[i], |i| p.pe[i], &mut c);
+            table[..n].iter_mut().zip(&c[..n]).for_each(|(t, c)| *t *= c);
+        }
         weight_from_pdfs(&p, s, heuristic, &|i| table[i])
     } else if counts.all_ones() {
         weight_unit_counts(&p, s, heuristic)
