@@ -37,12 +37,16 @@ def seeds(text):
     return out
 
 
-def main():
-    argv = sys.argv[1:]
-    common = []
+def split_common(argv):
+    """The script's own arguments and those after `--`, passed to every render."""
     if "--" in argv:
         i = argv.index("--")
-        argv, common = argv[:i], argv[i + 1 :]
+        return argv[:i], argv[i + 1 :]
+    return argv, []
+
+
+def main():
+    argv, common = split_common(sys.argv[1:])
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene")
     p.add_argument("--seeds", type=seeds, required=True, help="e.g. 1-60 or 1,2,5")

@@ -121,6 +121,11 @@ pub struct MethodEntry {
     pub pc_distance_term: Option<String>,
     pub pc_mis: Option<String>,
     pub pc_sampling: Option<String>,
+    pub sp_eye_subspaces: Option<usize>,
+    pub sp_light_subspaces: Option<usize>,
+    pub sp_training_iterations: Option<u32>,
+    pub sp_uniform: Option<f32>,
+    pub sp_mis: Option<String>,
 }
 
 fn default_backend() -> String {
@@ -304,6 +309,15 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
         pc.sampling = value_enum(file, "pc_sampling", x)?;
     }
     pc.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
+    let sp = &mut o.bidir.sp;
+    sp.eye_subspaces = m.sp_eye_subspaces.unwrap_or(sp.eye_subspaces);
+    sp.light_subspaces = m.sp_light_subspaces.unwrap_or(sp.light_subspaces);
+    sp.training_iterations = m.sp_training_iterations.unwrap_or(sp.training_iterations);
+    sp.uniform = m.sp_uniform.unwrap_or(sp.uniform);
+    if let Some(x) = &m.sp_mis {
+        sp.mis = value_enum(file, "sp_mis", x)?;
+    }
+    sp.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
     Ok(o)
 }
 

@@ -7,6 +7,7 @@ use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
 use pcbpt::integrator::bidir::mis::Heuristic;
 use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
+use pcbpt::integrator::bidir::spcbpt::SpOptions;
 use pcbpt::integrator::mlt::{MltBase, MltOptions};
 use pcbpt::integrator::{self, BidirOptions, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::{LoadOptions, Scene};
@@ -244,6 +245,26 @@ struct RenderArgs {
     /// PCBPT: memory limit of the cache (records × pool vertices floats), in MiB.
     #[arg(long, default_value_t = PcOptions::default().max_cache_mb)]
     pc_max_cache_mb: usize,
+    /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
+    /// normals).
+    #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
+    sp_eye_subspaces: usize,
+    /// SPCBPT: light subspaces (leaves of the k-d tree over light vertices).
+    #[arg(long, default_value_t = SpOptions::default().light_subspaces)]
+    sp_light_subspaces: usize,
+    /// SPCBPT: iterations whose connections train the subspace matrix (0: it stays uniform).
+    #[arg(long, default_value_t = SpOptions::default().training_iterations)]
+    sp_training_iterations: u32,
+    /// SPCBPT: share of the uniform distribution mixed into each trained row of the matrix.
+    #[arg(long, default_value_t = SpOptions::default().uniform)]
+    sp_uniform: f32,
+    /// SPCBPT: MIS strategy counts of the connections (as --pc-mis; resampling is the
+    /// selection density itself).
+    #[arg(long, value_enum, default_value_t = SpOptions::default().mis)]
+    sp_mis: PcMis,
+    /// SPCBPT: memory limit of the matrix and the training samples, in MiB.
+    #[arg(long, default_value_t = SpOptions::default().max_mb)]
+    sp_max_mb: usize,
     /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
     #[arg(long, value_name = "DIR")]
     strategy_images: Option<PathBuf>,
@@ -450,6 +471,14 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             sampling: a.pc_sampling,
             max_cache_mb: a.pc_max_cache_mb,
         },
+        sp: SpOptions {
+            eye_subspaces: a.sp_eye_subspaces,
+            light_subspaces: a.sp_light_subspaces,
+            training_iterations: a.sp_training_iterations,
+            uniform: a.sp_uniform,
+            mis: a.sp_mis,
+            max_mb: a.sp_max_mb,
+        },
     };
     opts.mlt = MltOptions {
         large_step_prob: a.large_step_prob,
@@ -613,6 +642,18 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
                 k.pool_vertices,
                 k.megabytes,
                 c.concentration().map_or(1.0, |(all, _)| all)
+            );
+        }
+        if let Some(k) = &s.subspaces {
+            eprintln!(
+                "  SPCBPT: {} eye × {} light subspaces ({} light subspaces in the last pool), {} trained rows from {} connections, {:.2} s building and training, matrix and trees {:.2} MiB",
+                k.eye_subspaces,
+                k.light_subspaces,
+                k.light_subspaces_used,
+                k.trained_rows,
+                k.training_samples,
+                k.training_seconds,
+                k.megabytes
             );
         }
     }

@@ -59,6 +59,15 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
         o.bidir.pc.mis = mis;
         o.bidir.pc.light_paths = 300;
         cases.push((format!("Pcbpt {mis:?}"), o));
+        // SPCBPT trains its matrix in iterations 0 and 1 and fixes its state after 2: the
+        // cuts fall inside the training, right after the state is fixed, and beyond.
+        let mut o = options(Spcbpt, 7, 11);
+        o.bidir.sp.mis = mis;
+        o.bidir.sp.training_iterations = 2;
+        o.bidir.sp.eye_subspaces = 16;
+        o.bidir.sp.light_subspaces = 32;
+        o.bidir.pc.light_paths = 300;
+        cases.push((format!("Spcbpt {mis:?}"), o));
     }
     for (name, o) in &cases {
         let whole = integrator::render(&scene, o).unwrap();

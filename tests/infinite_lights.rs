@@ -16,7 +16,7 @@ use pcbpt::integrator::bidir::pcbpt::PcMis;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
 
-/// Every integrator, PCBPT with each MIS option.
+/// Every integrator, PCBPT and SPCBPT with each MIS option.
 fn methods() -> Vec<(String, RenderOptions)> {
     use IntegratorKind::*;
     let mut out: Vec<(String, RenderOptions)> =
@@ -27,6 +27,12 @@ fn methods() -> Vec<(String, RenderOptions)> {
         o.bidir.pc.light_paths = 200;
         o.bidir.pc.stride = 8;
         out.push((format!("Pcbpt {mis:?}"), o));
+        let mut o = options(Spcbpt);
+        o.bidir.sp.mis = mis;
+        o.bidir.pc.light_paths = 200;
+        o.bidir.sp.eye_subspaces = 32;
+        o.bidir.sp.light_subspaces = 64;
+        out.push((format!("Spcbpt {mis:?}"), o));
     }
     let mut o = options(Pssmlt);
     o.mlt.bootstrap = 20_000;

@@ -148,6 +148,9 @@ fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
         let mut o = options(IntegratorKind::Pcbpt, 16);
         o.bidir.pc.mis = mis;
         methods.push(("pcbpt", o));
+        let mut o = options(IntegratorKind::Spcbpt, 16);
+        o.bidir.sp.mis = mis;
+        methods.push(("spcbpt", o));
     }
     let mut o = options(IntegratorKind::Pssmlt, 32);
     o.mlt.bootstrap = 20_000;
@@ -157,7 +160,11 @@ fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
     for (name, o) in methods {
         let img = image(pcbpt::integrator::render(&scene, &o).unwrap());
         let ratio = mean(&img) / mean(&reference);
-        let name = if name == "pcbpt" { format!("pcbpt {:?}", o.bidir.pc.mis) } else { name.to_string() };
+        let name = match name {
+            "pcbpt" => format!("pcbpt {:?}", o.bidir.pc.mis),
+            "spcbpt" => format!("spcbpt {:?}", o.bidir.sp.mis),
+            _ => name.to_string(),
+        };
         eprintln!("sunsky, {name}: mean ratio {ratio:.4}");
         if (ratio - 1.0).abs() > 0.01 {
             failures.push(format!("{name}: mean ratio {ratio:.4}"));

@@ -21,6 +21,7 @@ use bidir::mis::Heuristic;
 use bidir::pcbpt::{PcOptions, Pcbpt, PcbptRender};
 pub use bidir::pool::CONCENTRATION_DEPTHS;
 use bidir::pool::{Lvc, LvcRender};
+use bidir::spcbpt::{SpOptions, Spcbpt, SpcbptRender};
 use serde::Serialize;
 use std::ops::Range;
 use std::sync::Arc;
@@ -44,6 +45,9 @@ pub enum IntegratorKind {
     Pssmlt,
     /// Probabilistic connections: a shared pool, connections drawn from cached PMFs.
     Pcbpt,
+    /// Subspace-based probabilistic connections: connections drawn from a trained matrix
+    /// over eye and light subspaces.
+    Spcbpt,
     /// Path-space Metropolis with Manifold Exploration's mutations.
     Memlt,
 }
@@ -142,8 +146,10 @@ pub struct BidirOptions {
     pub lvc_connections: u32,
     /// Memory limit of a light pool, in MiB: settings whose pool would need more are refused.
     pub max_pool_mb: usize,
-    /// PCBPT's options.
+    /// PCBPT's options (the pool and the connections of SPCBPT too).
     pub pc: PcOptions,
+    /// SPCBPT's options.
+    pub sp: SpOptions,
 }
 
 impl Default for BidirOptions {
@@ -156,6 +162,7 @@ impl Default for BidirOptions {
             lvc_connections: 1,
             max_pool_mb: 4096,
             pc: PcOptions::default(),
+            sp: SpOptions::default(),
         }
     }
 }
@@ -261,6 +268,9 @@ pub struct RenderStats {
     /// PCBPT's cache (when PCBPT ran).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cache: Option<CacheStats>,
+    /// SPCBPT's subspaces and matrix (when SPCBPT ran).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub subspaces: Option<bidir::spcbpt::SubspaceStats>,
     /// Options of the bidirectional integrators (when one ran).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bidir: Option<BidirOptions>,
@@ -312,6 +322,7 @@ impl RenderStats {
             phases: PhaseTimes::default(),
             shadow_rays: PhaseRays::default(),
             cache: None,
+            subspaces: None,
             bidir: None,
             pool: None,
             mlt: None,
@@ -539,6 +550,12 @@ pub fn render_iterations(
             b.pc.validate().map_err(Error::Usage)?;
             let pc = Pcbpt { bdpt: bdpt(false), opts: b.pc.clone() };
             render_loop::run(scene, opts, PcbptRender::new(pc, heuristic, b.max_pool_mb), true, iterations)
+        }
+        IntegratorKind::Spcbpt => {
+            b.pc.validate().map_err(Error::Usage)?;
+            b.sp.validate().map_err(Error::Usage)?;
+            let sp = Spcbpt { bdpt: bdpt(false), pc: b.pc.clone(), opts: b.sp.clone() };
+            render_loop::run(scene, opts, SpcbptRender::new(sp, heuristic, b.max_pool_mb), true, iterations)
         }
     }
 }

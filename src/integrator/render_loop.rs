@@ -138,6 +138,8 @@ pub(crate) struct TileResult {
     pub block: ImageBlock,
     pub splats: Vec<Splat>,
     pub counters: Counters,
+    /// What an integrator learns from a tile for later iterations (its own type).
+    pub extra: Option<Box<dyn std::any::Any + Send + Sync>>,
 }
 
 /// Renders iterations `first..first + count` of every pixel of `tile`: `sample` estimates one
@@ -172,7 +174,7 @@ pub(crate) fn sample_tile(
             }
         }
     }
-    TileResult { block, splats, counters }
+    TileResult { block, splats, counters, extra: None }
 }
 
 /// Adds a pass's preparation splats and its tiles to a film, in a fixed order (preparation

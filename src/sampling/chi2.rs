@@ -262,3 +262,8 @@ fn pearson(counts: &[u64], expected: &[f64], significance: f64, tests: usize) ->
 pub fn discrete_chi2(counts: &[u64], expected: &[f64]) -> Chi2Result {
     pearson(counts, expected, 0.01, 1)
 }
+
+/// [`discrete_chi2`] as one of `tests` independent tests at 1% together (Šidák).
+pub fn discrete_chi2_of(counts: &[u64], expected: &[f64], tests: usize) -> Chi2Result {
+    pearson(counts, expected, 0.01, tests)
+}

@@ -137,7 +137,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
             let light_end = End { f: Rgb::ZERO, pdf_fwd: light.pdf_emission_direction(ls.n, -ls.wi), pdf_rev: 0.0 };
             (y0, Connection { w: -ls.wi, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
         };
-        self.finish(from_ref(&y0), camera, &conn, c, pos, rng, sink, counters, |s, w| s.add(1, t, w));
+        self.finish(from_ref(&y0), camera, &conn, c, pos, rng, sink, counters, |s, c, w| s.add(1, t, c * w));
     }
 
     /// `t = 1`: `y_{s-1}` connects to the camera and splats onto the film.
@@ -165,7 +165,9 @@ impl<C: StrategyCounts> Connector<'_, C> {
             // What `z0.end(scene, -k.wi, ..)` gives, without projecting the direction again.
             camera_end: End { f: Rgb::ZERO, pdf_fwd: k.pdf_dir, pdf_rev: 0.0 },
         };
-        self.finish(light, from_ref(&z0), &conn, c, k.raster, rng, sink, counters, |sk, w| sk.splat(s, 1, k.raster, w));
+        self.finish(light, from_ref(&z0), &conn, c, k.raster, rng, sink, counters, |sk, c, w| {
+            sk.splat(s, 1, k.raster, c * w)
+        });
     }
 
     /// `s, t >= 2`: joins `y_{s-1}` and `z_{t-1}` with a shadow ray; `scale` multiplies the
@@ -194,7 +196,9 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return false;
         }
         let c = qs.beta * f * pt.beta * (scale * conn.inv_dist2);
-        self.finish(light, camera, &conn, c, pos, rng, sink, counters, |sk, w| sk.add(s, t, w))
+        self.finish(light, camera, &conn, c, pos, rng, sink, counters, |sk, c, w| {
+            sk.add_connection(light, camera, c, w)
+        })
     }
 
     /// Weights an unweighted connection contribution, applies roulette, traces the shadow
@@ -211,7 +215,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         rng: &mut R,
         sink: &mut S,
         counters: &mut Counters,
-        deliver: impl FnOnce(&mut S, Rgb),
+        deliver: impl FnOnce(&mut S, Rgb, f32),
     ) -> bool {
         let (a, b) = (&light[light.len() - 1], &camera[camera.len() - 1]);
         if self.roulette.is_some() {
@@ -223,12 +227,12 @@ impl<C: StrategyCounts> Connector<'_, C> {
             let Some(k) = self.roulette(c * w, pos, rng, counters) else { return false };
             let visible = self.trace(a, b, counters);
             if visible {
-                deliver(sink, c * (w * k));
+                deliver(sink, c, w * k);
             }
             visible
         } else if self.trace(a, b, counters) {
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
-            deliver(sink, c * w);
+            deliver(sink, c, w);
             true
         } else {
             false

@@ -14,6 +14,8 @@ pub mod mis;
 pub mod pc_cache;
 pub mod pcbpt;
 pub mod pool;
+pub mod spcbpt;
+pub mod subspace;
 
 use super::Counters;
 use crate::accel::Ray;
@@ -750,5 +752,12 @@ pub trait Sink {
     #[inline]
     fn add_emission(&mut self, camera: &[Vertex], value: Rgb) {
         self.add(0, camera.len(), value);
+    }
+    /// `s, t >= 2`: the connection of `light` and `camera`, its unweighted contribution `c`
+    /// and MIS weight `w` (by default `add(s, t, c * w)`; a sink that learns from the
+    /// connections looks at them).
+    #[inline]
+    fn add_connection(&mut self, light: &[Vertex], camera: &[Vertex], c: Rgb, w: f32) {
+        self.add(light.len(), camera.len(), c * w);
     }
 }

@@ -688,14 +688,15 @@ impl CandidateGrid {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::integrator::bidir::mis::Counts;
     use crate::integrator::bidir::pcbpt::DRAW_BATCH;
     use crate::sampling::chi2::discrete_chi2;
     use crate::scene::LoadOptions;
 
-    fn scene() -> Scene {
+    /// `cornell-box` at 64×48.
+    pub(crate) fn scene() -> Scene {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box/scene.xml");
         let overrides = vec![("resx".into(), "64".into()), ("resy".into(), "48".into())];
         Scene::load(&path, &LoadOptions { overrides, ..Default::default() }).unwrap()

@@ -265,11 +265,7 @@ impl<'a> PcCounts<'a> {
         previous: Option<&'a Cache>,
     ) -> PcCounts<'a> {
         let n = opts.connections as f32;
-        let connect = std::array::from_fn(|k| match opts.mis {
-            _ if vbar <= 0.0 => 0.0,
-            PcMis::Harmonic | PcMis::Correlated => n * concentration[k] / vbar,
-            PcMis::Uniform | PcMis::Resampling => n / vbar,
-        });
+        let connect = connection_counts(opts.mis, n, vbar, concentration);
         PcCounts {
             scene,
             light_trace: m as f32 / pixels,
@@ -337,11 +333,27 @@ impl PcCounts<'_> {
     }
 }
 
+/// The counts of pool connections from camera vertex `z_{t-1}`, at `[t - 2]`, for counts
+/// that do not depend on the path: `N / V̄` (uniform; resampling's first iteration) or
+/// `N κ_t / V̄` (harmonic, correlated); none without a measured `V̄`.
+pub(super) fn connection_counts(
+    mis: PcMis,
+    n: f32,
+    vbar: f32,
+    concentration: &[f32; CONCENTRATION_DEPTHS],
+) -> [f32; CONCENTRATION_DEPTHS] {
+    std::array::from_fn(|k| match mis {
+        _ if vbar <= 0.0 => 0.0,
+        PcMis::Harmonic | PcMis::Correlated => n * concentration[k] / vbar,
+        PcMis::Uniform | PcMis::Resampling => n / vbar,
+    })
+}
+
 /// Calls `f` with room for the light throughputs of the first `n` vertices of a path: a
 /// small array for the usual short paths (zeroing the full one for every weight costs more
 /// than using it).
 #[inline]
-fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
+pub(super) fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
     use super::mis::{CAP, SHORT};
     if n <= SHORT { f(&mut [Rgb::ZERO; SHORT][..n]) } else { f(&mut [Rgb::ZERO; CAP][..n]) }
 }

@@ -9,6 +9,7 @@ use crate::bsdf::{Bsdf, BsdfModel};
 use crate::integrator::Counters;
 use crate::integrator::bidir::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, trace_records};
 use crate::integrator::bidir::pool::LightPool;
+use crate::integrator::bidir::spcbpt::{Measured, Model, SpCounts, test_model};
 use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
 use crate::light::{Light, LightSampler};
 use crate::math::{Frame, Rgb};
@@ -289,6 +290,16 @@ fn pc_cache(scene: &Scene, m: usize, term: DistanceTerm) -> Cache {
     cache
 }
 
+/// An SPCBPT model over a pool of `m` light paths (its `Γ` far from uniform) and what the
+/// counts measure from that pool (`V̄ = 3.1`, `κ` by depth).
+fn sp_model(scene: &Scene, m: usize) -> (Model, Measured) {
+    let (model, pool) = test_model(scene, m, 8, (8, 16), |x| 0.3 + 0.7 * x);
+    let subspaces = model.sort_pool(scene, &pool);
+    let kappa = std::array::from_fn(|k| 5.1 / (1.0 + k as f32));
+    let measured = Measured::of_pool(&subspaces, pool.paths, 3.1, kappa);
+    (model, measured)
+}
+
 fn check_variant(variant: Variant, seed: u64) {
     let scene = scene(variant);
     let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
@@ -310,12 +321,22 @@ fn check_variant(variant: Variant, seed: u64) {
         ("pc resampling printed", pc(PcMis::Resampling, Some(&caches[1]), 5, 40)),
         ("pc correlated", pc(PcMis::Correlated, Some(&caches[0]), 3, 120)),
     ];
+    let k_sp = if matches!(variant, Variant::Envmap | Variant::Directional | Variant::Sunsky) { 6 } else { 1 };
+    let (model, measured) = sp_model(&scene, 150 * k_sp);
+    let sp = |mis| SpCounts::for_iteration(&scene, mis, 3, 150 * k_sp, &measured, &model);
+    let sp_options = [
+        ("sp uniform", sp(PcMis::Uniform)),
+        ("sp harmonic", sp(PcMis::Harmonic)),
+        ("sp resampling", sp(PcMis::Resampling)),
+        ("sp correlated", sp(PcMis::Correlated)),
+    ];
     assert!(pc_options[0].1.previous.is_none() && pc_options[1].1.previous.is_none());
     assert!((pc_options[1].1.connect[0] / pc_options[0].1.connect[0] - 7.3).abs() < 1e-5);
     assert!((pc_options[1].1.connect[3] / pc_options[0].1.connect[3] - 7.3 / 4.0).abs() < 1e-5);
     let mut checked = 0;
     let mut with_delta = 0;
     let mut resampled = Vec::new();
+    let mut sp_resampled = Vec::new();
     // Paths whose pool connections `--pc-mis correlated` weighs otherwise than `harmonic`.
     let mut decorrelated = 0;
     for x in paths(&scene, seed, 300) {
@@ -328,6 +349,7 @@ fn check_variant(variant: Variant, seed: u64) {
         if x.len() >= 4 && !x.iter().any(|v| is_delta_surface(&scene, v)) {
             let (l, c) = subpaths(&scene, &x, 2).unwrap();
             resampled.push(pc_options[2].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
+            sp_resampled.push(sp_options[2].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
         }
         let n = x.len();
         let has_delta = x.iter().any(|v| is_delta_surface(&scene, v));
@@ -377,6 +399,10 @@ fn check_variant(variant: Variant, seed: u64) {
                 let b = brute(brute_force_weights(&scene, &x0, heuristic, counts));
                 check(&|l, c| mis_weight(&scene, l, c, heuristic, counts), b, what);
             }
+            for (what, counts) in &sp_options {
+                let b = brute(brute_force_weights(&scene, &x0, heuristic, counts));
+                check(&|l, c| mis_weight(&scene, l, c, heuristic, counts), b, what);
+            }
             // Light tracing alone: the t = 1 strategy carries everything it can sample.
             let lt: f32 = (1..n)
                 .filter_map(|s| subpaths(&scene, &x, s))
@@ -400,6 +426,9 @@ fn check_variant(variant: Variant, seed: u64) {
     // The resampling counts follow the cached PMFs: far from constant.
     let (lo, hi) = resampled.iter().fold((f32::MAX, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
     assert!(resampled.len() > 20 && lo > 0.0 && hi > 20.0 * lo, "{variant:?}: resampling counts {lo}..{hi}");
+    // So do SPCBPT's, with the subspaces' matrix entries and the vertices' flux.
+    let (lo, hi) = sp_resampled.iter().fold((f32::MAX, 0.0f32), |(a, b), &c| (a.min(c), b.max(c)));
+    assert!(sp_resampled.len() > 20 && lo > 0.0 && hi > 10.0 * lo, "{variant:?}: SPCBPT resampling counts {lo}..{hi}");
     if variant == Variant::Mirror {
         assert!(with_delta > 10, "only {with_delta} paths through the mirror");
     }

@@ -1,0 +1,767 @@
+//! Subspace-based probabilistic connections (SPCBPT; Su, Li and Wang, ACM TOG 41(4), 2022),
+//! on PCBPT's light pool and connection pass ([`PoolPass`]).
+//!
+//! Instead of a PMF over every pool vertex per cache record, SPCBPT bins vertices into
+//! subspaces and keeps one small matrix:
+//!
+//! 1. **Subspaces.** Two k-d trees over position and normal ([`SubspaceTree`]), built once
+//!    before the first iteration from a pilot's vertices (camera vertices of a grid of pixels
+//!    for the eye subspaces, a pilot pool for the light subspaces), `--sp-eye-subspaces` and
+//!    `--sp-light-subspaces` leaves.
+//! 2. **Selection.** A camera vertex of eye subspace `i` draws a light subspace `j` from row
+//!    `i` of `Γ`, then a pool vertex `y` of `j` with `P(y | j)` proportional to its flux (with
+//!    a uniform share, [`LightSubspaces`]): `P(y | z) = Γ_ij P(y | j)`, and the connection
+//!    weighs `1 / (N M P(y | z))`.
+//! 3. **Training.** `Γ` is uniform in iteration 0; after each of the first
+//!    `--sp-training-iterations` iterations it is fitted to all their connections by the
+//!    MIS-aware variance objective ([`Matrix::train`]), mixed with `--sp-uniform` of the
+//!    uniform distribution. From then on the state is fixed: `Γ`, and what the MIS counts take
+//!    from the last training iteration, so a chunk of a distributed render re-runs at most
+//!    the training iterations and the one after them.
+//!
+//! MIS counts (`--sp-mis`, as PCBPT's `--pc-mis`): `N / V̄` (uniform), `N κ_t / V̄`
+//! (harmonic, `κ_t` measured on the previous iteration's unoccluded draws), `N M P(y | z)`
+//! (resampling: the selection density itself, evaluated on the path with the frozen `Γ` and
+//! the previous pool's per-path subspace totals, so that it is a function of the path alone;
+//! the current pool's totals would make a connection's weight depend on the pool that holds
+//! its own light vertex), or harmonic corrected for correlation.
+
+use super::bdpt::{Bdpt, Connector, Scratch};
+use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
+use super::pc_cache::{Record, trace_records};
+use super::pcbpt::{PcMis, PcOptions, connection_counts, light_paths_for, light_throughputs, with_throughput_buffer};
+use super::pool::{
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, concentration_depth,
+};
+use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, within_probability};
+use super::{Sink, Vertex};
+use crate::error::Error;
+use crate::film::Tile;
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
+use crate::integrator::{Counters, RenderStats};
+use crate::math::{Rgb, luminance};
+use crate::sampling::Random;
+use crate::scene::Scene;
+use glam::Vec2;
+use serde::Serialize;
+use std::ops::Range;
+use std::time::Instant;
+
+/// Options of SPCBPT (the pool's light paths and the connections per camera vertex are
+/// PCBPT's `--pc-light-paths`, `--pc-pool-vertices` and `--pc-connections`).
+#[derive(Clone, Debug, Serialize)]
+pub struct SpOptions {
+    /// Eye subspaces (leaves of the eye tree).
+    pub eye_subspaces: usize,
+    /// Light subspaces (leaves of the light tree).
+    pub light_subspaces: usize,
+    /// Iterations whose connections train `Γ` (0: `Γ` stays uniform).
+    pub training_iterations: u32,
+    /// Share of the uniform distribution mixed into every trained row of `Γ`.
+    pub uniform: f32,
+    pub mis: PcMis,
+    /// Memory limit of the matrix and the training samples, in MiB.
+    pub max_mb: usize,
+}
+
+impl Default for SpOptions {
+    fn default() -> SpOptions {
+        SpOptions {
+            eye_subspaces: 64,
+            light_subspaces: 64,
+            training_iterations: 4,
+            uniform: 0.2,
+            mis: PcMis::Harmonic,
+            max_mb: 1024,
+        }
+    }
+}
+
+/// Pixels per side of the pilot grid whose camera vertices build the eye tree.
+const PILOT_STRIDE: u32 = 4;
+/// Camera vertices per pilot pixel.
+const PILOT_DEPTH: u32 = 5;
+/// The light tree is built from a pilot of this many times the iteration's light paths.
+const PILOT_POOLS: usize = 4;
+/// Training samples come from at most about this many pixels per iteration (every k-th
+/// pixel on larger films), so that their memory does not grow with the resolution.
+const TRAINING_PIXELS: usize = 65_536;
+/// Bytes of one training sample.
+const SAMPLE_BYTES: f64 = std::mem::size_of::<TrainingSample>() as f64;
+
+impl SpOptions {
+    /// Checks the options, naming the one at fault.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1..=65_536).contains(&self.eye_subspaces) {
+            return Err(format!("--sp-eye-subspaces must be between 1 and 65536, not {}", self.eye_subspaces));
+        }
+        if !(1..=65_536).contains(&self.light_subspaces) {
+            return Err(format!("--sp-light-subspaces must be between 1 and 65536, not {}", self.light_subspaces));
+        }
+        if !(self.uniform > 0.0 && self.uniform <= 1.0) {
+            return Err(format!(
+                "--sp-uniform must be in (0, 1] (it keeps every light subspace reachable), not {}",
+                self.uniform
+            ));
+        }
+        Ok(())
+    }
+
+    /// MiB of the matrix (probabilities and running sums).
+    fn matrix_mb(&self) -> f64 {
+        (self.eye_subspaces * self.light_subspaces * 8) as f64 / (1024.0 * 1024.0)
+    }
+}
+
+/// SPCBPT's statistics.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct SubspaceStats {
+    pub eye_subspaces: usize,
+    pub light_subspaces: usize,
+    /// Rows of `Γ` fitted to training connections.
+    pub trained_rows: usize,
+    /// Light subspaces holding a vertex of the last pool.
+    pub light_subspaces_used: usize,
+    /// Training connections kept.
+    pub training_samples: usize,
+    /// Seconds spent building the trees and training `Γ`.
+    pub training_seconds: f64,
+    /// The matrix and the trees, in MiB.
+    pub megabytes: f64,
+}
+
+/// The subspaces and `Γ`.
+pub struct Model {
+    pub eye: SubspaceTree,
+    pub light: SubspaceTree,
+    pub matrix: Matrix,
+}
+
+impl Model {
+    /// Trees of up to `eye` and `light` leaves over the features of camera vertices
+    /// `eye_vertices` and of the connectible vertices of `pool`; `Γ` uniform.
+    pub fn new(scene: &Scene, eye_vertices: &[Record], pool: &LightPool, eye: usize, light: usize) -> Model {
+        let eye_points: Vec<_> = eye_vertices.iter().map(|r| super::subspace::features(scene, &r.vertex)).collect();
+        let light_points: Vec<_> = (0..pool.connectible.len())
+            .map(|k| {
+                let prefix = pool.prefix(k);
+                light_features(scene, &prefix[prefix.len() - 1], &prefix[prefix.len() - 2])
+            })
+            .collect();
+        let eye = SubspaceTree::build(eye_points, eye);
+        let light = SubspaceTree::build(light_points, light);
+        let matrix = Matrix::uniform(eye.len(), light.len());
+        Model { eye, light, matrix }
+    }
+
+    /// The pool's connectible vertices by light subspace, with their flux.
+    pub fn sort_pool(&self, scene: &Scene, pool: &LightPool) -> LightSubspaces {
+        let mut alpha = Vec::new();
+        let mut flux = Vec::with_capacity(pool.connectible.len());
+        let mut subspace = Vec::with_capacity(pool.connectible.len());
+        let mut path = usize::MAX;
+        for &g in &pool.connectible {
+            let g = g as usize;
+            let start = pool.path_start[g] as usize;
+            if start != path {
+                // The throughputs of the whole path, once.
+                path = start;
+                let end = (start..pool.vertices.len())
+                    .find(|&k| pool.path_start[k] as usize != start)
+                    .unwrap_or(pool.vertices.len());
+                let verts = &pool.vertices[start..end];
+                alpha.clear();
+                alpha.resize(verts.len(), Rgb::ZERO);
+                light_throughputs(scene, &FullPath { light: verts, camera: &[] }, &mut alpha);
+            }
+            flux.push(luminance(alpha[g - start]).max(0.0));
+            subspace.push(self.light_subspace(scene, &pool.vertices[start..=g]) as u32);
+        }
+        LightSubspaces::new(self.light.len(), &subspace, flux)
+    }
+
+    /// The eye subspace of camera vertex `z`, its normal turned towards its walk's
+    /// previous vertex.
+    #[inline]
+    pub fn eye_subspace(&self, scene: &Scene, z: &Vertex) -> usize {
+        self.eye.classify(&super::subspace::features(scene, z))
+    }
+
+    /// The light subspace of the last vertex of a light subpath `y_0..y_{s-1}` (`s >= 2`).
+    #[inline]
+    pub fn light_subspace(&self, scene: &Scene, light: &[Vertex]) -> usize {
+        let s = light.len();
+        self.light.classify(&light_features(scene, &light[s - 1], &light[s - 2]))
+    }
+
+    fn megabytes(&self) -> f64 {
+        (self.matrix.bytes() + self.eye.bytes() + self.light.bytes()) as f64 / (1024.0 * 1024.0)
+    }
+}
+
+/// Features of light vertex `y` whose predecessor is `prev`: the normal is turned towards
+/// `prev` from their positions (or towards a light at infinity's direction), so that a
+/// path's strategies classify the vertex the same way whichever walk made it.
+fn light_features(scene: &Scene, y: &Vertex, prev: &Vertex) -> [f32; FEATURES] {
+    let towards = if prev.at_infinity() { prev.ng } else { prev.p - y.p };
+    super::subspace::features(scene, &Vertex { wo: towards, ..*y })
+}
+
+/// Features of eye vertex `z` whose successor towards the camera is `next`.
+fn eye_features(scene: &Scene, z: &Vertex, next: &Vertex) -> [f32; FEATURES] {
+    super::subspace::features(scene, &Vertex { wo: next.p - z.p, ..*z })
+}
+
+/// What the MIS counts of an iteration take from the one before (and, after training, from
+/// the last training iteration for good).
+#[derive(Clone, Debug)]
+pub struct Measured {
+    /// `V̄`.
+    pub vbar: f32,
+    /// `κ` by camera depth.
+    pub concentration: [f32; CONCENTRATION_DEPTHS],
+    /// `Q_j / M` of the pool.
+    flux: Vec<f64>,
+    /// `V_j / M` of the pool.
+    vertices: Vec<f64>,
+}
+
+impl Measured {
+    /// What pool `subspaces` of `paths` light paths gives, with the concentration
+    /// `concentration` of its draws.
+    pub fn of_pool(
+        subspaces: &LightSubspaces,
+        paths: usize,
+        vbar: f32,
+        concentration: [f32; CONCENTRATION_DEPTHS],
+    ) -> Measured {
+        let m = paths.max(1) as f64;
+        Measured {
+            vbar,
+            concentration,
+            flux: subspaces.totals.iter().map(|q| q / m).collect(),
+            vertices: (0..subspaces.totals.len()).map(|j| subspaces.count(j) as f64 / m).collect(),
+        }
+    }
+}
+
+/// SPCBPT's strategy counts, relative to one camera sample per pixel: `M/(W·H)` for light
+/// tracing, 1 for `s = 0` and NEE, and for pool connections `N / V̄`, `N κ_t / V̄` or
+/// `N M P(y | z)` (see the module documentation).
+pub struct SpCounts<'a> {
+    scene: &'a Scene,
+    light_trace: f32,
+    connect: [f32; CONCENTRATION_DEPTHS],
+    connections: f32,
+    /// The model and the per-path subspace totals, for resampling counts.
+    resampling: Option<(&'a Model, &'a Measured)>,
+    correlation: Option<Correlation>,
+}
+
+impl<'a> SpCounts<'a> {
+    /// The counts of an iteration with `m` light paths and `n` connections per camera
+    /// vertex, from what the previous iteration measured and the model.
+    pub fn for_iteration(
+        scene: &'a Scene,
+        mis: PcMis,
+        n: u32,
+        m: usize,
+        measured: &'a Measured,
+        model: &'a Model,
+    ) -> SpCounts<'a> {
+        let pixels = scene.film.width as f32 * scene.film.height as f32;
+        let n = n as f32;
+        let connect = connection_counts(mis, n, measured.vbar, &measured.concentration);
+        SpCounts {
+            scene,
+            light_trace: m as f32 / pixels,
+            connect,
+            connections: n,
+            resampling: (mis == PcMis::Resampling).then_some((model, measured)),
+            correlation: (mis == PcMis::Correlated).then_some(Correlation { pixels, connections: n }),
+        }
+    }
+
+    /// `N M P(y | z)` of the pool connection `s` of `path`, `alpha` the light throughput at
+    /// `y_{s-1}`.
+    fn selection(&self, model: &Model, measured: &Measured, path: &FullPath, s: usize, alpha: Rgb) -> f32 {
+        let scene = self.scene;
+        let (y, z) = (path.get(s - 1), path.get(s));
+        let i = model.eye.classify(&eye_features(scene, z, path.get(s + 1)));
+        let j = model.light.classify(&light_features(scene, y, path.get(s - 2)));
+        let q = luminance(alpha).max(0.0) as f64;
+        let within = within_probability(q, measured.flux[j], measured.vertices[j]);
+        (self.connections as f64 * model.matrix.gamma(i, j) as f64 * within) as f32
+    }
+}
+
+impl StrategyCounts for SpCounts<'_> {
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+        match (s, t) {
+            (_, 1) => self.light_trace,
+            (0 | 1, _) => 1.0,
+            _ => match self.resampling {
+                None => self.connect[concentration_depth(t)],
+                Some((model, measured)) => with_throughput_buffer(s, |alpha| {
+                    light_throughputs(self.scene, path, alpha);
+                    self.selection(model, measured, path, s, alpha[s - 1])
+                }),
+            },
+        }
+    }
+
+    fn path_dependent(&self) -> bool {
+        self.resampling.is_some()
+    }
+
+    fn correlation(&self) -> Option<Correlation> {
+        self.correlation
+    }
+
+    /// Counts of a whole path with one pass for the light throughputs.
+    fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
+        let n = path.len();
+        with_throughput_buffer(n, |alpha| {
+            if self.resampling.is_some()
+                && let Some(last) = (2..n.saturating_sub(1)).rev().find(|&s| needed(s))
+            {
+                light_throughputs(self.scene, path, &mut alpha[..last]);
+            }
+            for (s, o) in out.iter_mut().enumerate().take(n) {
+                if !needed(s) {
+                    continue;
+                }
+                *o = match (s, n - s, self.resampling) {
+                    (s, t, Some((model, measured))) if s >= 2 && t >= 2 => {
+                        self.selection(model, measured, path, s, alpha[s - 1])
+                    }
+                    (s, t, _) => self.count(path, s, t),
+                };
+            }
+        })
+    }
+}
+
+/// The draw of pool vertices for a camera vertex: a light subspace from `Γ`'s row, then a
+/// vertex within it.
+struct SubspaceSelection<'a> {
+    scene: &'a Scene,
+    model: &'a Model,
+    subspaces: &'a LightSubspaces,
+    paths: f64,
+}
+
+impl PoolSelection for SubspaceSelection<'_> {
+    type Lookup = usize;
+
+    fn lookup(&self, z: &Vertex) -> usize {
+        self.model.eye_subspace(self.scene, z)
+    }
+
+    #[inline]
+    fn draw<R: Random>(&self, &i: &usize, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)> {
+        let u = ((k as f32 + rng.next_1d()) / n as f32).min(1.0 - f32::EPSILON / 2.0);
+        let (j, gamma) = self.model.matrix.draw(i, u);
+        let (y, within) = self.subspaces.draw(j, rng.next_1d())?;
+        let p = gamma as f64 * within;
+        (p > 0.0).then(|| (1.0 / (n as f64 * self.paths * p)) as f32).map(|f| (y, f))
+    }
+}
+
+/// A sink that keeps the training samples of the pool connections passing through it.
+struct TrainingSink<'a, S> {
+    inner: &'a mut S,
+    scene: &'a Scene,
+    model: &'a Model,
+    samples: &'a mut Vec<TrainingSample>,
+}
+
+impl<S: Sink> Sink for TrainingSink<'_, S> {
+    #[inline]
+    fn add(&mut self, s: usize, t: usize, value: Rgb) {
+        self.inner.add(s, t, value);
+    }
+
+    #[inline]
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
+        self.inner.splat(s, t, pos, value);
+    }
+
+    #[inline]
+    fn add_emission(&mut self, camera: &[Vertex], value: Rgb) {
+        self.inner.add_emission(camera, value);
+    }
+
+    fn add_connection(&mut self, light: &[Vertex], camera: &[Vertex], c: Rgb, w: f32) {
+        let f = luminance(c);
+        if f > 0.0 && f.is_finite() && w > 0.0 {
+            let i = self.model.eye_subspace(self.scene, &camera[camera.len() - 1]);
+            let j = self.model.light_subspace(self.scene, light);
+            let gamma = self.model.matrix.gamma(i, j);
+            self.samples.push(TrainingSample { eye: i as u32, light: j as u32, gamma, f2: f * f, w });
+        }
+        self.inner.add_connection(light, camera, c, w);
+    }
+}
+
+/// Training watches every `k`-th pixel of a film of `pixels` pixels: all of them up to
+/// [`TRAINING_PIXELS`].
+fn training_stride(pixels: usize) -> usize {
+    pixels.div_ceil(TRAINING_PIXELS).max(1)
+}
+
+/// SPCBPT's per-sample estimator.
+#[derive(Clone, Debug)]
+pub struct Spcbpt {
+    pub bdpt: Bdpt,
+    /// The pool and connection options (light paths, pool vertices, connections).
+    pub pc: PcOptions,
+    pub opts: SpOptions,
+}
+
+/// One iteration's pool and its vertices by light subspace.
+pub struct SpPass {
+    pool: LightPool,
+    subspaces: LightSubspaces,
+}
+
+/// SPCBPT in the render loop.
+pub struct SpcbptRender {
+    pub sp: Spcbpt,
+    pub heuristic: Heuristic,
+    pub max_pool_mb: usize,
+    model: Option<Model>,
+    measured: Option<Measured>,
+    samples: Vec<TrainingSample>,
+    light_paths: usize,
+    stats: SubspaceStats,
+    pool_size: Option<(usize, usize)>,
+}
+
+impl SpcbptRender {
+    pub fn new(sp: Spcbpt, heuristic: Heuristic, max_pool_mb: usize) -> SpcbptRender {
+        SpcbptRender {
+            heuristic,
+            max_pool_mb,
+            model: None,
+            measured: None,
+            samples: Vec::new(),
+            light_paths: sp.pc.light_paths,
+            stats: SubspaceStats::default(),
+            pool_size: None,
+            sp,
+        }
+    }
+
+    fn counts<'a>(&'a self, scene: &'a Scene) -> SpCounts<'a> {
+        let measured = self.measured.as_ref().expect("begin measured the pilot");
+        let (n, m) = (self.sp.pc.connections, self.light_paths);
+        SpCounts::for_iteration(scene, self.sp.opts.mis, n, m, measured, self.model())
+    }
+
+    fn model(&self) -> &Model {
+        self.model.as_ref().expect("begin built the model")
+    }
+
+    /// Whether iteration `i` trains `Γ`.
+    fn training(&self, i: u32) -> bool {
+        i < self.sp.opts.training_iterations
+    }
+}
+
+impl Iterative for SpcbptRender {
+    type Pass = SpPass;
+
+    /// Sizes the pool from a pilot, checks the memory limits, and builds the subspace trees
+    /// from pilot vertices.
+    fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
+        let t = Instant::now();
+        let (pc, o) = (&self.sp.pc, &self.sp.opts);
+        let (scene, limits) = (ctx.scene, &self.sp.bdpt.limits);
+        let (pilot, _, _) = LightPool::trace::<Counts>(scene, limits, pc.light_paths, ctx.seed, PILOT_ITERATION, None);
+        let (w, h) = (scene.film.width as usize, scene.film.height as usize);
+        let m = light_paths_for(pc.light_paths, pc.pool_vertices, pilot.mean_vertices(), w * h);
+        check_pool_memory(m, &pilot, self.max_pool_mb, "--pc-light-paths")?;
+        // Training keeps at most one sample per connection of every camera vertex it watches.
+        let per_iteration = (w * h).min(2 * TRAINING_PIXELS) as f64 * PILOT_DEPTH as f64 * pc.connections as f64;
+        let samples_mb = per_iteration * o.training_iterations as f64 * SAMPLE_BYTES / (1024.0 * 1024.0);
+        let need = o.matrix_mb() + samples_mb;
+        if need > o.max_mb as f64 {
+            return Err(Error::Usage(format!(
+                "SPCBPT's matrix of {} × {} subspaces ({:.0} MiB) and the training samples of {} iterations (up to {:.0} \
+                 MiB) need more than the limit of {} MiB (--sp-max-mb); use fewer subspaces (--sp-eye-subspaces, \
+                 --sp-light-subspaces) or training iterations (--sp-training-iterations), or raise the limit",
+                o.eye_subspaces,
+                o.light_subspaces,
+                o.matrix_mb(),
+                o.training_iterations,
+                samples_mb,
+                o.max_mb
+            )));
+        }
+        // The trees: eye vertices of a grid of pixels, light vertices of a larger pilot pool.
+        let grid = PcOptions { stride: PILOT_STRIDE, cache_depth: PILOT_DEPTH, ..pc.clone() };
+        let (records, _) = trace_records(scene, limits, &grid, ctx.seed, PILOT_ITERATION);
+        let (light_pilot, _, _) =
+            LightPool::trace::<Counts>(scene, limits, m * PILOT_POOLS, ctx.seed, PILOT_ITERATION - 1, None);
+        self.model = Some(Model::new(scene, &records, &light_pilot, o.eye_subspaces, o.light_subspaces));
+        self.light_paths = m;
+        let subspaces = self.model().sort_pool(scene, &pilot);
+        self.measured =
+            Some(Measured::of_pool(&subspaces, pilot.paths, pilot.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]));
+        let model = self.model();
+        self.stats = SubspaceStats {
+            eye_subspaces: model.eye.len(),
+            light_subspaces: model.light.len(),
+            training_seconds: t.elapsed().as_secs_f64(),
+            megabytes: model.megabytes(),
+            ..SubspaceStats::default()
+        };
+        Ok(())
+    }
+
+    fn pass_end(&self, first: u32, _: u32) -> u32 {
+        first + 1
+    }
+
+    /// The state is fixed after the iteration that follows the training iterations.
+    fn warmup(&self, first: u32) -> Warmup {
+        Warmup { iterations: 0..first.min(self.sp.opts.training_iterations + 1), tiles: true }
+    }
+
+    fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<SpPass> {
+        let t = Instant::now();
+        let counts = self.counts(ctx.scene);
+        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let splat = keep.then_some((&conn, &self.sp.bdpt, ctx.layers));
+        let (m, limits) = (self.light_paths, &self.sp.bdpt.limits);
+        let (pool, splats, counters) = LightPool::trace(ctx.scene, limits, m, ctx.seed, first as u64, splat);
+        work.phases.light_pool += t.elapsed().as_secs_f64();
+        work.shadow.light_pool += counters.shadow_rays;
+        let t = Instant::now();
+        let subspaces = self.model().sort_pool(ctx.scene, &pool);
+        work.phases.cache += t.elapsed().as_secs_f64();
+        Prepared { pass: SpPass { pool, subspaces }, splats, counters }
+    }
+
+    fn render_tile(&self, ctx: &Ctx, pass: &SpPass, tile: Tile, first: u32, count: u32) -> TileResult {
+        let scene = ctx.scene;
+        let counts = self.counts(scene);
+        let conn = Connector { scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let model = self.model();
+        let select =
+            SubspaceSelection { scene, model, subspaces: &pass.subspaces, paths: pass.pool.paths.max(1) as f64 };
+        let pool_pass =
+            PoolPass { bdpt: &self.sp.bdpt, connections: self.sp.pc.connections, conn: &conn, pool: &pass.pool };
+        let mut scratch = Scratch::default();
+        if !self.training(first) {
+            return sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+                pool_pass.sample(&select, pos, rng, &mut scratch, sink, counters);
+                true
+            });
+        }
+        let mut samples = Vec::new();
+        let width = scene.film.width as usize;
+        let every = training_stride(width * scene.film.height as usize);
+        let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+            let pixel = pos.y as usize * width + pos.x as usize;
+            if !pixel.is_multiple_of(every) {
+                pool_pass.sample(&select, pos, rng, &mut scratch, sink, counters);
+            } else {
+                let mut sink = TrainingSink { inner: sink, scene, model, samples: &mut samples };
+                pool_pass.sample(&select, pos, rng, &mut scratch, &mut sink, counters);
+            }
+            true
+        });
+        result.extra = Some(Box::new(samples));
+        result
+    }
+
+    /// Until the state is fixed: keeps the pool's subspace totals and the concentration of
+    /// the draws for the next iteration's counts, and retrains `Γ` on every training sample
+    /// so far (in tile order).
+    fn finish(&mut self, _: &Ctx, pass: SpPass, iterations: Range<u32>, results: &[TileResult]) {
+        let i = iterations.start;
+        self.pool_size = Some((pass.pool.paths, pass.pool.connectible.len()));
+        self.stats.light_subspaces_used = pass.subspaces.used();
+        if i > self.sp.opts.training_iterations {
+            return;
+        }
+        let mut counters = Counters::default();
+        for r in results {
+            counters += r.counters;
+        }
+        let mut concentration = self.measured.as_ref().map_or([1.0; CONCENTRATION_DEPTHS], |m| m.concentration);
+        if let Some((_, by_depth)) = counters.concentration() {
+            concentration = by_depth.map(|c| c as f32);
+        }
+        self.measured =
+            Some(Measured::of_pool(&pass.subspaces, pass.pool.paths, pass.pool.mean_vertices(), concentration));
+        if !self.training(i) {
+            return;
+        }
+        let t = Instant::now();
+        for r in results {
+            if let Some(s) = r.extra.as_ref().and_then(|e| e.downcast_ref::<Vec<TrainingSample>>()) {
+                self.samples.extend_from_slice(s);
+            }
+        }
+        let model = self.model.as_mut().expect("begin built the model");
+        model.matrix = Matrix::train(model.eye.len(), model.light.len(), &self.samples, self.sp.opts.uniform);
+        self.stats.trained_rows = model.matrix.trained_rows;
+        self.stats.training_samples = self.samples.len();
+        self.stats.training_seconds += t.elapsed().as_secs_f64();
+        if i + 1 == self.sp.opts.training_iterations {
+            self.samples = Vec::new();
+        }
+    }
+
+    fn report(&self, stats: &mut RenderStats) {
+        stats.pool = self.pool_size;
+        stats.subspaces = Some(self.stats);
+    }
+}
+
+/// A model over a pool of `m` light paths (seed 3) and the camera vertices of every
+/// `stride`-th pixel, with up to `subspaces` eye and light subspaces and `Γ` trained on made-up
+/// connections (weights `w(x)` of a made-up contribution `x`), so that its rows are far from
+/// uniform; and the pool.
+#[cfg(test)]
+pub(crate) fn test_model(
+    scene: &Scene,
+    m: usize,
+    stride: u32,
+    subspaces: (usize, usize),
+    w: impl Fn(f32) -> f32,
+) -> (Model, LightPool) {
+    let limits = super::WalkLimits::new(8, 3);
+    let (pool, _, _) = LightPool::trace::<Counts>(scene, &limits, m, 3, 0, None);
+    let grid = PcOptions { stride, ..PcOptions::default() };
+    let (records, _) = trace_records(scene, &limits, &grid, 3, 0);
+    let mut model = Model::new(scene, &records, &pool, subspaces.0, subspaces.1);
+    let (e, l) = (model.eye.len(), model.light.len());
+    assert!(e > 4 && l > 8, "{e} eye and {l} light subspaces");
+    let samples: Vec<TrainingSample> = (0..e * l)
+        .map(|k| {
+            let x = ((k * 7919) % 97) as f32 / 97.0;
+            let (eye, light) = ((k / l) as u32, (k % l) as u32);
+            TrainingSample { eye, light, gamma: 1.0 / l as f32, f2: x.powi(6), w: w(x) }
+        })
+        .collect();
+    model.matrix = Matrix::train(e, l, &samples, 0.1);
+    (model, pool)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrator::bidir::pc_cache::tests::scene;
+    use crate::integrator::bidir::pool::draw_one_by_one;
+    use crate::integrator::bidir::{WalkLimits, camera_subpath};
+    use crate::sampling::Sampler;
+    use crate::sampling::chi2::discrete_chi2_of;
+
+    /// A model over a pool of 400 light paths with `Γ` trained on made-up connections, the
+    /// pool sorted by subspace, and what it measures.
+    fn setup(scene: &Scene) -> (Model, LightPool, LightSubspaces, Measured) {
+        let (model, pool) = test_model(scene, 400, 4, (16, 24), |_| 1.0);
+        let subspaces = model.sort_pool(scene, &pool);
+        let measured = Measured::of_pool(&subspaces, pool.paths, pool.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]);
+        (model, pool, subspaces, measured)
+    }
+
+    /// Camera vertices `z_1, z_2` of a few camera subpaths, with their prefixes.
+    fn camera_prefixes(scene: &Scene) -> Vec<Vec<Vertex>> {
+        let limits = WalkLimits::new(8, 3);
+        let mut out = Vec::new();
+        let mut counters = Counters::default();
+        for k in 0..40u64 {
+            let mut rng = Sampler::new(&[77, k]);
+            let pos = Vec2::new(rng.next_1d() * 64.0, rng.next_1d() * 48.0);
+            let mut path = Vec::new();
+            camera_subpath(scene, pos, &limits, &mut rng, &mut path, &mut counters);
+            for t in 2..=path.len().min(3) {
+                if path[t - 1].is_connectible() {
+                    out.push(path[..t].to_vec());
+                }
+            }
+        }
+        assert!(out.len() > 30, "{} camera vertices", out.len());
+        out
+    }
+
+    #[test]
+    fn pool_draws_follow_the_matrix_and_the_flux_chi2() {
+        let scene = scene();
+        let (model, pool, subspaces, _) = setup(&scene);
+        let select =
+            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64 };
+        let v = pool.connectible.len();
+        let mut rng = Sampler::new(&[5]);
+        let mut tested = 0;
+        let cameras = camera_prefixes(&scene);
+        const STEP: usize = 6;
+        let tests = cameras.len().div_ceil(STEP);
+        for camera in cameras.iter().step_by(STEP) {
+            let i = select.lookup(&camera[camera.len() - 1]);
+            let n = 200_000u32;
+            let mut counts = vec![0u64; v];
+            draw_one_by_one(&select, &i, n, &mut rng, |k, f| {
+                counts[k] += 1;
+                // The factor is 1 / (N M P) with P the draw's probability.
+                let p = 1.0 / (f as f64 * n as f64 * pool.paths as f64);
+                let j = model.light_subspace(&scene, pool.prefix(k));
+                let want = model.matrix.gamma(i, j) as f64 * subspaces.within(j, k);
+                assert!((p / want - 1.0).abs() < 1e-3, "draw of vertex {k}: probability {p} vs {want}");
+            });
+            let subspace_of = |k: usize| model.light_subspace(&scene, pool.prefix(k));
+            let expected: Vec<f64> = (0..v)
+                .map(|k| model.matrix.gamma(i, subspace_of(k)) as f64 * subspaces.within(subspace_of(k), k) * n as f64)
+                .collect();
+            discrete_chi2_of(&counts, &expected, tests).assert_pass();
+            // Negative control: uniform draws within each subspace are rejected.
+            let uniform_within: Vec<f64> = (0..v)
+                .map(|k| {
+                    let j = subspace_of(k);
+                    model.matrix.gamma(i, j) as f64 / subspaces.count(j) as f64 * n as f64
+                })
+                .collect();
+            assert!(
+                !discrete_chi2_of(&counts, &uniform_within, tests).passed(),
+                "uniform draws within subspaces were not rejected"
+            );
+            tested += 1;
+        }
+        assert!(tested >= 5);
+    }
+
+    #[test]
+    fn resampling_counts_are_the_draws_selection_density() {
+        // With the pool's own totals, `N M P(y | z)` evaluated on the connected path is the
+        // probability with which the connection drew `y` (up to a camera vertex seen at a
+        // grazing angle, whose normal may turn the other way when judged from positions).
+        let scene = scene();
+        let (model, pool, subspaces, measured) = setup(&scene);
+        let select =
+            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64 };
+        let n = 4u32;
+        let counts = SpCounts::for_iteration(&scene, PcMis::Resampling, n, pool.paths, &measured, &model);
+        let mut rng = Sampler::new(&[6]);
+        let (mut checked, mut off) = (0, 0);
+        for camera in camera_prefixes(&scene) {
+            let i = select.lookup(&camera[camera.len() - 1]);
+            draw_one_by_one(&select, &i, n, &mut rng, |k, f| {
+                let light = pool.prefix(k);
+                if light.len() < 2 {
+                    return;
+                }
+                let path = FullPath { light, camera: &camera };
+                let count = counts.count(&path, light.len(), camera.len()) as f64;
+                let drawn = 1.0 / f as f64;
+                checked += 1;
+                off += ((count / drawn - 1.0).abs() > 1e-3) as usize;
+            });
+        }
+        assert!(checked > 100 && off * 100 <= checked, "{off} of {checked} counts differ from the draws' densities");
+    }
+}

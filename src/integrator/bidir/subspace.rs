@@ -1,0 +1,511 @@
+//! SPCBPT's subspaces and its subspace sampling matrix (Su, Li and Wang 2022), the parts that
+//! know nothing of the render loop:
+//!
+//! - [`SubspaceTree`]: a k-d tree over vertex features (position over the scene's bounding
+//!   radius, normal) whose leaves are the subspaces, split at medians so that the vertices it
+//!   was built from fill its leaves evenly;
+//! - [`Matrix`]: `Γ`, one distribution over light subspaces per eye subspace, drawn by
+//!   inverting its CDF;
+//! - [`Matrix::train`]: `Γ` fitted to the connections of earlier iterations by minimising the
+//!   MIS-aware bound on the combined estimator's second moment (see there);
+//! - [`LightSubspaces`]: a pool's connectible vertices by light subspace, and the draw of one
+//!   vertex within a subspace.
+
+use super::Vertex;
+use crate::scene::Scene;
+
+/// Length of a feature vector: position, then normal.
+pub const FEATURES: usize = 6;
+/// Weight of the normal against the position (over the bounding radius) in the features: a
+/// normal that turns round moves a vertex as far as a quarter of the radius.
+const NORMAL_WEIGHT: f32 = 0.25;
+
+/// A vertex's features: its position relative to the scene's centre over the bounding radius,
+/// and its shading normal turned to the side its walk came from.
+pub fn features(scene: &Scene, v: &Vertex) -> [f32; FEATURES] {
+    let b = &scene.bounds;
+    let p = (v.p - b.center) / b.radius.max(f32::MIN_POSITIVE);
+    let n = if v.frame.n.dot(v.wo) < 0.0 { -v.frame.n } else { v.frame.n } * NORMAL_WEIGHT;
+    [p.x, p.y, p.z, n.x, n.y, n.z]
+}
+
+/// A node of a [`SubspaceTree`]: an inner node splits at `split` along `axis` (below goes to
+/// `left`, the rest to `left + 1`); a leaf (`axis == LEAF`) is subspace `left`.
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    axis: u8,
+    split: f32,
+    left: u32,
+}
+
+const LEAF: u8 = u8::MAX;
+
+/// A k-d tree whose leaves are subspaces.
+#[derive(Clone, Debug)]
+pub struct SubspaceTree {
+    nodes: Vec<Node>,
+    leaves: usize,
+}
+
+impl SubspaceTree {
+    /// A tree of up to `leaves` subspaces over `points`: each node splits along its points'
+    /// widest axis, at the quantile that gives its two children their share of the leaves. A
+    /// node with one point, or whose points coincide, stays a leaf, so a tree can have fewer
+    /// leaves than asked for (never fewer than one). The tree depends on the points' order
+    /// only through ties.
+    pub fn build(mut points: Vec<[f32; FEATURES]>, leaves: usize) -> SubspaceTree {
+        let mut tree = SubspaceTree { nodes: vec![Node { axis: LEAF, split: 0.0, left: 0 }], leaves: 0 };
+        tree.split(0, &mut points, leaves.max(1));
+        tree
+    }
+
+    fn split(&mut self, node: usize, points: &mut [[f32; FEATURES]], leaves: usize) {
+        let widest = (0..FEATURES)
+            .map(|a| {
+                let (lo, hi) = points.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| (lo.min(p[a]), hi.max(p[a])));
+                (a, hi - lo)
+            })
+            .fold((0, 0.0f32), |best, (a, w)| if w > best.1 { (a, w) } else { best });
+        if leaves <= 1 || points.len() <= 1 || widest.1 <= 0.0 {
+            self.nodes[node] = Node { axis: LEAF, split: 0.0, left: self.leaves as u32 };
+            self.leaves += 1;
+            return;
+        }
+        let axis = widest.0;
+        let left_leaves = leaves / 2;
+        let mid = (points.len() * left_leaves / leaves).clamp(1, points.len() - 1);
+        points.select_nth_unstable_by(mid, |a, b| a[axis].total_cmp(&b[axis]));
+        let split = points[mid][axis];
+        // Points equal to the split value go right, as the classification sends them.
+        let (l, r) = partition(points, |p| p[axis] < split);
+        if l.is_empty() {
+            // Every point at or above the median value: no split separates them along it.
+            self.nodes[node] = Node { axis: LEAF, split: 0.0, left: self.leaves as u32 };
+            self.leaves += 1;
+            return;
+        }
+        let left = self.nodes.len();
+        self.nodes.push(Node { axis: LEAF, split: 0.0, left: 0 });
+        self.nodes.push(Node { axis: LEAF, split: 0.0, left: 0 });
+        self.nodes[node] = Node { axis: axis as u8, split, left: left as u32 };
+        self.split(left, l, left_leaves);
+        self.split(left + 1, r, leaves - left_leaves);
+    }
+
+    /// Subspaces (leaves).
+    pub fn len(&self) -> usize {
+        self.leaves
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.leaves == 0
+    }
+
+    /// The subspace of a feature vector.
+    #[inline]
+    pub fn classify(&self, f: &[f32; FEATURES]) -> usize {
+        let mut node = self.nodes[0];
+        while node.axis != LEAF {
+            let i = node.left as usize + (f[node.axis as usize] >= node.split) as usize;
+            node = self.nodes[i];
+        }
+        node.left as usize
+    }
+
+    /// Bytes the tree takes.
+    pub fn bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<Node>()
+    }
+}
+
+/// Splits `points` in place into those that satisfy `below` and the rest.
+fn partition<T>(points: &mut [T], below: impl Fn(&T) -> bool) -> (&mut [T], &mut [T]) {
+    let mut k = 0;
+    for i in 0..points.len() {
+        if below(&points[i]) {
+            points.swap(i, k);
+            k += 1;
+        }
+    }
+    points.split_at_mut(k)
+}
+
+/// A connection of a training iteration: eye subspace `eye`, light subspace `light`, the
+/// matrix entry `gamma` it was drawn with, the square of its unweighted contribution's
+/// luminance (`F²`, `F` divided by the density of its draw) and its MIS weight `w`.
+#[derive(Clone, Copy, Debug)]
+pub struct TrainingSample {
+    pub eye: u32,
+    pub light: u32,
+    pub gamma: f32,
+    pub f2: f32,
+    pub w: f32,
+}
+
+/// The subspace sampling matrix `Γ`: row `i` is the distribution of light subspaces a camera
+/// vertex of eye subspace `i` draws from.
+#[derive(Clone, Debug)]
+pub struct Matrix {
+    pub eye: usize,
+    pub light: usize,
+    /// `eye × light` probabilities, row after row.
+    gamma: Vec<f32>,
+    /// `eye × light` running sums of the rows (the last entry of a row is 1).
+    cdf: Vec<f32>,
+    /// Rows fitted to training samples (the others are uniform).
+    pub trained_rows: usize,
+}
+
+/// Fixed-point steps of [`Matrix::train`].
+const TRAINING_STEPS: usize = 12;
+
+impl Matrix {
+    /// Every row uniform over the light subspaces.
+    pub fn uniform(eye: usize, light: usize) -> Matrix {
+        Matrix::from_rows(eye, light, vec![1.0 / light as f32; eye * light], 0)
+    }
+
+    fn from_rows(eye: usize, light: usize, gamma: Vec<f32>, trained_rows: usize) -> Matrix {
+        let mut cdf = vec![0.0f32; eye * light];
+        for (row, out) in gamma.chunks_exact(light).zip(cdf.chunks_exact_mut(light)) {
+            let mut sum = 0.0f64;
+            for (g, c) in row.iter().zip(out.iter_mut()) {
+                sum += *g as f64;
+                *c = sum as f32;
+            }
+            // The sums run to one; the last entry is set so that every draw lands in a row.
+            out[light - 1] = 1.0;
+        }
+        Matrix { eye, light, gamma, cdf, trained_rows }
+    }
+
+    /// `Γ_ij`.
+    #[inline]
+    pub fn gamma(&self, eye: usize, light: usize) -> f32 {
+        self.gamma[eye * self.light + light]
+    }
+
+    /// Draws a light subspace for eye subspace `eye` with `u` in `[0, 1)`; returns it and
+    /// the probability with which it is drawn (`Γ_ij`, as the CDF's step gives it).
+    #[inline]
+    pub fn draw(&self, eye: usize, u: f32) -> (usize, f32) {
+        let row = &self.cdf[eye * self.light..(eye + 1) * self.light];
+        let j = row.partition_point(|&c| c <= u).min(self.light - 1);
+        (j, self.gamma[eye * self.light + j])
+    }
+
+    /// Bytes the matrix takes.
+    pub fn bytes(&self) -> usize {
+        (self.gamma.len() + self.cdf.len()) * std::mem::size_of::<f32>()
+    }
+
+    /// `Γ` fitted to `samples`, mixed with the uniform distribution in proportion `uniform`.
+    ///
+    /// The objective (after Su, Li and Wang's MIS-aware bound): with the balance heuristic,
+    /// the second moment of the combined estimator is bounded by `∫ f² / Σ_k n_k p_k`, where
+    /// the pool connections' term is `N M Γ_ij P(y | j) p(x)`. A training connection, drawn
+    /// with `Γ'_ij` and weighted `w'`, estimates this integrand over its own density as
+    /// `F² / (r + Γ_ij / Γ'_ij)` with `r = (1 - w') / w'` (the other strategies' share,
+    /// fixed), so each row minimises `L_i(Γ) = Σ F² / (r + Γ_ij / Γ'_ij)` over `Σ_j Γ_ij = 1`.
+    /// Its optimum has `-∂L/∂Γ_ij` equal for every entry in use, and the fixed point
+    /// `Γ_ij ← Γ_ij (-∂L/∂Γ_ij)^½`, normalised, reaches it: without the other strategies
+    /// (`r = 0`) one step gives the closed form `Γ_ij ∝ (Σ F² Γ'_ij)^½`; where they already
+    /// carry a connection's paths, its entry loses weight. Rows without samples stay
+    /// uniform; entries without samples keep only the uniform share, which keeps every
+    /// light subspace reachable.
+    pub fn train(eye: usize, light: usize, samples: &[TrainingSample], uniform: f32) -> Matrix {
+        let mut gamma = vec![0.0f64; eye * light];
+        let mut rows = vec![false; eye];
+        for s in samples {
+            rows[s.eye as usize] = true;
+        }
+        for (i, row) in gamma.chunks_exact_mut(light).enumerate() {
+            if rows[i] {
+                row.fill(1.0 / light as f64);
+            }
+        }
+        // Samples with a positive weight and contribution, sorted by row for the steps.
+        let mut used: Vec<&TrainingSample> =
+            samples.iter().filter(|s| s.w > 0.0 && s.f2 > 0.0 && s.gamma > 0.0 && s.f2.is_finite()).collect();
+        used.sort_by_key(|s| (s.eye, s.light));
+        let mut grad = vec![0.0f64; eye * light];
+        for _ in 0..TRAINING_STEPS {
+            grad.fill(0.0);
+            for s in &used {
+                let k = s.eye as usize * light + s.light as usize;
+                let r = (1.0 - s.w as f64) / s.w as f64;
+                let d = r + gamma[k] / s.gamma as f64;
+                grad[k] += s.f2 as f64 / (s.gamma as f64 * d * d);
+            }
+            for (i, (row, g)) in gamma.chunks_exact_mut(light).zip(grad.chunks_exact(light)).enumerate() {
+                if !rows[i] {
+                    continue;
+                }
+                let mut sum = 0.0;
+                for (x, &gk) in row.iter_mut().zip(g) {
+                    *x *= gk.sqrt();
+                    sum += *x;
+                }
+                if sum > 0.0 && sum.is_finite() {
+                    row.iter_mut().for_each(|x| *x /= sum);
+                } else {
+                    row.fill(1.0 / light as f64);
+                }
+            }
+        }
+        let u = uniform.clamp(0.0, 1.0) as f64;
+        let trained_rows = rows.iter().filter(|&&r| r).count();
+        let out = gamma
+            .chunks_exact(light)
+            .zip(&rows)
+            .flat_map(|(row, &trained)| {
+                row.iter()
+                    .map(move |&g| if trained { ((1.0 - u) * g + u / light as f64) as f32 } else { 1.0 / light as f32 })
+            })
+            .collect();
+        Matrix::from_rows(eye, light, out, trained_rows)
+    }
+}
+
+/// A pool's connectible vertices sorted by light subspace, with what the draw within a
+/// subspace needs: vertex `y` of subspace `j` is drawn with probability
+/// `P(y | j) = (1 - δ) q(y) / Q_j + δ / V_j`, `q` its flux (the luminance of its light
+/// throughput), `Q_j` and `V_j` the subspace's total flux and vertex count, `δ` =
+/// [`WITHIN_UNIFORM`]. The uniform share reaches vertices whose flux is not known from their
+/// positions (behind a specular bounce).
+#[derive(Clone, Debug, Default)]
+pub struct LightSubspaces {
+    /// `light + 1` offsets into `members`.
+    offsets: Vec<u32>,
+    /// Connectible pool indices, subspace after subspace.
+    members: Vec<u32>,
+    /// Per member, the running sum of `q` within its subspace, over `Q_j`.
+    cdf: Vec<f32>,
+    /// `q` of each connectible pool index.
+    pub flux: Vec<f32>,
+    /// `Q_j`.
+    pub totals: Vec<f64>,
+}
+
+/// The uniform share `δ` of the draw within a light subspace.
+pub const WITHIN_UNIFORM: f32 = 0.1;
+
+impl LightSubspaces {
+    /// Sorts connectible pool vertices `0..subspace.len()` (of subspace `subspace[k]` and
+    /// flux `flux[k]`) into `light` subspaces.
+    pub fn new(light: usize, subspace: &[u32], flux: Vec<f32>) -> LightSubspaces {
+        let mut offsets = vec![0u32; light + 1];
+        for &j in subspace {
+            offsets[j as usize + 1] += 1;
+        }
+        for j in 0..light {
+            offsets[j + 1] += offsets[j];
+        }
+        let mut fill = offsets.clone();
+        let mut members = vec![0u32; subspace.len()];
+        for (k, &j) in subspace.iter().enumerate() {
+            members[fill[j as usize] as usize] = k as u32;
+            fill[j as usize] += 1;
+        }
+        let mut cdf = vec![0.0f32; members.len()];
+        let mut totals = vec![0.0f64; light];
+        for j in 0..light {
+            let range = offsets[j] as usize..offsets[j + 1] as usize;
+            let total: f64 = members[range.clone()].iter().map(|&k| flux[k as usize] as f64).sum();
+            totals[j] = total;
+            let mut sum = 0.0f64;
+            for m in range {
+                sum += flux[members[m] as usize] as f64;
+                cdf[m] = if total > 0.0 { (sum / total) as f32 } else { 0.0 };
+            }
+        }
+        LightSubspaces { offsets, members, cdf, flux, totals }
+    }
+
+    /// `V_j`.
+    #[inline]
+    pub fn count(&self, j: usize) -> usize {
+        (self.offsets[j + 1] - self.offsets[j]) as usize
+    }
+
+    /// Non-empty light subspaces.
+    pub fn used(&self) -> usize {
+        (0..self.totals.len()).filter(|&j| self.count(j) > 0).count()
+    }
+
+    /// `P(y | j)` of connectible pool index `k` in subspace `j`.
+    #[inline]
+    pub fn within(&self, j: usize, k: usize) -> f64 {
+        within_probability(self.flux[k] as f64, self.totals[j], self.count(j) as f64)
+    }
+
+    /// Draws a vertex of subspace `j` with `u` in `[0, 1)`: its connectible pool index and
+    /// `P(y | j)`; `None` when the subspace is empty.
+    #[inline]
+    pub fn draw(&self, j: usize, u: f32) -> Option<(usize, f64)> {
+        let (a, b) = (self.offsets[j] as usize, self.offsets[j + 1] as usize);
+        if a == b {
+            return None;
+        }
+        let n = b - a;
+        let m = if self.totals[j] <= 0.0 || u < WITHIN_UNIFORM {
+            let v = if self.totals[j] <= 0.0 { u } else { u / WITHIN_UNIFORM };
+            a + ((v * n as f32) as usize).min(n - 1)
+        } else {
+            let v = (u - WITHIN_UNIFORM) / (1.0 - WITHIN_UNIFORM);
+            a + self.cdf[a..b].partition_point(|&c| c <= v).min(n - 1)
+        };
+        let k = self.members[m] as usize;
+        Some((k, self.within(j, k)))
+    }
+}
+
+/// `P(y | j) = (1 - δ) q / Q + δ / V` (uniform `1 / V` where the subspace has no flux),
+/// from a vertex's flux `q` and its subspace's total flux `Q` and vertex count `V`.
+#[inline]
+pub fn within_probability(q: f64, total: f64, count: f64) -> f64 {
+    if count <= 0.0 {
+        0.0
+    } else if total <= 0.0 {
+        1.0 / count
+    } else {
+        (1.0 - WITHIN_UNIFORM as f64) * q / total + WITHIN_UNIFORM as f64 / count
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(state: &mut u64) -> f32 {
+        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*state >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn tree_leaves_share_the_points_evenly_and_classify_them_where_they_were_put() {
+        let mut s = 3u64;
+        let points: Vec<[f32; FEATURES]> = (0..4000).map(|_| std::array::from_fn(|_| lcg(&mut s))).collect();
+        let tree = SubspaceTree::build(points.clone(), 64);
+        assert_eq!(tree.len(), 64);
+        let mut counts = vec![0usize; 64];
+        for p in &points {
+            counts[tree.classify(p)] += 1;
+        }
+        let (lo, hi) = (counts.iter().min().unwrap(), counts.iter().max().unwrap());
+        assert!(*lo >= 55 && *hi <= 70, "leaf sizes {lo}..{hi}");
+        // Coincident points cannot be split: one leaf.
+        let same = SubspaceTree::build(vec![[0.5; FEATURES]; 100], 16);
+        assert_eq!(same.len(), 1);
+        assert_eq!(same.classify(&[0.1; FEATURES]), 0);
+    }
+
+    #[test]
+    fn training_without_other_strategies_gives_the_closed_form() {
+        // One row, four light subspaces, drawn uniformly (Γ' = 1/4), w = 1: the optimum is
+        // Γ_j ∝ (Σ F² Γ')^½.
+        let f2 = [4.0f32, 1.0, 0.0, 9.0];
+        let samples: Vec<TrainingSample> = f2
+            .iter()
+            .enumerate()
+            .map(|(j, &f2)| TrainingSample { eye: 0, light: j as u32, gamma: 0.25, f2, w: 1.0 })
+            .collect();
+        let m = Matrix::train(2, 4, &samples, 0.0);
+        let want = [2.0f32 / 6.0, 1.0 / 6.0, 0.0, 3.0 / 6.0];
+        for (j, w) in want.iter().enumerate() {
+            assert!((m.gamma(0, j) - w).abs() < 1e-5, "Γ_0{j} = {} ≠ {w}", m.gamma(0, j));
+        }
+        // The row without samples stays uniform, and the uniform share is mixed in.
+        assert!((0..4).all(|j| m.gamma(1, j) == 0.25));
+        let m = Matrix::train(2, 4, &samples, 0.2);
+        assert!((m.gamma(0, 2) - 0.05).abs() < 1e-6 && (m.gamma(0, 3) - (0.8 * 0.5 + 0.05)).abs() < 1e-6);
+        assert_eq!(m.trained_rows, 1);
+    }
+
+    #[test]
+    fn training_moves_weight_away_from_what_other_strategies_carry() {
+        // Two subspaces with the same contributions, drawn with Γ' = ½ each; the other
+        // strategies carry subspace 0's paths as well as its connections do (w' = ½, r = 1).
+        // L = 1/(1 + 2Γ_0) + 1/(2Γ_1): -∂L/∂Γ equal in both entries at Γ_0 = ¼.
+        let mk = |light, w| TrainingSample { eye: 0, light, gamma: 0.5, f2: 1.0, w };
+        let m = Matrix::train(1, 2, &[mk(0, 0.5), mk(1, 1.0)], 0.0);
+        assert!((m.gamma(0, 0) - 0.25).abs() < 2e-3, "Γ = {} {}", m.gamma(0, 0), m.gamma(0, 1));
+        // Carried nine times better by the others (w' = 0.1): the optimum is on the boundary.
+        let m = Matrix::train(1, 2, &[mk(0, 0.1), mk(1, 1.0)], 0.0);
+        assert!(m.gamma(0, 0) < 0.05, "Γ = {} {}", m.gamma(0, 0), m.gamma(0, 1));
+    }
+
+    /// `Γ` with uneven rows: a matrix trained on samples of random contributions.
+    fn uneven_matrix(eye: usize, light: usize) -> Matrix {
+        let mut s = 11u64;
+        let samples: Vec<TrainingSample> = (0..eye * light * 3)
+            .map(|k| {
+                let f = lcg(&mut s);
+                TrainingSample {
+                    eye: (k % eye) as u32,
+                    light: (k / eye % light) as u32,
+                    gamma: 1.0 / light as f32,
+                    f2: f * f * f * f,
+                    w: 0.2 + 0.8 * lcg(&mut s),
+                }
+            })
+            .collect();
+        Matrix::train(eye, light, &samples, 0.1)
+    }
+
+    #[test]
+    fn subspace_draws_follow_gamma_chi2() {
+        use crate::sampling::chi2::discrete_chi2;
+        let (eye, light) = (5, 40);
+        let m = uneven_matrix(eye, light);
+        let mut s = 5u64;
+        for i in 0..eye {
+            let row: Vec<f64> = (0..light).map(|j| m.gamma(i, j) as f64).collect();
+            assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-5);
+            let (lo, hi) = row.iter().fold((1.0f64, 0.0f64), |(a, b), &g| (a.min(g), b.max(g)));
+            assert!(hi > 4.0 * lo, "row {i} is nearly uniform: {lo}..{hi}");
+            let n = 100_000u64;
+            let mut counts = vec![0u64; light];
+            for _ in 0..n {
+                let (j, p) = m.draw(i, lcg(&mut s));
+                assert_eq!(p, m.gamma(i, j));
+                counts[j] += 1;
+            }
+            let expected: Vec<f64> = row.iter().map(|g| g * n as f64).collect();
+            discrete_chi2(&counts, &expected).assert_pass();
+            // Negative control: the uniform rows the matrix started from are rejected.
+            let uniform = vec![n as f64 / light as f64; light];
+            assert!(!discrete_chi2(&counts, &uniform).passed(), "row {i}: uniform rows were not rejected");
+        }
+    }
+
+    #[test]
+    fn draws_within_a_subspace_have_the_probability_they_report() {
+        let subspace = [0u32, 1, 0, 0, 1, 2];
+        let flux = vec![1.0f32, 2.0, 3.0, 0.0, 0.0, 0.0];
+        let l = LightSubspaces::new(4, &subspace, flux);
+        assert_eq!((l.count(0), l.count(1), l.count(2), l.count(3)), (3, 2, 1, 0));
+        assert_eq!(l.used(), 3);
+        assert!(l.draw(3, 0.5).is_none());
+        let n = 200_000;
+        let mut hits = [0usize; 6];
+        for k in 0..n {
+            let u = (k as f32 + 0.5) / n as f32;
+            let (i, p) = l.draw(0, u).unwrap();
+            hits[i] += 1;
+            assert!((p - l.within(0, i)).abs() < 1e-12);
+        }
+        for i in [0usize, 2, 3] {
+            let want = l.within(0, i);
+            assert!(
+                (hits[i] as f64 / n as f64 - want).abs() < 1e-3,
+                "vertex {i}: {} vs {want}",
+                hits[i] as f64 / n as f64
+            );
+        }
+        // Vertex 3 has no flux: only the uniform share reaches it.
+        assert!((l.within(0, 3) - WITHIN_UNIFORM as f64 / 3.0).abs() < 1e-9);
+        // A subspace without flux draws uniformly.
+        assert!((l.within(2, 5) - 1.0).abs() < 1e-12);
+    }
+}
