@@ -34,7 +34,7 @@ use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use super::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, concentration_depth,
-    draw_one_by_one,
+    draw_one_by_one, pass_concentration,
 };
 use super::{Sink, Vertex};
 use crate::bsdf::TransportMode;
@@ -293,12 +293,7 @@ impl<'a> PcCounts<'a> {
 impl StrategyCounts for PcCounts<'_> {
     #[inline]
     fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
-        self.count_with(path, s, t, || {
-            with_throughput_buffer(s, |alpha| {
-                light_throughputs(self.scene, path, alpha);
-                alpha[s - 1]
-            })
-        })
+        self.count_with(path, s, t, || throughput_at(self.scene, path, s))
     }
 
     fn path_dependent(&self) -> bool {
@@ -311,26 +306,44 @@ impl StrategyCounts for PcCounts<'_> {
 
     /// Counts of a whole path with one pass for the light throughputs.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
-        let n = path.len();
-        with_throughput_buffer(n, |alpha| self.fill_with(path, needed, out, alpha))
+        let throughputs = self.previous.is_some();
+        fill_counts(self.scene, path, needed, out, throughputs, |s, t, alpha| {
+            self.count_with(path, s, t, || alpha[s - 1])
+        });
     }
 }
 
-impl PcCounts<'_> {
-    /// [`StrategyCounts::fill`] with room for the path's light throughputs.
-    fn fill_with(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32], alpha: &mut [Rgb]) {
-        let n = path.len();
-        if self.previous.is_some()
-            && let Some(last) = (2..n.saturating_sub(1)).rev().find(|&s| needed(s))
-        {
-            light_throughputs(self.scene, path, &mut alpha[..last]);
+/// The light throughput `α_L(y_{s-1})` that strategy `s` of `path` has ([`light_throughputs`]).
+pub(super) fn throughput_at(scene: &Scene, path: &FullPath, s: usize) -> Rgb {
+    with_throughput_buffer(s, |alpha| {
+        light_throughputs(scene, path, alpha);
+        alpha[s - 1]
+    })
+}
+
+/// [`StrategyCounts::fill`] of counts that may need the light throughputs: `out[s]`, for
+/// every `s` that `needed` asks for, is `count(s, t, alpha)`. With `throughputs`, `alpha`
+/// holds the path's light throughputs up to the last pool connection asked for, computed in
+/// one pass (zero otherwise).
+pub(super) fn fill_counts(
+    scene: &Scene,
+    path: &FullPath,
+    needed: &dyn Fn(usize) -> bool,
+    out: &mut [f32],
+    throughputs: bool,
+    count: impl Fn(usize, usize, &[Rgb]) -> f32,
+) {
+    let n = path.len();
+    with_throughput_buffer(n, |alpha| {
+        if throughputs && let Some(last) = (2..n.saturating_sub(1)).rev().find(|&s| needed(s)) {
+            light_throughputs(scene, path, &mut alpha[..last]);
         }
         for (s, o) in out.iter_mut().enumerate().take(n) {
             if needed(s) {
-                *o = self.count_with(path, s, n - s, || alpha[s - 1]);
+                *o = count(s, n - s, alpha);
             }
         }
-    }
+    })
 }
 
 /// The counts of pool connections from camera vertex `z_{t-1}`, at `[t - 2]`, for counts
@@ -353,7 +366,7 @@ pub(super) fn connection_counts(
 /// small array for the usual short paths (zeroing the full one for every weight costs more
 /// than using it).
 #[inline]
-pub(super) fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
+fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
     use super::mis::{CAP, SHORT};
     if n <= SHORT { f(&mut [Rgb::ZERO; SHORT][..n]) } else { f(&mut [Rgb::ZERO; CAP][..n]) }
 }
@@ -529,12 +542,8 @@ impl Iterative for PcbptRender {
         let (pool, cache, stats) = pass;
         self.vbar = pool.mean_vertices();
         self.pool_size = Some((pool.paths, pool.connectible.len()));
-        let mut counters = Counters::default();
-        for r in results {
-            counters += r.counters;
-        }
-        if let Some((_, by_depth)) = counters.concentration() {
-            self.concentration = by_depth.map(|c| c as f32);
+        if let Some(kappa) = pass_concentration(results) {
+            self.concentration = kappa;
         }
         self.cache_stats = Some(stats);
         self.previous = Some(cache);

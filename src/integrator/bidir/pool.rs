@@ -284,6 +284,16 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
         }
     }
 }
+/// The concentration `κ` by camera depth of a camera pass's unoccluded pool draws
+/// ([`Counters::concentration`], summed in tile order); `None` without any.
+pub(crate) fn pass_concentration(results: &[TileResult]) -> Option<[f32; CONCENTRATION_DEPTHS]> {
+    let mut counters = Counters::default();
+    for r in results {
+        counters += r.counters;
+    }
+    counters.concentration().map(|(_, by_depth)| by_depth.map(|c| c as f32))
+}
+
 /// Key of the pilot pool that measures `V̄` before the first iteration.
 pub(crate) const PILOT_ITERATION: u64 = u64::MAX;
 

@@ -29,16 +29,19 @@
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
-use super::pcbpt::{PcMis, PcOptions, connection_counts, light_paths_for, light_throughputs, with_throughput_buffer};
+use super::pcbpt::{
+    PcMis, PcOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
+};
 use super::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, concentration_depth,
+    pass_concentration,
 };
-use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, within_probability};
+use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability};
 use super::{Sink, Vertex};
 use crate::error::Error;
 use crate::film::Tile;
+use crate::integrator::RenderStats;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
-use crate::integrator::{Counters, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -141,7 +144,7 @@ impl Model {
     /// Trees of up to `eye` and `light` leaves over the features of camera vertices
     /// `eye_vertices` and of the connectible vertices of `pool`; `Γ` uniform.
     pub fn new(scene: &Scene, eye_vertices: &[Record], pool: &LightPool, eye: usize, light: usize) -> Model {
-        let eye_points: Vec<_> = eye_vertices.iter().map(|r| super::subspace::features(scene, &r.vertex)).collect();
+        let eye_points: Vec<_> = eye_vertices.iter().map(|r| features(scene, &r.vertex, r.vertex.wo)).collect();
         let light_points: Vec<_> = (0..pool.connectible.len())
             .map(|k| {
                 let prefix = pool.prefix(k);
@@ -184,7 +187,7 @@ impl Model {
     /// previous vertex.
     #[inline]
     pub fn eye_subspace(&self, scene: &Scene, z: &Vertex) -> usize {
-        self.eye.classify(&super::subspace::features(scene, z))
+        self.eye.classify(&features(scene, z, z.wo))
     }
 
     /// The light subspace of the last vertex of a light subpath `y_0..y_{s-1}` (`s >= 2`).
@@ -203,13 +206,12 @@ impl Model {
 /// `prev` from their positions (or towards a light at infinity's direction), so that a
 /// path's strategies classify the vertex the same way whichever walk made it.
 fn light_features(scene: &Scene, y: &Vertex, prev: &Vertex) -> [f32; FEATURES] {
-    let towards = if prev.at_infinity() { prev.ng } else { prev.p - y.p };
-    super::subspace::features(scene, &Vertex { wo: towards, ..*y })
+    features(scene, y, if prev.at_infinity() { prev.ng } else { prev.p - y.p })
 }
 
 /// Features of eye vertex `z` whose successor towards the camera is `next`.
 fn eye_features(scene: &Scene, z: &Vertex, next: &Vertex) -> [f32; FEATURES] {
-    super::subspace::features(scene, &Vertex { wo: next.p - z.p, ..*z })
+    features(scene, z, next.p - z.p)
 }
 
 /// What the MIS counts of an iteration take from the one before (and, after training, from
@@ -295,19 +297,24 @@ impl<'a> SpCounts<'a> {
     }
 }
 
-impl StrategyCounts for SpCounts<'_> {
-    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+impl SpCounts<'_> {
+    /// `n(s,t)`; `alpha` gives the light throughput at `y_{s-1}` (asked only for resampling).
+    #[inline]
+    fn count_with(&self, path: &FullPath, s: usize, t: usize, alpha: impl FnOnce() -> Rgb) -> f32 {
         match (s, t) {
             (_, 1) => self.light_trace,
             (0 | 1, _) => 1.0,
             _ => match self.resampling {
                 None => self.connect[concentration_depth(t)],
-                Some((model, measured)) => with_throughput_buffer(s, |alpha| {
-                    light_throughputs(self.scene, path, alpha);
-                    self.selection(model, measured, path, s, alpha[s - 1])
-                }),
+                Some((model, measured)) => self.selection(model, measured, path, s, alpha()),
             },
         }
+    }
+}
+
+impl StrategyCounts for SpCounts<'_> {
+    fn count(&self, path: &FullPath, s: usize, t: usize) -> f32 {
+        self.count_with(path, s, t, || throughput_at(self.scene, path, s))
     }
 
     fn path_dependent(&self) -> bool {
@@ -320,25 +327,10 @@ impl StrategyCounts for SpCounts<'_> {
 
     /// Counts of a whole path with one pass for the light throughputs.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
-        let n = path.len();
-        with_throughput_buffer(n, |alpha| {
-            if self.resampling.is_some()
-                && let Some(last) = (2..n.saturating_sub(1)).rev().find(|&s| needed(s))
-            {
-                light_throughputs(self.scene, path, &mut alpha[..last]);
-            }
-            for (s, o) in out.iter_mut().enumerate().take(n) {
-                if !needed(s) {
-                    continue;
-                }
-                *o = match (s, n - s, self.resampling) {
-                    (s, t, Some((model, measured))) if s >= 2 && t >= 2 => {
-                        self.selection(model, measured, path, s, alpha[s - 1])
-                    }
-                    (s, t, _) => self.count(path, s, t),
-                };
-            }
-        })
+        let throughputs = self.resampling.is_some();
+        fill_counts(self.scene, path, needed, out, throughputs, |s, t, alpha| {
+            self.count_with(path, s, t, || alpha[s - 1])
+        });
     }
 }
 
@@ -587,14 +579,8 @@ impl Iterative for SpcbptRender {
         if i > self.sp.opts.training_iterations {
             return;
         }
-        let mut counters = Counters::default();
-        for r in results {
-            counters += r.counters;
-        }
-        let mut concentration = self.measured.as_ref().map_or([1.0; CONCENTRATION_DEPTHS], |m| m.concentration);
-        if let Some((_, by_depth)) = counters.concentration() {
-            concentration = by_depth.map(|c| c as f32);
-        }
+        let previous = self.measured.as_ref().map_or([1.0; CONCENTRATION_DEPTHS], |m| m.concentration);
+        let concentration = pass_concentration(results).unwrap_or(previous);
         self.measured =
             Some(Measured::of_pool(&pass.subspaces, pass.pool.paths, pass.pool.mean_vertices(), concentration));
         if !self.training(i) {
@@ -655,6 +641,7 @@ pub(crate) fn test_model(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::integrator::Counters;
     use crate::integrator::bidir::pc_cache::tests::scene;
     use crate::integrator::bidir::pool::draw_one_by_one;
     use crate::integrator::bidir::{WalkLimits, camera_subpath};

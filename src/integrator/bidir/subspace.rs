@@ -13,6 +13,7 @@
 
 use super::Vertex;
 use crate::scene::Scene;
+use glam::Vec3;
 
 /// Length of a feature vector: position, then normal.
 pub const FEATURES: usize = 6;
@@ -21,11 +22,11 @@ pub const FEATURES: usize = 6;
 const NORMAL_WEIGHT: f32 = 0.25;
 
 /// A vertex's features: its position relative to the scene's centre over the bounding radius,
-/// and its shading normal turned to the side its walk came from.
-pub fn features(scene: &Scene, v: &Vertex) -> [f32; FEATURES] {
+/// and its shading normal turned to the side of direction `towards`.
+pub fn features(scene: &Scene, v: &Vertex, towards: Vec3) -> [f32; FEATURES] {
     let b = &scene.bounds;
     let p = (v.p - b.center) / b.radius.max(f32::MIN_POSITIVE);
-    let n = if v.frame.n.dot(v.wo) < 0.0 { -v.frame.n } else { v.frame.n } * NORMAL_WEIGHT;
+    let n = if v.frame.n.dot(towards) < 0.0 { -v.frame.n } else { v.frame.n } * NORMAL_WEIGHT;
     [p.x, p.y, p.z, n.x, n.y, n.z]
 }
 
@@ -224,10 +225,9 @@ impl Matrix {
                 row.fill(1.0 / light as f64);
             }
         }
-        // Samples with a positive weight and contribution, sorted by row for the steps.
-        let mut used: Vec<&TrainingSample> =
+        // Samples with a positive weight and contribution.
+        let used: Vec<&TrainingSample> =
             samples.iter().filter(|s| s.w > 0.0 && s.f2 > 0.0 && s.gamma > 0.0 && s.f2.is_finite()).collect();
-        used.sort_by_key(|s| (s.eye, s.light));
         let mut grad = vec![0.0f64; eye * light];
         for _ in 0..TRAINING_STEPS {
             grad.fill(0.0);
