@@ -121,6 +121,9 @@ pub struct MethodEntry {
     pub pc_distance_term: Option<String>,
     pub pc_mis: Option<String>,
     pub pc_sampling: Option<String>,
+    pub pc_budget: Option<String>,
+    pub pc_budget_iterations: Option<u32>,
+    pub pc_budget_independence: Option<f32>,
     pub sp_eye_subspaces: Option<usize>,
     pub sp_light_subspaces: Option<usize>,
     pub sp_training_iterations: Option<u32>,
@@ -308,6 +311,11 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     if let Some(x) = &m.pc_sampling {
         pc.sampling = value_enum(file, "pc_sampling", x)?;
     }
+    if let Some(x) = &m.pc_budget {
+        pc.budget = value_enum(file, "pc_budget", x)?;
+    }
+    pc.budget_iterations = m.pc_budget_iterations.unwrap_or(pc.budget_iterations);
+    pc.budget_independence = m.pc_budget_independence.unwrap_or(pc.budget_independence);
     pc.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
     let sp = &mut o.bidir.sp;
     sp.eye_subspaces = m.sp_eye_subspaces.unwrap_or(sp.eye_subspaces);

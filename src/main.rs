@@ -5,6 +5,7 @@ use pcbpt::accel::{Backend, BuildOptions, BuildQuality, BvhLayout};
 use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
+use pcbpt::integrator::bidir::budget::BudgetMode;
 use pcbpt::integrator::bidir::mis::Heuristic;
 use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
 use pcbpt::integrator::bidir::spcbpt::SpOptions;
@@ -215,7 +216,8 @@ struct RenderArgs {
     /// (judged on a pilot pool), up to one per pixel; 0 keeps --pc-light-paths exactly.
     #[arg(long, default_value_t = PcOptions::default().pool_vertices)]
     pc_pool_vertices: usize,
-    /// PCBPT: connections drawn per camera vertex (N).
+    /// PCBPT and SPCBPT: connections drawn per camera vertex (N; 0: none, the pool only light
+    /// traces). With --pc-budget auto, the number the budget is measured with.
     #[arg(long, default_value_t = PcOptions::default().connections)]
     pc_connections: u32,
     /// PCBPT: one cache record pixel per stride × stride tile.
@@ -245,6 +247,18 @@ struct RenderArgs {
     /// PCBPT: memory limit of the cache (records × pool vertices floats), in MiB.
     #[arg(long, default_value_t = PcOptions::default().max_cache_mb)]
     pc_max_cache_mb: usize,
+    /// PCBPT and SPCBPT: choose the connections per camera vertex (0-8) and the light paths
+    /// that are light traced from the second moments and costs of measured iterations
+    /// (auto), or keep --pc-connections and the pool's light paths (off).
+    #[arg(long, value_enum, default_value_t = PcOptions::default().budget)]
+    pc_budget: BudgetMode,
+    /// PCBPT and SPCBPT: iterations measured before the budget is chosen.
+    #[arg(long, default_value_t = PcOptions::default().budget_iterations)]
+    pc_budget_iterations: u32,
+    /// PCBPT and SPCBPT: the share of the predicted change of second moment between budgets
+    /// that counts (1 if connections were independent samples).
+    #[arg(long, default_value_t = PcOptions::default().budget_independence)]
+    pc_budget_independence: f32,
     /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
     /// normals).
     #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
@@ -470,6 +484,9 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             mis: a.pc_mis,
             sampling: a.pc_sampling,
             max_cache_mb: a.pc_max_cache_mb,
+            budget: a.pc_budget,
+            budget_iterations: a.pc_budget_iterations,
+            budget_independence: a.pc_budget_independence,
         },
         sp: SpOptions {
             eye_subspaces: a.sp_eye_subspaces,
@@ -642,6 +659,14 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
                 k.pool_vertices,
                 k.megabytes,
                 c.concentration().map_or(1.0, |(all, _)| all)
+            );
+        }
+        if let Some(b) = &s.budget
+            && let (Some(p), Some(m)) = (b.chosen, b.measured_with)
+        {
+            eprintln!(
+                "  budget: {} connections per camera vertex and {} light-traced paths per iteration (measured with {} and {}; predicted efficiency {:.2}× theirs)",
+                p.connections, p.splat_paths, m.connections, m.splat_paths, b.predicted_gain
             );
         }
         if let Some(k) = &s.subspaces {

@@ -7,6 +7,7 @@ mod common;
 
 use common::*;
 use pcbpt::accel::Backend;
+use pcbpt::integrator::bidir::budget::BudgetMode;
 use pcbpt::integrator::bidir::pcbpt::PcMis;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::partial::{self, Part};
@@ -69,6 +70,19 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
         o.bidir.pc.light_paths = 300;
         cases.push((format!("Spcbpt {mis:?}"), o));
     }
+    // Budgets measured in iterations 1 and 2 (PCBPT) and 2 and 3 (SPCBPT, after training):
+    // the cuts fall inside the measurement, at its end, and beyond.
+    let mut o = options(Pcbpt, 7, 11);
+    o.bidir.pc.light_paths = 300;
+    o.bidir.pc.budget = BudgetMode::Auto;
+    cases.push(("Pcbpt with a budget".into(), o));
+    let mut o = options(Spcbpt, 7, 11);
+    o.bidir.sp.training_iterations = 2;
+    o.bidir.sp.eye_subspaces = 16;
+    o.bidir.sp.light_subspaces = 32;
+    o.bidir.pc.light_paths = 300;
+    o.bidir.pc.budget = BudgetMode::Auto;
+    cases.push(("Spcbpt with a budget".into(), o));
     for (name, o) in &cases {
         let whole = integrator::render(&scene, o).unwrap();
         for cuts in CUTS {

@@ -56,3 +56,28 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
         assert_ne!(one.image, other.image, "{kind:?}: the seed must change the image");
     }
 }
+
+/// PCBPT's and SPCBPT's budgets are chosen from counts and moments summed in a fixed order:
+/// the same plan, and the same image, whatever the number of threads.
+#[test]
+fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
+    use pcbpt::integrator::bidir::budget::BudgetMode;
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
+    for kind in [IntegratorKind::Pcbpt, IntegratorKind::Spcbpt] {
+        let set = |o: &mut pcbpt::integrator::RenderOptions| {
+            o.bidir.pc.budget = BudgetMode::Auto;
+            o.bidir.sp.training_iterations = 2;
+        };
+        let one = render_with(&scene, kind, 6, 42, 1, &set);
+        let two = render_with(&scene, kind, 6, 42, 2, &set);
+        let (a, b) = (one.stats.budget.as_ref().unwrap(), two.stats.budget.as_ref().unwrap());
+        assert!(a.chosen.is_some() && a.chosen == b.chosen, "{kind:?}: {a:?} against {b:?}");
+        assert!(
+            one.image
+                .iter()
+                .zip(&two.image)
+                .all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)),
+            "{kind:?} with a budget differs between 1 and 2 threads"
+        );
+    }
+}

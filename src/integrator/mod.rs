@@ -90,6 +90,10 @@ pub struct Counters {
     /// Sum over those draws of `1 / (V · PMF)`, the inverse of their selection probability
     /// relative to uniform selection (1 for uniform draws), by the same depths.
     pub pool_hits_inverse_concentration: [f64; CONCENTRATION_DEPTHS],
+    /// Shadow rays of pool connections (of `shadow_rays`).
+    pub pool_shadow_rays: u64,
+    /// Camera vertices that drew pool connections.
+    pub pool_lookups: u64,
 }
 
 impl Counters {
@@ -124,6 +128,8 @@ impl std::ops::AddAssign for Counters {
         self.connections_occluded += o.connections_occluded;
         self.connections_skipped += o.connections_skipped;
         self.draws_merged += o.draws_merged;
+        self.pool_shadow_rays += o.pool_shadow_rays;
+        self.pool_lookups += o.pool_lookups;
         for k in 0..CONCENTRATION_DEPTHS {
             self.pool_hits[k] += o.pool_hits[k];
             self.pool_hits_inverse_concentration[k] += o.pool_hits_inverse_concentration[k];
@@ -271,6 +277,8 @@ pub struct RenderStats {
     /// SPCBPT's subspaces and matrix (when SPCBPT ran).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub subspaces: Option<bidir::spcbpt::SubspaceStats>,
+    /// The budget PCBPT or SPCBPT chose (`--pc-budget auto`).
+    pub budget: Option<bidir::budget::BudgetStats>,
     /// Options of the bidirectional integrators (when one ran).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bidir: Option<BidirOptions>,
@@ -323,6 +331,7 @@ impl RenderStats {
             shadow_rays: PhaseRays::default(),
             cache: None,
             subspaces: None,
+            budget: None,
             bidir: None,
             pool: None,
             mlt: None,

@@ -50,20 +50,52 @@ pub(crate) struct Prepared<P> {
     pub pass: P,
     pub splats: Vec<Splat>,
     pub counters: Counters,
+    /// The light paths the film divides this pass's splats by, when not the ones traced
+    /// (`counters.light_paths`): an integrator whose light paths per iteration change
+    /// scales its splats to a fixed count.
+    pub splat_paths: Option<u64>,
 }
 
 impl<P> Prepared<P> {
     pub fn only(pass: P) -> Prepared<P> {
-        Prepared { pass, splats: Vec::new(), counters: Counters::default() }
+        Prepared { pass, splats: Vec::new(), counters: Counters::default(), splat_paths: None }
     }
 }
 
 /// Iterations to re-run before a chunk's first one, so that the integrator's state is the
 /// one a single process would have there.
 pub(crate) struct Warmup {
-    pub iterations: Range<u32>,
-    /// Whether their camera passes are needed too (or only their preparation).
-    pub tiles: bool,
+    /// Ranges of iterations, in order, each with whether their camera passes are needed too
+    /// (or only their preparation).
+    pub ranges: Vec<(Range<u32>, bool)>,
+}
+
+impl Warmup {
+    pub fn new(iterations: Range<u32>, tiles: bool) -> Warmup {
+        Warmup { ranges: vec![(iterations, tiles)] }
+    }
+
+    /// The warm-up of a pool integrator whose budget ([`super::bidir::budget`]) is measured
+    /// in iterations before `window_end` (with `BudgetMode::Auto`) and whose counts take
+    /// the previous iteration's state (its camera pass too with `previous_tiles`): those
+    /// iterations, with their camera passes, then iteration `first - 1`.
+    pub fn after_budget(
+        mode: super::bidir::budget::BudgetMode,
+        window_end: u32,
+        first: u32,
+        previous_tiles: bool,
+    ) -> Warmup {
+        let previous = first.saturating_sub(1)..first;
+        if mode == super::bidir::budget::BudgetMode::Off {
+            return Warmup::new(previous, previous_tiles);
+        }
+        let measured = 0..first.min(window_end);
+        let mut ranges = vec![(measured.clone(), true)];
+        if previous.start >= measured.end {
+            ranges.push((previous, previous_tiles));
+        }
+        Warmup { ranges }
+    }
 }
 
 /// Time and shadow rays of the passes' preparation.
@@ -92,7 +124,7 @@ pub(crate) trait Iterative: Send + Sync {
     /// The iterations before `first` whose passes rebuild the state a one-process render
     /// has when it reaches `first`.
     fn warmup(&self, first: u32) -> Warmup {
-        Warmup { iterations: first..first, tiles: false }
+        Warmup::new(first..first, false)
     }
 
     /// Prepares the pass starting at iteration `first`. `keep` is false in warm-up passes,
@@ -256,22 +288,24 @@ pub(crate) fn run<M: Iterative>(
         // A chunk that starts late rebuilds the state of the iterations before it.
         let warm = method.warmup(range.start);
         let t_warm = Instant::now();
-        let mut i = warm.iterations.start;
-        while i < warm.iterations.end {
-            let end = next_pass(&method, i, warm.iterations.end, per);
-            let mut scratch = Work::default();
-            let prepared = method.prepare(&ctx, i, false, &mut scratch);
-            let results: Vec<TileResult> = if warm.tiles {
-                tile_list
-                    .par_iter()
-                    .with_max_len(1)
-                    .map(|&t| method.render_tile(&ctx, &prepared.pass, t, i, end - i))
-                    .collect()
-            } else {
-                Vec::new()
-            };
-            method.finish(&ctx, prepared.pass, i..end, &results);
-            i = end;
+        for (iterations, tiles) in warm.ranges {
+            let mut i = iterations.start;
+            while i < iterations.end {
+                let end = next_pass(&method, i, iterations.end, per);
+                let mut scratch = Work::default();
+                let prepared = method.prepare(&ctx, i, false, &mut scratch);
+                let results: Vec<TileResult> = if tiles {
+                    tile_list
+                        .par_iter()
+                        .with_max_len(1)
+                        .map(|&t| method.render_tile(&ctx, &prepared.pass, t, i, end - i))
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                method.finish(&ctx, prepared.pass, i..end, &results);
+                i = end;
+            }
         }
         work.phases.warmup += t_warm.elapsed().as_secs_f64();
         let mut pending: Option<PendingPass> = None;
@@ -321,8 +355,11 @@ pub(crate) fn run<M: Iterative>(
             counters += pass_counters;
             work.shadow.camera_pass += pass_counters.shadow_rays;
             method.finish(&ctx, prepared.pass, first..end, &results);
-            pending =
-                Some(PendingPass { splats: prepared.splats, light_paths: prepared.counters.light_paths, results });
+            pending = Some(PendingPass {
+                splats: prepared.splats,
+                light_paths: prepared.splat_paths.unwrap_or(prepared.counters.light_paths),
+                results,
+            });
             first = end;
             passes += 1;
             let done = first - range.start;

@@ -3,7 +3,7 @@
 //! `(s,t)`), and BDPT with efficiency-optimised Russian roulette on connections (EORR,
 //! contract §4).
 
-use super::mis::{Counts, Heuristic, StrategyCounts, mis_weight_with};
+use super::mis::{Counts, Heuristic, StrategyCounts, mis_shares_with, mis_weight_with};
 use super::{
     Connection, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
 };
@@ -92,6 +92,9 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return;
         }
         let w = mis_weight_with(self.scene, &[], camera, None, self.heuristic, self.counts);
+        if sink.wants_shares() {
+            sink.note_shares(mis_shares_with(self.scene, &[], camera, None, self.counts));
+        }
         sink.add_emission(camera, pt.beta * le * w);
     }
 
@@ -201,6 +204,14 @@ impl<C: StrategyCounts> Connector<'_, C> {
         })
     }
 
+    /// Tells a sink that wants them the MIS shares of the connection about to be delivered.
+    #[inline]
+    fn note_shares(&self, light: &[Vertex], camera: &[Vertex], conn: &Connection, sink: &mut impl Sink) {
+        if sink.wants_shares() {
+            sink.note_shares(mis_shares_with(self.scene, light, camera, Some(conn), self.counts));
+        }
+    }
+
     /// Weights an unweighted connection contribution, applies roulette, traces the shadow
     /// ray and delivers the result; `true` when the shadow ray was traced and unoccluded.
     #[allow(clippy::too_many_arguments)]
@@ -227,11 +238,13 @@ impl<C: StrategyCounts> Connector<'_, C> {
             let Some(k) = self.roulette(c * w, pos, rng, counters) else { return false };
             let visible = self.trace(a, b, counters);
             if visible {
+                self.note_shares(light, camera, conn, sink);
                 deliver(sink, c, w * k);
             }
             visible
         } else if self.trace(a, b, counters) {
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
+            self.note_shares(light, camera, conn, sink);
             deliver(sink, c, w);
             true
         } else {

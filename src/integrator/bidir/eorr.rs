@@ -63,7 +63,7 @@ impl Iterative for Eorr {
 
     fn warmup(&self, first: u32) -> Warmup {
         let end = if self.pilot_spp == 0 { first } else { first.min(self.pilot_spp) };
-        Warmup { iterations: 0..end, tiles: true }
+        Warmup::new(0..end, true)
     }
 
     fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {

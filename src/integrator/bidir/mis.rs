@@ -402,21 +402,108 @@ fn weight_in<const N: usize>(
     let full = FullPath { light, camera };
     let (n, s) = (full.len(), light.len());
     let p = path_pdfs::<N>(scene, light, camera, conn);
-    let correlation = counts.correlation();
-    if counts.path_dependent() || correlation.is_some() {
+    if counts.path_dependent() || counts.correlation().is_some() {
         // Costly or corrected counts: all those the walk needs, evaluated together first.
-        let mut table = [0.0f32; N];
-        counts.fill(&full, &|i| i == s || p.valid(i), &mut table);
-        if let Some(corr) = correlation {
-            let mut c = [1.0f32; N];
-            corr.factors(n, |i| p.pl[i], |i| p.pe[i], &mut c);
-            table[..n].iter_mut().zip(&c[..n]).for_each(|(t, c)| *t *= c);
-        }
+        let table = count_table(&p, &full, counts);
         weight_from_pdfs(&p, s, heuristic, &|i| table[i])
     } else if counts.all_ones() {
         weight_unit_counts(&p, s, heuristic)
     } else {
         weight_from_pdfs(&p, s, heuristic, &|sp| counts.count(&full, sp, n - sp))
+    }
+}
+
+/// The counts of every strategy of the path that the walk needs (the sampled one and the
+/// valid ones), with the correlation correction applied.
+fn count_table<const N: usize>(p: &PathPdfs<N>, full: &FullPath, counts: &impl StrategyCounts) -> [f32; N] {
+    let (n, s) = (full.len(), full.light.len());
+    let mut table = [0.0f32; N];
+    counts.fill(full, &|i| i == s || p.valid(i), &mut table);
+    if let Some(corr) = counts.correlation() {
+        let mut c = [1.0f32; N];
+        corr.factors(n, |i| p.pl[i], |i| p.pe[i], &mut c);
+        table[..n].iter_mut().zip(&c[..n]).for_each(|(t, c)| *t *= c);
+    }
+    table
+}
+
+/// The kinds of strategies an integrator with a light pool can budget: the camera path's own
+/// (`s = 0` and next-event estimation), pool connections (`s, t >= 2`) and light tracing
+/// (`t = 1`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Shares {
+    pub unidirectional: f32,
+    pub connection: f32,
+    pub light_trace: f32,
+}
+
+impl Shares {
+    /// The class of strategy `(s, t)`: 0 unidirectional, 1 connection, 2 light tracing.
+    #[inline]
+    pub fn class(s: usize, t: usize) -> usize {
+        match (s, t) {
+            (_, 1) => 2,
+            (0 | 1, _) => 0,
+            _ => 1,
+        }
+    }
+
+    fn add(&mut self, class: usize, x: f32) {
+        match class {
+            0 => self.unidirectional += x,
+            1 => self.connection += x,
+            _ => self.light_trace += x,
+        }
+    }
+}
+
+/// The balance-heuristic weights of all strategies of the path that joins `light` and
+/// `camera` (with the connection `conn`, `None` for `s = 0`), summed by [`Shares::class`]:
+/// they sum to one. With other counts `n'` that scale each class's counts by `a_k`, the
+/// path's combined density changes by `Σ_k a_k share_k`, which is what an efficiency
+/// estimate needs to predict the second moment of another budget from this one's samples.
+pub fn mis_shares_with(
+    scene: &Scene,
+    light: &[Vertex],
+    camera: &[Vertex],
+    conn: Option<&Connection>,
+    counts: &impl StrategyCounts,
+) -> Shares {
+    let full = FullPath { light, camera };
+    let (n, s) = (full.len(), light.len());
+    let p = path_pdfs::<CAP>(scene, light, camera, conn);
+    let table = count_table(&p, &full, counts);
+    // The terms `n_i p_i / (n_s p_s)` of the balance heuristic's walk, by class.
+    let nee = |i: usize| if i == 1 { p.nee_ratio } else { 1.0 };
+    let n_s = table[s] * nee(s);
+    let mut shares = Shares::default();
+    if n_s.is_nan() || n_s <= 0.0 {
+        return shares;
+    }
+    let term = |i: usize, r: f32| if p.valid(i) && table[i] > 0.0 { r * nee(i) * table[i] / n_s } else { 0.0 };
+    let mut sum = 1.0f32;
+    shares.add(Shares::class(s, n - s), 1.0);
+    let mut r = 1.0f32;
+    for i in (0..s).rev() {
+        r *= remap0(p.pe[i]) / remap0(p.pl[i]);
+        let x = term(i, r);
+        sum += x;
+        shares.add(Shares::class(i, n - i), x);
+    }
+    let mut r = 1.0f32;
+    for i in s..n.saturating_sub(1) {
+        r *= remap0(p.pl[i]) / remap0(p.pe[i]);
+        let x = term(i + 1, r);
+        sum += x;
+        shares.add(Shares::class(i + 1, n - i - 1), x);
+    }
+    if !(sum.is_finite() && sum > 0.0) {
+        return Shares::default();
+    }
+    Shares {
+        unidirectional: shares.unidirectional / sum,
+        connection: shares.connection / sum,
+        light_trace: shares.light_trace / sum,
     }
 }
 
@@ -437,6 +524,18 @@ pub fn mis_weight(
         None => None,
     };
     mis_weight_with(scene, light, camera, conn.as_ref(), heuristic, counts)
+}
+
+/// [`mis_shares_with`], evaluating the connection itself.
+pub fn mis_shares(scene: &Scene, light: &[Vertex], camera: &[Vertex], counts: &impl StrategyCounts) -> Shares {
+    let conn = match light.last() {
+        Some(qs) => match Connection::new(scene, qs, &camera[camera.len() - 1]) {
+            Some(c) => Some(c),
+            None => return Shares::default(),
+        },
+        None => None,
+    };
+    mis_shares_with(scene, light, camera, conn.as_ref(), counts)
 }
 
 /// The weights of every strategy of a full path computed from scratch: each strategy's

@@ -8,6 +8,7 @@
 //! by its own walk, `pdf_rev` the density had it been generated from the other end.
 
 pub mod bdpt;
+pub mod budget;
 pub mod cache_fit;
 pub mod eorr;
 pub mod mis;
@@ -760,4 +761,13 @@ pub trait Sink {
     fn add_connection(&mut self, light: &[Vertex], camera: &[Vertex], c: Rgb, w: f32) {
         self.add(light.len(), camera.len(), c * w);
     }
+    /// Whether the sink wants the MIS [`mis::Shares`] of each contribution (an efficiency
+    /// estimate does); they then come through [`Sink::note_shares`] right before it.
+    #[inline]
+    fn wants_shares(&self) -> bool {
+        false
+    }
+    /// The shares of the contribution delivered next.
+    #[inline]
+    fn note_shares(&mut self, _shares: mis::Shares) {}
 }

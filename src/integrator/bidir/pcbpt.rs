@@ -30,11 +30,12 @@
 //! times more often the cache's draws reach a vertex than uniform ones would.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
+use super::budget::{Budget, BudgetMode, CameraSample, Operations, Plan, SplatShares, budget_tile, normalise_splats};
 use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use super::pool::{
-    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, concentration_depth,
-    draw_one_by_one, pass_concentration,
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolPlan, PoolSampler, PoolSelection,
+    check_pool_memory, concentration_depth, draw_one_by_one, pass_concentration,
 };
 use super::{Sink, Vertex};
 use crate::bsdf::TransportMode;
@@ -122,6 +123,15 @@ pub struct PcOptions {
     pub sampling: PcSampling,
     /// Memory limit of the cache (`records × V` floats), in MiB.
     pub max_cache_mb: usize,
+    /// Whether connections and light tracing are budgeted from measured moments and costs
+    /// ([`super::budget`]; PCBPT and SPCBPT).
+    pub budget: BudgetMode,
+    /// Iterations measured before the budget is chosen.
+    pub budget_iterations: u32,
+    /// The share of the predicted change of second moment between budgets that counts
+    /// ([`super::budget`]): 1 if connections were independent samples; they are not (they
+    /// share the pool and, from one camera vertex, the camera prefix).
+    pub budget_independence: f32,
 }
 
 impl Default for PcOptions {
@@ -139,6 +149,9 @@ impl Default for PcOptions {
             mis: PcMis::Harmonic,
             sampling: PcSampling::Mixture,
             max_cache_mb: 1024,
+            budget: BudgetMode::Off,
+            budget_iterations: 2,
+            budget_independence: 0.35,
         }
     }
 }
@@ -149,8 +162,21 @@ impl PcOptions {
         if self.light_paths == 0 {
             return Err("--pc-light-paths must be at least 1".into());
         }
-        if self.connections == 0 {
-            return Err("--pc-connections must be at least 1".into());
+        if self.connections == 0 && self.budget == BudgetMode::Auto {
+            return Err("--pc-connections must be at least 1 with --pc-budget auto (it is what is measured)".into());
+        }
+
+        if !(self.budget_independence >= 0.0 && self.budget_independence.is_finite()) {
+            return Err(format!(
+                "--pc-budget-independence must be non-negative and finite, not {}",
+                self.budget_independence
+            ));
+        }
+        if self.budget_iterations < 2 {
+            return Err(
+                "--pc-budget-iterations must be at least 2 with --pc-budget auto (the variance is measured across them)"
+                    .into(),
+            );
         }
         if self.stride == 0 {
             return Err("--pc-cache-stride must be at least 1".into());
@@ -264,13 +290,27 @@ impl<'a> PcCounts<'a> {
         concentration: &[f32; CONCENTRATION_DEPTHS],
         previous: Option<&'a Cache>,
     ) -> PcCounts<'a> {
-        let n = opts.connections as f32;
+        let plan = Plan { connections: opts.connections, pool_paths: m, splat_paths: m };
+        PcCounts::for_plan(scene, opts, &plan, pixels, vbar, concentration, previous)
+    }
+
+    /// [`PcCounts::for_iteration`] of an iteration that spends `plan`.
+    pub fn for_plan(
+        scene: &'a Scene,
+        opts: &PcOptions,
+        plan: &Plan,
+        pixels: f32,
+        vbar: f32,
+        concentration: &[f32; CONCENTRATION_DEPTHS],
+        previous: Option<&'a Cache>,
+    ) -> PcCounts<'a> {
+        let n = plan.connections as f32;
         let connect = connection_counts(opts.mis, n, vbar, concentration);
         PcCounts {
             scene,
-            light_trace: m as f32 / pixels,
+            light_trace: plan.splat_paths as f32 / pixels,
             connect,
-            connections_times_paths: n * m as f32,
+            connections_times_paths: n * plan.pool_paths as f32,
             previous: previous.filter(|_| opts.mis == PcMis::Resampling),
             correlation: (opts.mis == PcMis::Correlated).then_some(Correlation { pixels, connections: n }),
         }
@@ -371,8 +411,8 @@ fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
     if n <= SHORT { f(&mut [Rgb::ZERO; SHORT][..n]) } else { f(&mut [Rgb::ZERO; CAP][..n]) }
 }
 
-/// The PCBPT camera pass: BDPT's `s = 0` and NEE per camera vertex, and `N` connections to
-/// pool vertices drawn from the cache.
+/// The PCBPT camera pass: BDPT's `s = 0` and NEE per camera vertex, and `connections`
+/// connections to pool vertices drawn from the cache (`--pc-connections`, or the budget's).
 #[derive(Clone, Debug)]
 pub struct Pcbpt {
     pub bdpt: Bdpt,
@@ -386,6 +426,7 @@ impl Pcbpt {
         conn: &Connector<C>,
         pool: &LightPool,
         cache: &Cache,
+        connections: u32,
         pos: Vec2,
         rng: &mut R,
         scratch: &mut Scratch,
@@ -393,7 +434,7 @@ impl Pcbpt {
         counters: &mut Counters,
     ) {
         let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.opts.sampling };
-        let pass = PoolPass { bdpt: &self.bdpt, connections: self.opts.connections, conn, pool };
+        let pass = PoolPass { bdpt: &self.bdpt, connections, conn, pool };
         pass.sample(&select, pos, rng, scratch, sink, counters);
     }
 }
@@ -404,7 +445,8 @@ impl Pcbpt {
 /// resampling weights; a pilot pool's `V̄` before the first) is kept here; a chunk that
 /// starts at `A` re-runs iteration `A - 1` for it (its camera pass only when `κ` is used),
 /// which gives exactly what one process has: the pool, the records and the draws of `A - 1`
-/// depend on the seed and `A - 1` alone, not on the counts.
+/// depend on the seed and `A - 1` alone, not on the counts. With `--pc-budget auto` the
+/// iterations of the budget's window are measured, and a chunk re-runs them too.
 pub struct PcbptRender {
     pub pc: Pcbpt,
     pub heuristic: Heuristic,
@@ -416,6 +458,17 @@ pub struct PcbptRender {
     cache_stats: Option<CacheStats>,
     /// Light paths per iteration (`M`), fixed by the pilot (see [`light_paths_for`]).
     light_paths: usize,
+    /// Connections and light tracing per iteration (set in `begin`).
+    budget: Option<Budget>,
+}
+
+/// One PCBPT iteration's pool, cache, and what the budget measures of its preparation.
+pub struct PcPass {
+    pool: LightPool,
+    cache: Cache,
+    stats: CacheStats,
+    splat_shares: Vec<SplatShares>,
+    operations: Operations,
 }
 
 impl PcbptRender {
@@ -429,14 +482,19 @@ impl PcbptRender {
             pool_size: None,
             cache_stats: None,
             light_paths: pc.opts.light_paths,
+            budget: None,
             pc,
         }
     }
 
+    fn budget(&self) -> &Budget {
+        self.budget.as_ref().expect("begin set the budget")
+    }
+
     fn counts<'a>(&'a self, scene: &'a Scene) -> PcCounts<'a> {
         let pixels = scene.film.width as f32 * scene.film.height as f32;
-        let (m, vbar, kappa) = (self.light_paths, self.vbar, &self.concentration);
-        PcCounts::for_iteration(scene, &self.pc.opts, m, pixels, vbar, kappa, self.previous.as_ref())
+        let (plan, vbar, kappa) = (self.budget().plan(), self.vbar, &self.concentration);
+        PcCounts::for_plan(scene, &self.pc.opts, &plan, pixels, vbar, kappa, self.previous.as_ref())
     }
 
     /// Traces the record pixels of iteration `iteration` and evaluates their PMFs over
@@ -444,7 +502,11 @@ impl PcbptRender {
     /// much larger than the pilot promised) are left out: lookups then blend fewer records.
     fn build_cache(&self, scene: &Scene, pool: &LightPool, seed: u64, iteration: u64) -> (Cache, CacheStats, Counters) {
         let o = &self.pc.opts;
-        let (mut records, mut counters) = trace_records(scene, &self.pc.bdpt.limits, o, seed, iteration);
+        let (mut records, mut counters) = if self.budget().plan().connections > 0 {
+            trace_records(scene, &self.pc.bdpt.limits, o, seed, iteration)
+        } else {
+            (Vec::new(), Counters::default())
+        };
         let v = pool.connectible.len();
         let fit = (o.max_cache_mb as f64 * 1024.0 * 1024.0 / Cache::bytes(1, v)).floor() as usize;
         let dropped = records.len().saturating_sub(fit);
@@ -464,7 +526,7 @@ impl PcbptRender {
 }
 
 impl Iterative for PcbptRender {
-    type Pass = (LightPool, Cache, CacheStats);
+    type Pass = PcPass;
 
     /// Measures `V̄` on a pilot pool, sets `M` from it, and checks the pool and the cache
     /// against their memory limits.
@@ -487,6 +549,10 @@ impl Iterative for PcbptRender {
         }
         self.vbar = pilot.mean_vertices();
         self.light_paths = m;
+        // Iteration 0's counts have no measured concentration: the budget measures from 1.
+        let plan = Plan { connections: o.connections, pool_paths: m, splat_paths: m };
+        let window = 1..1 + o.budget_iterations;
+        self.budget = Some(Budget::new(o.budget, window, plan, o.budget_independence, w as usize, h as usize));
         Ok(())
     }
 
@@ -495,51 +561,61 @@ impl Iterative for PcbptRender {
     }
 
     fn warmup(&self, first: u32) -> Warmup {
-        Warmup {
-            iterations: first.saturating_sub(1)..first,
-            tiles: matches!(self.pc.opts.mis, PcMis::Harmonic | PcMis::Correlated),
-        }
+        let kappa = matches!(self.pc.opts.mis, PcMis::Harmonic | PcMis::Correlated);
+        Warmup::after_budget(self.pc.opts.budget, self.pc.opts.budget_iterations + 1, first, kappa)
     }
 
-    fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<(LightPool, Cache, CacheStats)> {
+    fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<PcPass> {
         let t = Instant::now();
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
-        let splat = keep.then_some((&conn, &self.pc.bdpt, ctx.layers));
-        let (m, limits) = (self.light_paths, &self.pc.bdpt.limits);
-        let (pool, splats, mut counters) = LightPool::trace(ctx.scene, limits, m, ctx.seed, first as u64, splat);
+        let measures = self.budget().measures(first);
+        // A measured iteration splats in a warm-up too: its moments are part of the state.
+        let splat = (keep || measures).then_some((&conn, &self.pc.bdpt, ctx.layers));
+        let plan = self.budget().plan();
+        let pool_plan = PoolPlan { pool_paths: plan.pool_paths, splat_paths: plan.splat_paths };
+        let limits = &self.pc.bdpt.limits;
+        let (pool, mut splats, mut counters, splat_shares) =
+            LightPool::trace_plan(ctx.scene, limits, pool_plan, ctx.seed, first as u64, splat, measures);
+        let splat_paths = Some(normalise_splats(&mut splats, &plan, self.light_paths));
         work.phases.light_pool += t.elapsed().as_secs_f64();
         work.shadow.light_pool += counters.shadow_rays;
+        let mut operations = Operations {
+            light_rays: counters.camera_rays + counters.extension_rays,
+            splat_shadow: counters.shadow_rays,
+            ..Operations::default()
+        };
         let t = Instant::now();
         let (cache, stats, c) = self.build_cache(ctx.scene, &pool, ctx.seed, first as u64);
+        operations.cache_entries = (stats.records * stats.pool_vertices) as u64;
         work.phases.cache += t.elapsed().as_secs_f64();
         work.shadow.cache += c.shadow_rays;
         counters += c;
-        Prepared { pass: (pool, cache, stats), splats, counters }
+        Prepared { pass: PcPass { pool, cache, stats, splat_shares, operations }, splats, counters, splat_paths }
     }
 
-    fn render_tile(
-        &self,
-        ctx: &Ctx,
-        pass: &(LightPool, Cache, CacheStats),
-        tile: Tile,
-        first: u32,
-        count: u32,
-    ) -> TileResult {
-        let (pool, cache, _) = pass;
+    fn render_tile(&self, ctx: &Ctx, pass: &PcPass, tile: Tile, first: u32, count: u32) -> TileResult {
+        let (pool, cache) = (&pass.pool, &pass.cache);
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
-        let mut scratch = Scratch::default();
+        let budget = self.budget();
+        let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.pc.opts.sampling };
+        let connections = budget.plan().connections;
+        let pass = PoolPass { bdpt: &self.pc.bdpt, connections, conn: &conn, pool };
+        let mut sampler = PoolSampler { pass, select: &select, scratch: Scratch::default() };
+        if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
+            return result;
+        }
         sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-            self.pc.sample(&conn, pool, cache, pos, rng, &mut scratch, sink, counters);
+            sampler.sample(pos, rng, sink, counters);
             true
         })
     }
 
     /// Keeps `V̄`, the cache and the concentration of the camera pass's draws (summed in
-    /// tile order) for the next iteration.
-    fn finish(&mut self, _: &Ctx, pass: (LightPool, Cache, CacheStats), _: Range<u32>, results: &[TileResult]) {
-        let (pool, cache, stats) = pass;
+    /// tile order) for the next iteration, and gives a measured iteration to the budget.
+    fn finish(&mut self, _: &Ctx, pass: PcPass, iterations: Range<u32>, results: &[TileResult]) {
+        let PcPass { pool, cache, stats, splat_shares, operations } = pass;
         self.vbar = pool.mean_vertices();
         self.pool_size = Some((pool.paths, pool.connectible.len()));
         if let Some(kappa) = pass_concentration(results) {
@@ -547,11 +623,16 @@ impl Iterative for PcbptRender {
         }
         self.cache_stats = Some(stats);
         self.previous = Some(cache);
+        let budget = self.budget.as_mut().expect("begin set the budget");
+        if budget.measures(iterations.start) {
+            budget.add_iteration(results, &splat_shares, operations.with_camera_pass(results));
+        }
     }
 
     fn report(&self, stats: &mut RenderStats) {
         stats.pool = self.pool_size;
         stats.cache = self.cache_stats;
+        stats.budget = self.budget.as_ref().map(|b| b.stats.clone()).filter(|s| s.chosen.is_some());
     }
 }
 

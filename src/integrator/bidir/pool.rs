@@ -4,7 +4,8 @@
 //! uniformly — PCBPT without its cached PMFs.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::mis::{Counts, Heuristic, StrategyCounts};
+use super::budget::SplatShares;
+use super::mis::{Counts, Heuristic, Shares, StrategyCounts};
 use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
 use crate::error::Error;
 use crate::film::{Splat, Tile};
@@ -47,10 +48,13 @@ pub struct LightPool {
     pub paths: usize,
 }
 
-/// Collects splats (pool light tracing has no pixel of its own).
+/// Collects splats (pool light tracing has no pixel of its own), and with `shares` each
+/// splat's luminance and MIS shares for an efficiency estimate.
 pub struct SplatSink<'a> {
     pub splats: &'a mut Vec<Splat>,
     pub layers: bool,
+    pub shares: Option<&'a mut Vec<SplatShares>>,
+    pub pending: Shares,
 }
 
 impl Sink for SplatSink<'_> {
@@ -61,6 +65,37 @@ impl Sink for SplatSink<'_> {
     #[inline]
     fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: crate::math::Rgb) {
         self.splats.push(Splat::of_strategy(s, t, pos, value, self.layers));
+        if let Some(out) = self.shares.as_deref_mut() {
+            out.push(SplatShares { pos, value: crate::math::luminance(value), shares: self.pending });
+        }
+    }
+
+    fn wants_shares(&self) -> bool {
+        self.shares.is_some()
+    }
+
+    fn note_shares(&mut self, shares: Shares) {
+        self.pending = shares;
+    }
+}
+
+/// How many light paths an iteration traces, and what each does: paths `0..pool_paths`
+/// form the pool that connections draw from, paths `0..splat_paths` are light traced
+/// (`t = 1`). Path `i` is the same path whatever the plan (its random stream is keyed by `i`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PoolPlan {
+    pub pool_paths: usize,
+    pub splat_paths: usize,
+}
+
+impl PoolPlan {
+    /// `m` paths that both form the pool and splat.
+    pub fn both(m: usize) -> PoolPlan {
+        PoolPlan { pool_paths: m, splat_paths: m }
+    }
+
+    pub fn traced(&self) -> usize {
+        self.pool_paths.max(self.splat_paths)
     }
 }
 
@@ -76,38 +111,61 @@ impl LightPool {
         iteration: u64,
         splat: Option<(&Connector<C>, &Bdpt, bool)>,
     ) -> (LightPool, Vec<Splat>, Counters) {
+        let (pool, splats, counters, _) =
+            LightPool::trace_plan(scene, limits, PoolPlan::both(paths), seed, iteration, splat, false);
+        (pool, splats, counters)
+    }
+
+    /// [`LightPool::trace`] by a [`PoolPlan`]; with `shares`, also each splat's luminance and
+    /// MIS shares, in the splats' order.
+    pub fn trace_plan<C: StrategyCounts + Sync>(
+        scene: &Scene,
+        limits: &WalkLimits,
+        plan: PoolPlan,
+        seed: u64,
+        iteration: u64,
+        splat: Option<(&Connector<C>, &Bdpt, bool)>,
+        shares: bool,
+    ) -> (LightPool, Vec<Splat>, Counters, Vec<SplatShares>) {
         const CHUNK: usize = 256;
-        let chunks: Vec<Chunk> = (0..paths.div_ceil(CHUNK))
+        let paths = plan.traced();
+        let chunks: Vec<(Chunk, Vec<SplatShares>)> = (0..paths.div_ceil(CHUNK))
             .into_par_iter()
             .map(|c| {
                 crate::accel::embree::set_flush_denormals();
                 let mut verts = Vec::new();
                 let mut lens = Vec::new();
                 let mut splats = Vec::new();
+                let mut splat_shares = Vec::new();
                 let mut counters = Counters::default();
                 let mut path = Vec::new();
                 for i in c * CHUNK..((c + 1) * CHUNK).min(paths) {
                     let mut rng = Sampler::new(&[seed, POOL_STREAM, iteration, i as u64]);
                     light_subpath(scene, limits, &mut rng, &mut path, &mut counters);
                     counters.light_paths += 1;
-                    if let Some((conn, bdpt, layers)) = splat {
-                        let mut sink = SplatSink { splats: &mut splats, layers };
+                    if let Some((conn, bdpt, layers)) = splat.filter(|_| i < plan.splat_paths) {
+                        let shares = shares.then_some(&mut splat_shares);
+                        let mut sink = SplatSink { splats: &mut splats, layers, shares, pending: Shares::default() };
                         for s in 1..=path.len() {
                             if bdpt.allowed(s, 1) {
                                 conn.to_camera(&path[..s], &mut rng, &mut sink, &mut counters);
                             }
                         }
                     }
-                    lens.push(path.len() as u32);
-                    verts.extend_from_slice(&path);
+                    if i < plan.pool_paths {
+                        lens.push(path.len() as u32);
+                        verts.extend_from_slice(&path);
+                    }
                 }
-                (verts, lens, splats, counters)
+                ((verts, lens, splats, counters), splat_shares)
             })
             .collect();
-        let mut pool = LightPool { paths, ..Default::default() };
+        let mut pool = LightPool { paths: plan.pool_paths, ..Default::default() };
         let mut splats = Vec::new();
+        let mut all_shares = Vec::new();
         let mut counters = Counters::default();
-        for (verts, lens, sp, c) in chunks {
+        for ((verts, lens, sp, c), sh) in chunks {
+            all_shares.extend(sh);
             let mut k = 0usize;
             for len in lens {
                 let start = pool.vertices.len() as u32;
@@ -124,7 +182,7 @@ impl LightPool {
             splats.extend(sp);
             counters += c;
         }
-        (pool, splats, counters)
+        (pool, splats, counters, all_shares)
     }
 
     /// The light subpath `y_0..y_{s-1}` that ends at connectible vertex `k`.
@@ -216,6 +274,20 @@ impl PoolSelection for Uniform {
     }
 }
 
+/// A [`PoolPass`] with its selection and scratch, as one camera sample at a time.
+pub(crate) struct PoolSampler<'a, C, P> {
+    pub pass: PoolPass<'a, C>,
+    pub select: &'a P,
+    pub scratch: Scratch,
+}
+
+impl<C: StrategyCounts, P: PoolSelection> super::budget::CameraSample for PoolSampler<'_, C, P> {
+    #[inline]
+    fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl Sink, counters: &mut Counters) {
+        self.pass.sample(self.select, pos, rng, &mut self.scratch, sink, counters);
+    }
+}
+
 /// The camera pass of the pool integrators: per camera sample, BDPT's `s = 0` and `s = 1`
 /// strategies at every camera vertex and `connections` connections to pool vertices chosen
 /// by a [`PoolSelection`].
@@ -249,9 +321,10 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
             if bdpt.allowed(1, t) {
                 conn.next_event(&camera[..t], pos, rng, sink, counters);
             }
-            if self.pool.connectible.is_empty() || !camera[t - 1].is_connectible() {
+            if self.connections == 0 || self.pool.connectible.is_empty() || !camera[t - 1].is_connectible() {
                 continue;
             }
+            counters.pool_lookups += 1;
             let lookup = select.lookup(&camera[t - 1]);
             // Draws that repeat an earlier one (a peaked PMF and stratified draws) make the
             // same connection: it is evaluated and traced once with the factors summed.
@@ -273,6 +346,7 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
                 touched += y.p.x + y.pdf_rev + y.beta.x;
             }
             std::hint::black_box(touched);
+            let shadow_before = counters.shadow_rays;
             for &(i, scale, repeats) in &scratch.draws {
                 let light = self.pool.prefix(i);
                 if bdpt.allowed(light.len(), t) && conn.connect(light, &camera[..t], scale, pos, rng, sink, counters) {
@@ -281,6 +355,7 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
                     counters.pool_hits_inverse_concentration[k] += scale as f64 / uniform_scale;
                 }
             }
+            counters.pool_shadow_rays += counters.shadow_rays - shadow_before;
         }
     }
 }
@@ -358,7 +433,7 @@ impl Iterative for LvcRender {
     }
 
     fn warmup(&self, first: u32) -> Warmup {
-        Warmup { iterations: first.saturating_sub(1)..first, tiles: false }
+        Warmup::new(first.saturating_sub(1)..first, false)
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<LightPool> {
@@ -370,7 +445,7 @@ impl Iterative for LvcRender {
             LightPool::trace(ctx.scene, &self.lvc.bdpt.limits, self.lvc.light_paths, ctx.seed, first as u64, splat);
         work.phases.light_pool += t.elapsed().as_secs_f64();
         work.shadow.light_pool += counters.shadow_rays;
-        Prepared { pass: pool, splats, counters }
+        Prepared { pass: pool, splats, counters, splat_paths: None }
     }
 
     fn render_tile(&self, ctx: &Ctx, pool: &LightPool, tile: Tile, first: u32, count: u32) -> TileResult {

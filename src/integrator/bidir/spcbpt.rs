@@ -27,14 +27,15 @@
 //! its own light vertex), or harmonic corrected for correlation.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
+use super::budget::{Budget, BudgetMode, Operations, Plan, SplatShares, budget_tile, normalise_splats};
+use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
 use super::pcbpt::{
     PcMis, PcOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
 };
 use super::pool::{
-    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, concentration_depth,
-    pass_concentration,
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolPlan, PoolSampler, PoolSelection,
+    check_pool_memory, concentration_depth, pass_concentration,
 };
 use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability};
 use super::{Sink, Vertex};
@@ -394,6 +395,14 @@ impl<S: Sink> Sink for TrainingSink<'_, S> {
         }
         self.inner.add_connection(light, camera, c, w);
     }
+
+    fn wants_shares(&self) -> bool {
+        self.inner.wants_shares()
+    }
+
+    fn note_shares(&mut self, shares: Shares) {
+        self.inner.note_shares(shares);
+    }
 }
 
 /// Training watches every `k`-th pixel of a film of `pixels` pixels: all of them up to
@@ -411,10 +420,13 @@ pub struct Spcbpt {
     pub opts: SpOptions,
 }
 
-/// One iteration's pool and its vertices by light subspace.
+/// One iteration's pool and its vertices by light subspace, and what the budget measures of
+/// its preparation.
 pub struct SpPass {
     pool: LightPool,
     subspaces: LightSubspaces,
+    splat_shares: Vec<SplatShares>,
+    operations: Operations,
 }
 
 /// SPCBPT in the render loop.
@@ -428,6 +440,8 @@ pub struct SpcbptRender {
     light_paths: usize,
     stats: SubspaceStats,
     pool_size: Option<(usize, usize)>,
+    /// Connections and light tracing per iteration (set in `begin`).
+    budget: Option<Budget>,
 }
 
 impl SpcbptRender {
@@ -441,14 +455,29 @@ impl SpcbptRender {
             light_paths: sp.pc.light_paths,
             stats: SubspaceStats::default(),
             pool_size: None,
+            budget: None,
             sp,
         }
     }
 
     fn counts<'a>(&'a self, scene: &'a Scene) -> SpCounts<'a> {
         let measured = self.measured.as_ref().expect("begin measured the pilot");
-        let (n, m) = (self.sp.pc.connections, self.light_paths);
-        SpCounts::for_iteration(scene, self.sp.opts.mis, n, m, measured, self.model())
+        let plan = self.budget().plan();
+        SpCounts::for_iteration(scene, self.sp.opts.mis, plan.connections, plan.splat_paths, measured, self.model())
+    }
+
+    fn budget(&self) -> &Budget {
+        self.budget.as_ref().expect("begin set the budget")
+    }
+
+    /// The end of the iterations that change the state: training, the iteration after it,
+    /// and the budget's window.
+    fn state_end(&self) -> u32 {
+        let o = &self.sp.opts;
+        match self.sp.pc.budget {
+            BudgetMode::Off => o.training_iterations + 1,
+            BudgetMode::Auto => (o.training_iterations + 1).max(o.training_iterations + self.sp.pc.budget_iterations),
+        }
     }
 
     fn model(&self) -> &Model {
@@ -498,6 +527,10 @@ impl Iterative for SpcbptRender {
             LightPool::trace::<Counts>(scene, limits, m * PILOT_POOLS, ctx.seed, PILOT_ITERATION - 1, None);
         self.model = Some(Model::new(scene, &records, &light_pilot, o.eye_subspaces, o.light_subspaces));
         self.light_paths = m;
+        // The budget is measured once `Γ` is trained.
+        let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
+        let window = o.training_iterations..o.training_iterations + pc.budget_iterations;
+        self.budget = Some(Budget::new(pc.budget, window, plan, pc.budget_independence, w, h));
         let subspaces = self.model().sort_pool(scene, &pilot);
         self.measured =
             Some(Measured::of_pool(&subspaces, pilot.paths, pilot.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]));
@@ -516,24 +549,36 @@ impl Iterative for SpcbptRender {
         first + 1
     }
 
-    /// The state is fixed after the iteration that follows the training iterations.
+    /// The state is fixed after the iteration that follows the training iterations and
+    /// after the budget's window.
     fn warmup(&self, first: u32) -> Warmup {
-        Warmup { iterations: 0..first.min(self.sp.opts.training_iterations + 1), tiles: true }
+        Warmup::new(0..first.min(self.state_end()), true)
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<SpPass> {
         let t = Instant::now();
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
-        let splat = keep.then_some((&conn, &self.sp.bdpt, ctx.layers));
-        let (m, limits) = (self.light_paths, &self.sp.bdpt.limits);
-        let (pool, splats, counters) = LightPool::trace(ctx.scene, limits, m, ctx.seed, first as u64, splat);
+        let measures = self.budget().measures(first);
+        // A measured iteration splats in a warm-up too: its moments are part of the state.
+        let splat = (keep || measures).then_some((&conn, &self.sp.bdpt, ctx.layers));
+        let plan = self.budget().plan();
+        let pool_plan = PoolPlan { pool_paths: plan.pool_paths, splat_paths: plan.splat_paths };
+        let limits = &self.sp.bdpt.limits;
+        let (pool, mut splats, counters, splat_shares) =
+            LightPool::trace_plan(ctx.scene, limits, pool_plan, ctx.seed, first as u64, splat, measures);
+        let splat_paths = Some(normalise_splats(&mut splats, &plan, self.light_paths));
         work.phases.light_pool += t.elapsed().as_secs_f64();
         work.shadow.light_pool += counters.shadow_rays;
+        let operations = Operations {
+            light_rays: counters.camera_rays + counters.extension_rays,
+            splat_shadow: counters.shadow_rays,
+            ..Operations::default()
+        };
         let t = Instant::now();
         let subspaces = self.model().sort_pool(ctx.scene, &pool);
         work.phases.cache += t.elapsed().as_secs_f64();
-        Prepared { pass: SpPass { pool, subspaces }, splats, counters }
+        Prepared { pass: SpPass { pool, subspaces, splat_shares, operations }, splats, counters, splat_paths }
     }
 
     fn render_tile(&self, ctx: &Ctx, pass: &SpPass, tile: Tile, first: u32, count: u32) -> TileResult {
@@ -543,9 +588,14 @@ impl Iterative for SpcbptRender {
         let model = self.model();
         let select =
             SubspaceSelection { scene, model, subspaces: &pass.subspaces, paths: pass.pool.paths.max(1) as f64 };
-        let pool_pass =
-            PoolPass { bdpt: &self.sp.bdpt, connections: self.sp.pc.connections, conn: &conn, pool: &pass.pool };
-        let mut scratch = Scratch::default();
+        let budget = self.budget();
+        let connections = budget.plan().connections;
+        let pool_pass = PoolPass { bdpt: &self.sp.bdpt, connections, conn: &conn, pool: &pass.pool };
+        let mut sampler = PoolSampler { pass: pool_pass, select: &select, scratch: Scratch::default() };
+        if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
+            return result;
+        }
+        let PoolSampler { pass: pool_pass, mut scratch, .. } = sampler;
         if !self.training(first) {
             return sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
                 pool_pass.sample(&select, pos, rng, &mut scratch, sink, counters);
@@ -576,6 +626,10 @@ impl Iterative for SpcbptRender {
         let i = iterations.start;
         self.pool_size = Some((pass.pool.paths, pass.pool.connectible.len()));
         self.stats.light_subspaces_used = pass.subspaces.used();
+        let budget = self.budget.as_mut().expect("begin set the budget");
+        if budget.measures(i) {
+            budget.add_iteration(results, &pass.splat_shares, pass.operations.with_camera_pass(results));
+        }
         if i > self.sp.opts.training_iterations {
             return;
         }
@@ -605,6 +659,7 @@ impl Iterative for SpcbptRender {
     fn report(&self, stats: &mut RenderStats) {
         stats.pool = self.pool_size;
         stats.subspaces = Some(self.stats);
+        stats.budget = self.budget.as_ref().map(|b| b.stats.clone()).filter(|s| s.chosen.is_some());
     }
 }
 

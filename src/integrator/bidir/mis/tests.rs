@@ -300,6 +300,36 @@ fn sp_model(scene: &Scene, m: usize) -> (Model, Measured) {
     (model, measured)
 }
 
+/// The MIS shares of every strategy of `x` (what an efficiency-aware budget predicts moments
+/// from) are the balance-heuristic weights of the path's strategies summed by kind, whichever
+/// strategy sampled it.
+fn check_shares(scene: &Scene, x: &[Vertex], counts: &impl StrategyCounts, what: &str) {
+    let n = x.len();
+    let usable = |s: usize| s == 0 || (x[s - 1].is_connectible() || s == 1 && n > 2) && x[s].is_connectible();
+    let sub = |s: usize| subpaths(scene, x, s).filter(|_| usable(s));
+    let mut by_class = [0.0f64; 3];
+    for s in 0..n {
+        if let Some((l, c)) = sub(s) {
+            by_class[Shares::class(s, n - s)] += mis_weight(scene, &l, &c, Heuristic::Balance, counts) as f64;
+        }
+    }
+    for s in 0..n {
+        let Some((l, c)) = sub(s) else { continue };
+        if mis_weight(scene, &l, &c, Heuristic::Balance, counts) <= 0.0 {
+            continue;
+        }
+        let sh = mis_shares(scene, &l, &c, counts);
+        let got = [sh.unidirectional as f64, sh.connection as f64, sh.light_trace as f64];
+        assert!((got.iter().sum::<f64>() - 1.0).abs() < 1e-4, "{what} s={s} n={n}: shares {sh:?}");
+        for k in 0..3 {
+            assert!(
+                (got[k] - by_class[k]).abs() < 1e-4 * (1.0 + by_class[k]),
+                "{what} s={s} n={n}: shares {got:?} against the weights by kind {by_class:?}"
+            );
+        }
+    }
+}
+
 fn check_variant(variant: Variant, seed: u64) {
     let scene = scene(variant);
     let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
@@ -351,6 +381,11 @@ fn check_variant(variant: Variant, seed: u64) {
             resampled.push(pc_options[2].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
             sp_resampled.push(sp_options[2].1.count(&FullPath { light: &l, camera: &c }, 2, x.len() - 2));
         }
+        check_shares(&scene, &x, &pool, "pool");
+        check_shares(&scene, &x, &pc_options[1].1, "pc harmonic");
+        check_shares(&scene, &x, &pc_options[2].1, "pc resampling");
+        check_shares(&scene, &x, &pc_options[4].1, "pc correlated");
+        check_shares(&scene, &x, &sp_options[2].1, "sp resampling");
         let n = x.len();
         let has_delta = x.iter().any(|v| is_delta_surface(&scene, v));
         with_delta += has_delta as usize;

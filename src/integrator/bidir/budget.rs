@@ -1,0 +1,645 @@
+//! Efficiency-aware connection budgets of the pool integrators (PCBPT, SPCBPT): the number
+//! of pool connections per camera vertex (0, 1, 2, 4 or 8) and the number of light paths
+//! that are light traced (none, the pool's `M`, a quarter of the pixels, or one per pixel),
+//! chosen from the second moments and costs measured in a few iterations (the idea of
+//! Grittmann, Yazici, Georgiev and Slusallek, "Efficiency-aware multiple importance sampling
+//! for bidirectional rendering algorithms", SIGGRAPH 2022). With no connections and no light
+//! tracing an iteration is plain path tracing with next-event estimation.
+//!
+//! **Second moments.** A budget `b'` scales the counts of the connection strategies by
+//! `a = N'/N` and those of light tracing by `c = L'/L`, and leaves the camera path's own
+//! (`s = 0`, next-event estimation) as they are. Under the balance heuristic a sample's
+//! weighted contribution is `v = f / Σ_k n_k p_k`, and with the MIS shares `u`, `k_c`, `l` of
+//! its path (the weights of its strategies summed by kind, [`Shares`]) the combined density
+//! under `b'` is `Σ_k n_k p_k · (u + a k_c + c l)`. So `Σ v² / (u + a k_c + c l)` over the
+//! samples of a pixel estimates `∫ f² / Σ n'_k p_k`, the second moment of that pixel's
+//! estimate under `b'`, from samples of the budget in use (Grittmann et al.'s estimator). A
+//! path no strategy of `b'` can make gives an infinite moment, so a budget that would lose
+//! light (a caustic of a point light with no light tracing) is never chosen.
+//!
+//! **Variance.** A pixel's estimate sums many contributions (one per strategy and path
+//! length), so its second moment is no variance: the variance under the budget in use is
+//! measured across the iterations instead, and a candidate's is that plus the change of
+//! second moment, taken in two steps: to the candidate's light tracing (light paths are
+//! independent samples), then to its connections, that change multiplied by
+//! `--pc-budget-independence` (0.35). The estimator treats connections as independent
+//! samples, but those of one camera vertex share its prefix and all pixels share the pool:
+//! with a factor of 1 it predicted on `staircase2` 3.4× the variance of the budget in use
+//! for no connections and 1.4× for one, where equal-time renders measured 1.75× and 1.15×.
+//!
+//! **Choice.** Per candidate, `Σ_pixels variance / (mean² + 0.01)` (the relMSE the images
+//! are judged by, on luminance) times the cost of an iteration, from the operations the
+//! measured iterations counted, priced by [`Prices`]. The least product wins. The choice is
+//! made from counts alone, never from clocks, so it is the same on every machine and for
+//! every thread count, and a chunk that re-runs the measured iterations makes it again.
+//! Iterations of different budgets are each unbiased and averaged alike; the film divides
+//! every iteration's splats by the same count of light paths ([`normalise_splats`]).
+
+use super::mis::Shares;
+use crate::film::{Splat, Tile};
+use crate::integrator::Counters;
+use crate::integrator::path::PathTracer;
+use crate::integrator::render_loop::{Ctx, TileResult, sample_tile};
+use crate::sampling::Sampler;
+use glam::Vec2;
+use serde::Serialize;
+use std::ops::Range;
+
+/// Whether the pool integrators choose their budget (`--pc-budget`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BudgetMode {
+    /// `--pc-connections` and the pool's light paths, as given.
+    Off,
+    /// Chosen after `--pc-budget-iterations` measured iterations.
+    Auto,
+}
+
+/// Connections per camera vertex a budget may choose.
+pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
+
+/// Pixels whose moments are measured: every `k`-th, at most about this many.
+const MEASURED_PIXELS: usize = 65_536;
+
+/// The `0.01` of relMSE's denominator.
+const REL_EPSILON: f64 = 0.01;
+
+/// What an iteration spends on the pool: connections per camera vertex, and light paths
+/// that form the pool and that splat.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Plan {
+    pub connections: u32,
+    pub pool_paths: usize,
+    pub splat_paths: usize,
+}
+
+impl Plan {
+    pub fn traced(&self) -> usize {
+        self.pool_paths.max(self.splat_paths)
+    }
+
+    /// No connections and no light tracing: the path tracer's estimator.
+    pub fn path_tracing(&self) -> bool {
+        self.connections == 0 && self.splat_paths == 0
+    }
+}
+
+/// Scales the splats of an iteration that light traces `plan.splat_paths` paths to what
+/// `reference` paths would splat, and returns `reference`: the film divides every
+/// iteration's splats by the same count of light paths, so each iteration's light tracing
+/// stays an estimate of its share of the image whatever the plan (dividing by the paths
+/// actually traced would weigh iterations by their light paths, and the camera pass's share
+/// by iterations: a bias of a few percent when the plan changes the share of light tracing).
+pub(crate) fn normalise_splats(splats: &mut [Splat], plan: &Plan, reference: usize) -> u64 {
+    if plan.splat_paths > 0 && plan.splat_paths != reference {
+        let k = reference as f32 / plan.splat_paths as f32;
+        for sp in splats.iter_mut() {
+            sp.value *= k;
+        }
+    }
+    reference as u64
+}
+
+/// One camera sample of a pool integrator, into any sink.
+pub(crate) trait CameraSample {
+    fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl super::Sink, counters: &mut Counters);
+}
+
+/// A tile of iteration `first` as the budget has it: the path tracer's when the plan
+/// [`Plan::path_tracing`], or `sample`'s with the measured pixels' contributions recorded in
+/// a measured iteration; `None` otherwise (the integrator renders it its own way).
+pub(crate) fn budget_tile(
+    ctx: &Ctx,
+    tile: Tile,
+    first: u32,
+    count: u32,
+    budget: &Budget,
+    sample: &mut impl CameraSample,
+) -> Option<TileResult> {
+    if !budget.measures(first) {
+        return (budget.plan().path_tracing() && !ctx.layers).then(|| path_traced_tile(ctx, tile, first, count));
+    }
+    let mut moments = budget.tile_moments();
+    let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+        match budget.measured_pixel(pos) {
+            Some(id) => {
+                moments.begin(id);
+                let mut sink = BudgetSink { inner: sink, moments: &mut moments, pending: Shares::default() };
+                sample.sample(pos, rng, &mut sink, counters);
+            }
+            None => sample.sample(pos, rng, sink, counters),
+        }
+        true
+    });
+    result.extra = Some(Box::new(moments));
+    Some(result)
+}
+
+/// A tile of a plan that [`Plan::path_tracing`]: the path tracer's samples (next-event
+/// estimation and BSDF sampling under the power heuristic, `src/integrator/path.rs`), which
+/// cost less than the bidirectional camera pass with its stored vertices and ratio walks.
+fn path_traced_tile(ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult {
+    let pt = PathTracer::new(&ctx.scene.integrator);
+    sample_tile(ctx, tile, first, count, |pos, sampler, sink, counters| {
+        let ray = ctx.scene.camera.generate_ray(pos);
+        counters.camera_rays += 1;
+        sink.l = pt.li(ctx.scene, ray, sampler, counters);
+        true
+    })
+}
+
+/// The budgets considered when the pool holds `m` light paths and the film `pixels` pixels:
+/// every connection count with every light-tracing count; connections need the pool.
+pub fn candidates(m: usize, pixels: usize) -> Vec<Plan> {
+    let mut lights = vec![0, m];
+    for l in [pixels / 4, pixels] {
+        if l > m && !lights.contains(&l) {
+            lights.push(l);
+        }
+    }
+    let mut out = Vec::new();
+    for n in CONNECTION_CHOICES {
+        for &l in &lights {
+            out.push(Plan { connections: n, pool_paths: if n > 0 { m } else { 0 }, splat_paths: l });
+        }
+    }
+    out
+}
+
+/// Relative cost of the operations an iteration counts, in extension rays (a closest-hit
+/// ray and the vertex built at its hit). Measured with PCBPT on `staircase2` (320×180,
+/// 24 spp, 2 threads) with 0, 1, 4 and 8 connections per camera vertex: the camera pass took
+/// 1.68, 2.73, 4.37 and 6.53 s for 0, 2.52, 10.1 and 20.1 M pool shadow rays, so a traced
+/// connection (its draw, both BSDFs, the shadow ray and the MIS weight) costs 0.216 µs; the
+/// 4.69 M lookups that drawing needs 0.108 µs each; the pass without connections, 5.32 M
+/// extension rays and 3.14 M next-event rays priced like connections, leaves 0.187 µs per
+/// extension ray; a cache entry (its target and shadow ray) took 0.188 µs (1.0 M in 0.19 s).
+#[derive(Clone, Copy, Debug)]
+pub struct Prices {
+    pub shadow: f64,
+    pub lookup: f64,
+    pub cache_entry: f64,
+    /// The path tracer's camera pass over the bidirectional one's without connections: 124
+    /// and 151 samples per pixel in 10 s on `staircase2` (320×180, 2 threads).
+    pub path_tracer: f64,
+}
+
+pub const PRICES: Prices = Prices { shadow: 1.15, lookup: 0.58, cache_entry: 1.0, path_tracer: 0.82 };
+
+/// Operations one iteration performed, summed over the measured iterations.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Operations {
+    /// Camera and extension rays of the camera pass.
+    pub camera_rays: u64,
+    /// Shadow rays of the camera pass other than pool connections (next-event estimation).
+    pub camera_shadow: u64,
+    /// Shadow rays of pool connections.
+    pub pool_shadow: u64,
+    /// Camera vertices that drew connections.
+    pub lookups: u64,
+    /// Rays of the light paths.
+    pub light_rays: u64,
+    /// Shadow rays of light tracing.
+    pub splat_shadow: u64,
+    /// Cache entries built for the pool (PCBPT's records × pool vertices; 0 for SPCBPT).
+    pub cache_entries: u64,
+}
+
+impl Operations {
+    /// These operations with those of a camera pass's tiles added.
+    pub(crate) fn with_camera_pass(mut self, results: &[TileResult]) -> Operations {
+        for r in results {
+            let c = &r.counters;
+            self.camera_rays += c.camera_rays + c.extension_rays;
+            self.camera_shadow += c.shadow_rays - c.pool_shadow_rays;
+            self.pool_shadow += c.pool_shadow_rays;
+            self.lookups += c.pool_lookups;
+        }
+        self
+    }
+
+    /// The cost of an iteration under `to`, in extension rays, from these operations made
+    /// under `from`.
+    pub fn cost(&self, from: &Plan, to: &Plan, prices: &Prices) -> f64 {
+        let ratio = |a: usize, b: usize| if b == 0 { 0.0 } else { a as f64 / b as f64 };
+        let mut c = self.camera_rays as f64 + prices.shadow * self.camera_shadow as f64;
+        if to.path_tracing() {
+            return c * prices.path_tracer;
+        }
+        if to.connections > 0 {
+            c += prices.shadow * self.pool_shadow as f64 * to.connections as f64 / from.connections.max(1) as f64;
+            c += prices.cache_entry * self.cache_entries as f64 + prices.lookup * self.lookups as f64;
+        }
+        c += self.light_rays as f64 * ratio(to.traced(), from.traced());
+        c += prices.shadow * self.splat_shadow as f64 * ratio(to.splat_paths, from.splat_paths);
+        c
+    }
+}
+
+/// A light-tracing splat's luminance and MIS shares.
+#[derive(Clone, Copy, Debug)]
+pub struct SplatShares {
+    pub pos: Vec2,
+    pub value: f32,
+    pub shares: Shares,
+}
+
+/// The count scales `(a, c)` of each candidate against the plan in use.
+fn scales(from: &Plan, candidates: &[Plan]) -> Vec<(f64, f64)> {
+    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
+    candidates
+        .iter()
+        .map(|p| {
+            (ratio(p.connections as f64, from.connections as f64), ratio(p.splat_paths as f64, from.splat_paths as f64))
+        })
+        .collect()
+}
+
+/// Adds a contribution of luminance `v` and shares `s` to a pixel's moments: its value to
+/// `x`, and `v² / (u + a k + c l)` for every candidate's scales to `q`.
+#[inline]
+fn accumulate(v: f32, s: &Shares, scales: &[(f64, f64)], x: &mut f64, q: &mut [f64]) {
+    if !(v.is_finite() && v > 0.0) {
+        return;
+    }
+    let v = v as f64;
+    *x += v;
+    let (u, k, l) = (s.unidirectional as f64, s.connection as f64, s.light_trace as f64);
+    for (q, &(a, c)) in q.iter_mut().zip(scales) {
+        let d = u + a * k + c * l;
+        *q += if d > 0.0 { v * v / d } else { f64::INFINITY };
+    }
+}
+
+/// The moments of one tile's measured pixels in one iteration.
+pub struct TileMoments {
+    scales: Vec<(f64, f64)>,
+    /// Measured-pixel index of each entry.
+    ids: Vec<u32>,
+    x: Vec<f64>,
+    /// `q` of entry `e` at `[e * C .. (e + 1) * C]`.
+    q: Vec<f64>,
+}
+
+impl TileMoments {
+    /// Starts the entry of measured pixel `id`.
+    pub fn begin(&mut self, id: usize) {
+        self.ids.push(id as u32);
+        self.x.push(0.0);
+        self.q.extend(std::iter::repeat_n(0.0, self.scales.len()));
+    }
+
+    fn record(&mut self, v: f32, shares: &Shares) {
+        let c = self.scales.len();
+        let (Some(x), true) = (self.x.last_mut(), self.q.len() >= c) else { return };
+        let at = self.q.len() - c;
+        accumulate(v, shares, &self.scales, x, &mut self.q[at..]);
+    }
+}
+
+/// Wraps a camera sample's sink: passes everything on, and records each contribution's
+/// luminance and shares into the tile's moments.
+pub struct BudgetSink<'a, S> {
+    pub inner: &'a mut S,
+    pub moments: &'a mut TileMoments,
+    pub pending: Shares,
+}
+
+impl<S: super::Sink> super::Sink for BudgetSink<'_, S> {
+    #[inline]
+    fn add(&mut self, s: usize, t: usize, value: crate::math::Rgb) {
+        self.moments.record(crate::math::luminance(value), &self.pending);
+        self.inner.add(s, t, value);
+    }
+
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: crate::math::Rgb) {
+        // Camera passes of the pool integrators do not splat; their light tracing is the
+        // pool's, measured through `SplatShares`.
+        self.inner.splat(s, t, pos, value);
+    }
+
+    fn add_emission(&mut self, camera: &[super::Vertex], value: crate::math::Rgb) {
+        self.moments.record(crate::math::luminance(value), &self.pending);
+        self.inner.add_emission(camera, value);
+    }
+
+    fn add_connection(&mut self, light: &[super::Vertex], camera: &[super::Vertex], c: crate::math::Rgb, w: f32) {
+        self.moments.record(crate::math::luminance(c * w), &self.pending);
+        self.inner.add_connection(light, camera, c, w);
+    }
+
+    fn wants_shares(&self) -> bool {
+        true
+    }
+
+    fn note_shares(&mut self, shares: Shares) {
+        self.pending = shares;
+    }
+}
+
+/// What a choice found: the plan and, per candidate, the predicted relMSE sum and cost.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BudgetStats {
+    /// The plan chosen (`None` before the choice, or with `--pc-budget off`).
+    pub chosen: Option<Plan>,
+    /// The plan of the measured iterations.
+    pub measured_with: Option<Plan>,
+    /// Predicted efficiency of the chosen plan over that of the measured one (> 1: better).
+    pub predicted_gain: f64,
+    /// Per candidate: connections, splatting paths, predicted relative variance (summed over
+    /// the measured pixels), cost per iteration (extension rays).
+    pub candidates: Vec<(u32, usize, f64, f64)>,
+}
+
+/// The budget of a pool integrator over a render: the plan in use, and the measurement that
+/// replaces it.
+pub struct Budget {
+    pub mode: BudgetMode,
+    /// Iterations whose samples are measured; the plan changes after the last.
+    pub window: Range<u32>,
+    plan: Plan,
+    candidates: Vec<Plan>,
+    scales: Vec<(f64, f64)>,
+    /// Every `every`-th pixel is measured.
+    every: usize,
+    width: usize,
+    pixels: usize,
+    s1: Vec<f64>,
+    s2: Vec<f64>,
+    q: Vec<f64>,
+    operations: Operations,
+    iterations: u32,
+    independence: f64,
+    pub stats: BudgetStats,
+}
+
+impl Budget {
+    /// A budget that starts with `plan` and, with `BudgetMode::Auto`, measures `window`.
+    pub fn new(
+        mode: BudgetMode,
+        window: Range<u32>,
+        plan: Plan,
+        independence: f32,
+        width: usize,
+        height: usize,
+    ) -> Budget {
+        let pixels = width * height;
+        let candidates = if mode == BudgetMode::Auto { candidates(plan.pool_paths, pixels) } else { Vec::new() };
+        let scales = scales(&plan, &candidates);
+        let every = pixels.div_ceil(MEASURED_PIXELS).max(1);
+        Budget {
+            mode,
+            window,
+            plan,
+            candidates,
+            scales,
+            every,
+            width,
+            pixels,
+            s1: Vec::new(),
+            s2: Vec::new(),
+            q: Vec::new(),
+            operations: Operations::default(),
+            iterations: 0,
+            independence: independence as f64,
+            stats: BudgetStats::default(),
+        }
+    }
+
+    pub fn plan(&self) -> Plan {
+        self.plan
+    }
+
+    /// Whether iteration `i`'s samples are measured.
+    pub fn measures(&self, i: u32) -> bool {
+        self.mode == BudgetMode::Auto && self.window.contains(&i)
+    }
+
+    /// Measured pixels: `pixels.div_ceil(every)`.
+    fn measured(&self) -> usize {
+        self.pixels.div_ceil(self.every)
+    }
+
+    /// The measured-pixel index of film position `pos`, if it is measured.
+    pub fn measured_pixel(&self, pos: Vec2) -> Option<usize> {
+        let (x, y) = (pos.x.max(0.0) as usize, pos.y.max(0.0) as usize);
+        if x >= self.width || y * self.width + x >= self.pixels {
+            return None;
+        }
+        let p = y * self.width + x;
+        p.is_multiple_of(self.every).then_some(p / self.every)
+    }
+
+    /// Empty moments for a tile of a measured iteration.
+    pub fn tile_moments(&self) -> TileMoments {
+        TileMoments { scales: self.scales.clone(), ids: Vec::new(), x: Vec::new(), q: Vec::new() }
+    }
+
+    /// Adds a measured iteration: its tiles' moments (in `extra`, in tile order), its
+    /// splats' shares and the operations it made; after the last iteration of the window,
+    /// chooses the plan.
+    pub(crate) fn add_iteration(&mut self, results: &[TileResult], splats: &[SplatShares], operations: Operations) {
+        let (n, c) = (self.measured(), self.candidates.len());
+        if self.s1.is_empty() {
+            self.s1 = vec![0.0; n];
+            self.s2 = vec![0.0; n];
+            self.q = vec![0.0; n * c];
+        }
+        let mut x = vec![0.0f64; n];
+        for r in results {
+            let Some(m) = r.extra.as_ref().and_then(|e| e.downcast_ref::<TileMoments>()) else { continue };
+            for (e, &id) in m.ids.iter().enumerate() {
+                let id = id as usize;
+                x[id] += m.x[e];
+                for (q, add) in self.q[id * c..(id + 1) * c].iter_mut().zip(&m.q[e * c..(e + 1) * c]) {
+                    *q += add;
+                }
+            }
+        }
+        // A splat adds `value · W·H / L` to its pixel's estimate of the iteration (the film
+        // divides the splats of `L` light paths by `L / (W·H)` samples per pixel).
+        let per_path = self.pixels as f32 / self.plan.splat_paths.max(1) as f32;
+        for sp in splats {
+            if let Some(id) = self.measured_pixel(sp.pos) {
+                let v = sp.value * per_path;
+                accumulate(v, &sp.shares, &self.scales, &mut x[id], &mut self.q[id * c..(id + 1) * c]);
+            }
+        }
+        for (id, x) in x.into_iter().enumerate() {
+            self.s1[id] += x;
+            self.s2[id] += x * x;
+        }
+        let o = &mut self.operations;
+        o.camera_rays += operations.camera_rays;
+        o.camera_shadow += operations.camera_shadow;
+        o.pool_shadow += operations.pool_shadow;
+        o.lookups += operations.lookups;
+        o.light_rays += operations.light_rays;
+        o.splat_shadow += operations.splat_shadow;
+        o.cache_entries += operations.cache_entries;
+        self.iterations += 1;
+        if self.iterations == self.window.len() as u32 {
+            self.choose();
+        }
+    }
+
+    /// Picks the candidate with the least predicted relMSE × cost, and frees the moments.
+    ///
+    /// A pixel's variance under the plan in use is measured across the iterations; under
+    /// another plan it is predicted as that variance plus the difference of the two second
+    /// moments. (The second moment alone is no variance: a pixel's estimate sums many
+    /// contributions, one per strategy and path length, and their means do not cancel.)
+    fn choose(&mut self) {
+        let t = self.iterations as f64;
+        let c = self.candidates.len();
+        let from = self.plan;
+        let current = self.candidates.iter().position(|p| *p == from).expect("the plan in use is a candidate");
+        // Candidate `k`'s change is taken in two steps: to its light tracing with the
+        // connections in use (`via[k]`; light paths are independent samples), then to its
+        // connections, shrunk by the independence factor (they are correlated).
+        let via: Vec<usize> = self
+            .candidates
+            .iter()
+            .map(|p| {
+                let same = |q: &Plan| q.connections == from.connections && q.splat_paths == p.splat_paths;
+                self.candidates.iter().position(same).expect("every light-tracing count is a candidate")
+            })
+            .collect();
+        let mut variance = vec![0.0f64; c];
+        for id in 0..self.s1.len() {
+            let (s1, s2) = (self.s1[id], self.s2[id]);
+            let mean = s1 / t;
+            let measured = ((s2 - s1 * s1 / t) / (t - 1.0).max(1.0)).max(0.0);
+            let norm = 1.0 / (mean * mean + REL_EPSILON);
+            let q = &self.q[id * c..(id + 1) * c];
+            for (k, v) in variance.iter_mut().enumerate() {
+                let change = if q[k].is_infinite() {
+                    f64::INFINITY
+                } else if q[via[k]].is_infinite() {
+                    q[k] - q[current]
+                } else {
+                    (q[via[k]] - q[current]) + self.independence * (q[k] - q[via[k]])
+                };
+                *v += (measured + change / t).max(0.0) * norm;
+            }
+        }
+        let per_iteration = |p: &Plan| self.operations.cost(&from, p, &PRICES) / t;
+        let score = |k: usize| variance[k].max(0.0) * per_iteration(&self.candidates[k]);
+        let mut best: Option<usize> = None;
+        for k in 0..c {
+            let s = score(k);
+            if s.is_finite() && best.is_none_or(|b| s < score(b)) {
+                best = Some(k);
+            }
+        }
+        self.stats.measured_with = Some(from);
+        self.stats.candidates = (0..c)
+            .map(|k| {
+                let p = &self.candidates[k];
+                (p.connections, p.splat_paths, variance[k], per_iteration(p))
+            })
+            .collect();
+        if let Some(b) = best {
+            self.plan = self.candidates[b];
+            self.stats.predicted_gain = score(current) / score(b).max(f64::MIN_POSITIVE);
+        }
+        self.stats.chosen = Some(self.plan);
+        self.s1 = Vec::new();
+        self.s2 = Vec::new();
+        self.q = Vec::new();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn candidates_cover_path_tracing_and_need_a_pool_for_connections() {
+        let c = candidates(500, 57_600);
+        assert_eq!(c.len(), 5 * 4);
+        assert!(c.contains(&Plan { connections: 0, pool_paths: 0, splat_paths: 0 }));
+        assert!(c.contains(&Plan { connections: 4, pool_paths: 500, splat_paths: 500 }));
+        assert!(c.contains(&Plan { connections: 8, pool_paths: 500, splat_paths: 57_600 }));
+        assert!(c.iter().all(|p| (p.connections > 0) == (p.pool_paths > 0)));
+        // A pool already as large as the film adds no larger light-tracing counts.
+        assert_eq!(candidates(100, 100).len(), 5 * 2);
+    }
+
+    /// The estimator of another budget's second moment is exact for a path sampled by two
+    /// strategies with known densities: the balance-heuristic samples of budget `n` predict
+    /// `∫ f² / Σ n' p` for budget `n'`.
+    #[test]
+    fn moments_of_another_budget_match_their_integral() {
+        // On [0, 1]: f(x) = 1 + x; "unidirectional" samples uniform (p_u = 1, count 1),
+        // "connections" with density p_k(x) = 2x (count n = 2).
+        let f = |x: f64| 1.0 + x;
+        let (pu, pk) = (|_x: f64| 1.0, |x: f64| 2.0 * x);
+        let n = 2.0;
+        let mut rng = crate::sampling::Sampler::new(&[5]);
+        let scales = [(0.0, 0.0), (0.5, 0.0), (1.0, 0.0), (4.0, 0.0)];
+        let mut q = [0.0f64; 4];
+        let mut x = 0.0;
+        let runs = 200_000;
+        let shares = |y: f64| {
+            let total = pu(y) + n * pk(y);
+            Shares { unidirectional: (pu(y) / total) as f32, connection: (n * pk(y) / total) as f32, light_trace: 0.0 }
+        };
+        for _ in 0..runs {
+            // One unidirectional sample and `n` connection samples per run.
+            let y = rng.next_1d() as f64;
+            let v = f(y) / (pu(y) + n * pk(y));
+            accumulate(v as f32, &shares(y), &scales, &mut x, &mut q);
+            for _ in 0..n as usize {
+                let y = (rng.next_1d() as f64).sqrt();
+                let v = f(y) / (pu(y) + n * pk(y));
+                accumulate(v as f32, &shares(y), &scales, &mut x, &mut q);
+            }
+        }
+        assert!((x / runs as f64 - 1.5).abs() < 0.01, "mean {}", x / runs as f64);
+        for (k, &(a, _)) in scales.iter().enumerate() {
+            // ∫ (1+x)² / (1 + a n 2x) dx by the midpoint rule.
+            let m = 100_000;
+            let exact: f64 = (0..m)
+                .map(|i| {
+                    let y = (i as f64 + 0.5) / m as f64;
+                    f(y) * f(y) / (pu(y) + a * n * pk(y))
+                })
+                .sum::<f64>()
+                / m as f64;
+            let est = q[k] / runs as f64;
+            assert!((est / exact - 1.0).abs() < 0.01, "scale {a}: {est} against {exact}");
+        }
+    }
+
+    /// A budget without the only strategy that makes a path predicts an infinite moment.
+    #[test]
+    fn losing_a_paths_only_strategy_costs_an_infinite_moment() {
+        let mut x = 0.0;
+        let mut q = [0.0; 2];
+        let s = Shares { unidirectional: 0.0, connection: 0.0, light_trace: 1.0 };
+        accumulate(1.0, &s, &[(1.0, 1.0), (1.0, 0.0)], &mut x, &mut q);
+        assert_eq!(q[0], 1.0);
+        assert!(q[1].is_infinite());
+    }
+
+    #[test]
+    fn costs_scale_each_part_with_what_the_plan_changes() {
+        let from = Plan { connections: 4, pool_paths: 500, splat_paths: 500 };
+        let ops = Operations {
+            camera_rays: 1000,
+            camera_shadow: 500,
+            pool_shadow: 2000,
+            lookups: 0,
+            light_rays: 100,
+            splat_shadow: 50,
+            cache_entries: 300,
+        };
+        let p = Prices { shadow: 0.5, lookup: 0.0, cache_entry: 0.25, path_tracer: 0.8 };
+        assert_eq!(ops.cost(&from, &from, &p), 1000.0 + 250.0 + 1000.0 + 75.0 + 100.0 + 25.0);
+        let pt = Plan { connections: 0, pool_paths: 0, splat_paths: 0 };
+        assert_eq!(ops.cost(&from, &pt, &p), 1000.0);
+        let more = Plan { connections: 8, pool_paths: 500, splat_paths: 2000 };
+        assert_eq!(ops.cost(&from, &more, &p), 1250.0 + 2000.0 + 75.0 + 400.0 + 100.0);
+    }
+}

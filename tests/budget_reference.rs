@@ -1,0 +1,85 @@
+//! PCBPT and SPCBPT with efficiency-aware budgets (`--pc-budget auto`) against the Mitsuba 3
+//! path-tracer references, with the verdict of the other bidirectional integrators
+//! (`tests/bidir_reference.rs`): two seeds averaged, the image mean within the case's
+//! tolerance, relMSE within 1.3× of what noise explains. The budget is measured in two
+//! iterations (PCBPT's 1 and 2, SPCBPT's after its training) and then changes the number of
+//! connections and light-traced paths: the iterations before and after the change are each
+//! unbiased, so the image converges whichever plan is chosen. The test prints the plan.
+//!
+//! On `veach-ajar`, whose pool error is common to the image (`tests/pcbpt_reference.rs`),
+//! PCBPT with a budget is compared with PCBPT without one on same-seed pairs.
+
+mod common;
+
+use common::*;
+use pcbpt::image_io::Image;
+use pcbpt::integrator::bidir::budget::BudgetMode;
+use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use pcbpt::scene::Scene;
+
+fn render(scene: &Scene, kind: IntegratorKind, spp: u32, budget: BudgetMode, seed: u64) -> Image {
+    let mut o = RenderOptions::new(kind, Budget::Spp(spp));
+    o.seed = seed;
+    o.bidir.pc.budget = budget;
+    let out = integrator::render(scene, &o).unwrap();
+    if let Some(b) = &out.stats.budget {
+        println!("{kind:?} seed {seed}: plan {:?}, measured with {:?}", b.chosen, b.measured_with);
+    }
+    image(out)
+}
+
+fn check(case: &Case, kind: IntegratorKind, spp: u32) {
+    let scene = case.scene();
+    let a = render(&scene, kind, spp, BudgetMode::Auto, 1);
+    let b = render(&scene, kind, spp, BudgetMode::Auto, 2);
+    case.check(&a, &b, &format!("{kind:?} with a budget, 2 × {spp} spp"));
+}
+
+macro_rules! cases {
+    ($($name:ident: $case:expr, $kind:ident, $spp:expr;)*) => {
+        $(
+            #[test]
+            fn $name() {
+                check(&$case, IntegratorKind::$kind, $spp);
+            }
+        )*
+    };
+}
+
+cases! {
+    pcbpt_cornell_ply: CORNELL_PLY, Pcbpt, 24;
+    spcbpt_cornell_ply: CORNELL_PLY, Spcbpt, 24;
+    pcbpt_veach_mis: VEACH_MIS, Pcbpt, 32;
+    spcbpt_veach_mis: VEACH_MIS, Spcbpt, 32;
+    pcbpt_staircase2: STAIRCASE2, Pcbpt, 32;
+    spcbpt_staircase2: STAIRCASE2, Spcbpt, 32;
+    pcbpt_living_room: LIVING_ROOM, Pcbpt, 32;
+    pcbpt_sunlit_room: SUNLIT_ROOM, Pcbpt, 16;
+    spcbpt_sunlit_room: SUNLIT_ROOM, Spcbpt, 16;
+}
+
+/// PCBPT with a budget against PCBPT without one on 12 same-seed pairs of `veach-ajar`
+/// renders (80×45, unlimited depth, 48 spp), which share their pools: the ratio of their
+/// image means is free of most of the pool's common error. A plan that lost a strategy's
+/// share would move it by far more than the 1% allowed.
+#[test]
+fn pcbpt_budget_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
+    let scene = load(
+        &root().join(VEACH_AJAR.scene),
+        &[("resx", "80"), ("resy", "45"), ("max_depth", "-1")],
+        pcbpt::accel::Backend::Embree,
+    );
+    let pcbpt = IntegratorKind::Pcbpt;
+    let ratios: Vec<f64> = (1000..1012)
+        .map(|seed| {
+            render(&scene, pcbpt, 48, BudgetMode::Auto, seed).mean()
+                / render(&scene, pcbpt, 48, BudgetMode::Off, seed).mean()
+        })
+        .collect();
+    let n = ratios.len() as f64;
+    let ratio = ratios.iter().sum::<f64>() / n;
+    let se = (ratios.iter().map(|r| (r - ratio) * (r - ratio)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    println!("veach-ajar 80×45, 12 pairs × 48 spp: PCBPT with a budget / without = {ratio:.5} ± {se:.5}");
+    assert!(se < 0.004, "pairs too noisy to judge the mean: ± {se}");
+    assert!((ratio - 1.0).abs() < 0.01, "PCBPT with a budget / without = {ratio} ± {se}");
+}
