@@ -35,7 +35,9 @@
 //! Iterations of different budgets are each unbiased and averaged alike; the film divides
 //! every iteration's splats by the same count of light paths ([`normalise_splats`]).
 
-use super::mis::Shares;
+use super::bdpt::{Bdpt, Connector};
+use super::mis::{Shares, StrategyCounts};
+use super::pool::{LightPool, PoolPlan};
 use crate::film::{Splat, Tile};
 use crate::integrator::Counters;
 use crate::integrator::path::PathTracer;
@@ -74,8 +76,13 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// What the plan asks of the light pool.
+    pub fn pool(&self) -> PoolPlan {
+        PoolPlan { pool_paths: self.pool_paths, splat_paths: self.splat_paths }
+    }
+
     pub fn traced(&self) -> usize {
-        self.pool_paths.max(self.splat_paths)
+        self.pool().traced()
     }
 
     /// No connections and no light tracing: the path tracer's estimator.
@@ -234,6 +241,18 @@ impl Operations {
         c += prices.shadow * self.splat_shadow as f64 * ratio(to.splat_paths, from.splat_paths);
         c
     }
+}
+
+/// An iteration's light pool as [`Budget::trace_pool`] traced it.
+pub(crate) struct TracedPool {
+    pub pool: LightPool,
+    pub splats: Vec<Splat>,
+    pub counters: Counters,
+    pub splat_shares: Vec<SplatShares>,
+    /// What the tracing spent, for the cost model (the camera pass's part is added later).
+    pub operations: Operations,
+    /// The light paths the film divides the splats by.
+    pub splat_paths: u64,
 }
 
 /// A light-tracing splat's luminance and MIS shares.
@@ -410,6 +429,44 @@ impl Budget {
         self.plan
     }
 
+    /// The light pool of iteration `first` under the plan: its paths traced (splatting in a
+    /// measured iteration even in a warm-up, as its moments are part of the state), its
+    /// splats scaled to `m` light paths ([`normalise_splats`]), each splat's shares when
+    /// measured, and the operations of the tracing.
+    pub(crate) fn trace_pool<C: StrategyCounts + Sync>(
+        &self,
+        ctx: &Ctx,
+        conn: &Connector<C>,
+        bdpt: &Bdpt,
+        first: u32,
+        keep: bool,
+        m: usize,
+    ) -> TracedPool {
+        let measures = self.measures(first);
+        let splat = (keep || measures).then_some((conn, bdpt, ctx.layers));
+        let (pool, mut splats, counters, splat_shares) =
+            LightPool::trace_plan(ctx.scene, &bdpt.limits, self.plan.pool(), ctx.seed, first as u64, splat, measures);
+        let splat_paths = normalise_splats(&mut splats, &self.plan, m);
+        let operations = Operations {
+            light_rays: counters.camera_rays + counters.extension_rays,
+            splat_shadow: counters.shadow_rays,
+            ..Operations::default()
+        };
+        TracedPool { pool, splats, counters, splat_shares, operations, splat_paths }
+    }
+
+    /// After iteration `i`'s camera pass (`results`): adds it when it is measured.
+    pub(crate) fn finish(&mut self, i: u32, results: &[TileResult], splat_shares: &[SplatShares], ops: Operations) {
+        if self.measures(i) {
+            self.add_iteration(results, splat_shares, ops.with_camera_pass(results));
+        }
+    }
+
+    /// The statistics, once a plan has been chosen.
+    pub fn chosen_stats(&self) -> Option<BudgetStats> {
+        self.stats.chosen.is_some().then(|| self.stats.clone())
+    }
+
     /// Whether iteration `i`'s samples are measured.
     pub fn measures(&self, i: u32) -> bool {
         self.mode == BudgetMode::Auto && self.window.contains(&i)
@@ -438,7 +495,7 @@ impl Budget {
     /// Adds a measured iteration: its tiles' moments (in `extra`, in tile order), its
     /// splats' shares and the operations it made; after the last iteration of the window,
     /// chooses the plan.
-    pub(crate) fn add_iteration(&mut self, results: &[TileResult], splats: &[SplatShares], operations: Operations) {
+    fn add_iteration(&mut self, results: &[TileResult], splats: &[SplatShares], operations: Operations) {
         let (n, c) = (self.measured(), self.candidates.len());
         if self.s1.is_empty() {
             self.s1 = vec![0.0; n];

@@ -29,15 +29,15 @@
 //! reach, and the share of draws that reach one is `P(Vis)`; their ratio, `κ`, is how many
 //! times more often the cache's draws reach a vertex than uniform ones would.
 
+use super::Vertex;
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{Budget, BudgetMode, CameraSample, Operations, Plan, SplatShares, budget_tile, normalise_splats};
+use super::budget::{Budget, BudgetMode, CameraSample, Operations, Plan, SplatShares, TracedPool, budget_tile};
 use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use super::pool::{
-    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolPlan, PoolSampler, PoolSelection,
-    check_pool_memory, concentration_depth, draw_one_by_one, pass_concentration,
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
+    concentration_depth, draw_one_by_one, pass_concentration,
 };
-use super::{Sink, Vertex};
 use crate::bsdf::TransportMode;
 use crate::error::Error;
 use crate::film::Tile;
@@ -46,7 +46,6 @@ use crate::integrator::{CacheStats, Counters, RenderStats};
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;
-use glam::Vec2;
 use serde::Serialize;
 use std::ops::Range;
 use std::time::Instant;
@@ -165,7 +164,6 @@ impl PcOptions {
         if self.connections == 0 && self.budget == BudgetMode::Auto {
             return Err("--pc-connections must be at least 1 with --pc-budget auto (it is what is measured)".into());
         }
-
         if !(self.budget_independence >= 0.0 && self.budget_independence.is_finite()) {
             return Err(format!(
                 "--pc-budget-independence must be non-negative and finite, not {}",
@@ -173,10 +171,7 @@ impl PcOptions {
             ));
         }
         if self.budget_iterations < 2 {
-            return Err(
-                "--pc-budget-iterations must be at least 2 with --pc-budget auto (the variance is measured across them)"
-                    .into(),
-            );
+            return Err("--pc-budget-iterations must be at least 2 (the variance is measured across them)".into());
         }
         if self.stride == 0 {
             return Err("--pc-cache-stride must be at least 1".into());
@@ -411,32 +406,13 @@ fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
     if n <= SHORT { f(&mut [Rgb::ZERO; SHORT][..n]) } else { f(&mut [Rgb::ZERO; CAP][..n]) }
 }
 
-/// The PCBPT camera pass: BDPT's `s = 0` and NEE per camera vertex, and `connections`
-/// connections to pool vertices drawn from the cache (`--pc-connections`, or the budget's).
+/// PCBPT's per-sample estimator: BDPT's `s = 0` and NEE per camera vertex, and connections to
+/// pool vertices drawn from the cache (`--pc-connections`, or the budget's), by [`PoolPass`]
+/// with `CacheSelection`.
 #[derive(Clone, Debug)]
 pub struct Pcbpt {
     pub bdpt: Bdpt,
     pub opts: PcOptions,
-}
-
-impl Pcbpt {
-    #[allow(clippy::too_many_arguments)]
-    pub fn sample<R: Random, C: StrategyCounts>(
-        &self,
-        conn: &Connector<C>,
-        pool: &LightPool,
-        cache: &Cache,
-        connections: u32,
-        pos: Vec2,
-        rng: &mut R,
-        scratch: &mut Scratch,
-        sink: &mut impl Sink,
-        counters: &mut Counters,
-    ) {
-        let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.opts.sampling };
-        let pass = PoolPass { bdpt: &self.bdpt, connections, conn, pool };
-        pass.sample(&select, pos, rng, scratch, sink, counters);
-    }
 }
 
 /// PCBPT in the render loop. Per iteration: a light pool, the cache's records and PMFs over
@@ -569,29 +545,18 @@ impl Iterative for PcbptRender {
         let t = Instant::now();
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
-        let measures = self.budget().measures(first);
-        // A measured iteration splats in a warm-up too: its moments are part of the state.
-        let splat = (keep || measures).then_some((&conn, &self.pc.bdpt, ctx.layers));
-        let plan = self.budget().plan();
-        let pool_plan = PoolPlan { pool_paths: plan.pool_paths, splat_paths: plan.splat_paths };
-        let limits = &self.pc.bdpt.limits;
-        let (pool, mut splats, mut counters, splat_shares) =
-            LightPool::trace_plan(ctx.scene, limits, pool_plan, ctx.seed, first as u64, splat, measures);
-        let splat_paths = Some(normalise_splats(&mut splats, &plan, self.light_paths));
+        let traced = self.budget().trace_pool(ctx, &conn, &self.pc.bdpt, first, keep, self.light_paths);
+        let TracedPool { pool, splats, mut counters, splat_shares, mut operations, splat_paths } = traced;
         work.phases.light_pool += t.elapsed().as_secs_f64();
         work.shadow.light_pool += counters.shadow_rays;
-        let mut operations = Operations {
-            light_rays: counters.camera_rays + counters.extension_rays,
-            splat_shadow: counters.shadow_rays,
-            ..Operations::default()
-        };
         let t = Instant::now();
         let (cache, stats, c) = self.build_cache(ctx.scene, &pool, ctx.seed, first as u64);
         operations.cache_entries = (stats.records * stats.pool_vertices) as u64;
         work.phases.cache += t.elapsed().as_secs_f64();
         work.shadow.cache += c.shadow_rays;
         counters += c;
-        Prepared { pass: PcPass { pool, cache, stats, splat_shares, operations }, splats, counters, splat_paths }
+        let pass = PcPass { pool, cache, stats, splat_shares, operations };
+        Prepared { pass, splats, counters, splat_paths: Some(splat_paths) }
     }
 
     fn render_tile(&self, ctx: &Ctx, pass: &PcPass, tile: Tile, first: u32, count: u32) -> TileResult {
@@ -624,15 +589,13 @@ impl Iterative for PcbptRender {
         self.cache_stats = Some(stats);
         self.previous = Some(cache);
         let budget = self.budget.as_mut().expect("begin set the budget");
-        if budget.measures(iterations.start) {
-            budget.add_iteration(results, &splat_shares, operations.with_camera_pass(results));
-        }
+        budget.finish(iterations.start, results, &splat_shares, operations);
     }
 
     fn report(&self, stats: &mut RenderStats) {
         stats.pool = self.pool_size;
         stats.cache = self.cache_stats;
-        stats.budget = self.budget.as_ref().map(|b| b.stats.clone()).filter(|s| s.chosen.is_some());
+        stats.budget = self.budget.as_ref().and_then(Budget::chosen_stats);
     }
 }
 

@@ -27,15 +27,15 @@
 //! its own light vertex), or harmonic corrected for correlation.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{Budget, BudgetMode, Operations, Plan, SplatShares, budget_tile, normalise_splats};
+use super::budget::{Budget, BudgetMode, Operations, Plan, SplatShares, TracedPool, budget_tile};
 use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
 use super::pcbpt::{
     PcMis, PcOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
 };
 use super::pool::{
-    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolPlan, PoolSampler, PoolSelection,
-    check_pool_memory, concentration_depth, pass_concentration,
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
+    concentration_depth, pass_concentration,
 };
 use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability};
 use super::{Sink, Vertex};
@@ -559,26 +559,15 @@ impl Iterative for SpcbptRender {
         let t = Instant::now();
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
-        let measures = self.budget().measures(first);
-        // A measured iteration splats in a warm-up too: its moments are part of the state.
-        let splat = (keep || measures).then_some((&conn, &self.sp.bdpt, ctx.layers));
-        let plan = self.budget().plan();
-        let pool_plan = PoolPlan { pool_paths: plan.pool_paths, splat_paths: plan.splat_paths };
-        let limits = &self.sp.bdpt.limits;
-        let (pool, mut splats, counters, splat_shares) =
-            LightPool::trace_plan(ctx.scene, limits, pool_plan, ctx.seed, first as u64, splat, measures);
-        let splat_paths = Some(normalise_splats(&mut splats, &plan, self.light_paths));
+        let traced = self.budget().trace_pool(ctx, &conn, &self.sp.bdpt, first, keep, self.light_paths);
+        let TracedPool { pool, splats, counters, splat_shares, operations, splat_paths } = traced;
         work.phases.light_pool += t.elapsed().as_secs_f64();
         work.shadow.light_pool += counters.shadow_rays;
-        let operations = Operations {
-            light_rays: counters.camera_rays + counters.extension_rays,
-            splat_shadow: counters.shadow_rays,
-            ..Operations::default()
-        };
         let t = Instant::now();
         let subspaces = self.model().sort_pool(ctx.scene, &pool);
         work.phases.cache += t.elapsed().as_secs_f64();
-        Prepared { pass: SpPass { pool, subspaces, splat_shares, operations }, splats, counters, splat_paths }
+        let pass = SpPass { pool, subspaces, splat_shares, operations };
+        Prepared { pass, splats, counters, splat_paths: Some(splat_paths) }
     }
 
     fn render_tile(&self, ctx: &Ctx, pass: &SpPass, tile: Tile, first: u32, count: u32) -> TileResult {
@@ -627,9 +616,7 @@ impl Iterative for SpcbptRender {
         self.pool_size = Some((pass.pool.paths, pass.pool.connectible.len()));
         self.stats.light_subspaces_used = pass.subspaces.used();
         let budget = self.budget.as_mut().expect("begin set the budget");
-        if budget.measures(i) {
-            budget.add_iteration(results, &pass.splat_shares, pass.operations.with_camera_pass(results));
-        }
+        budget.finish(i, results, &pass.splat_shares, pass.operations);
         if i > self.sp.opts.training_iterations {
             return;
         }
@@ -659,7 +646,7 @@ impl Iterative for SpcbptRender {
     fn report(&self, stats: &mut RenderStats) {
         stats.pool = self.pool_size;
         stats.subspaces = Some(self.stats);
-        stats.budget = self.budget.as_ref().map(|b| b.stats.clone()).filter(|s| s.chosen.is_some());
+        stats.budget = self.budget.as_ref().and_then(Budget::chosen_stats);
     }
 }
 
