@@ -76,9 +76,7 @@ fn pcbpt_budget_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
                 / render(&scene, pcbpt, 48, BudgetMode::Off, seed).mean()
         })
         .collect();
-    let n = ratios.len() as f64;
-    let ratio = ratios.iter().sum::<f64>() / n;
-    let se = (ratios.iter().map(|r| (r - ratio) * (r - ratio)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    let (ratio, se) = mean_and_standard_error(&ratios);
     println!("veach-ajar 80×45, 12 pairs × 48 spp: PCBPT with a budget / without = {ratio:.5} ± {se:.5}");
     assert!(se < 0.004, "pairs too noisy to judge the mean: ± {se}");
     assert!((ratio - 1.0).abs() < 0.01, "PCBPT with a budget / without = {ratio} ± {se}");

@@ -82,9 +82,7 @@ fn check_pairs(mis: PcMis) {
     let ratios: Vec<f64> = (1000..1030)
         .map(|seed| render(&scene, 64, &other, seed).mean() / render(&scene, 64, &uniform, seed).mean())
         .collect();
-    let n = ratios.len() as f64;
-    let ratio = ratios.iter().sum::<f64>() / n;
-    let se = (ratios.iter().map(|r| (r - ratio) * (r - ratio)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    let (ratio, se) = mean_and_standard_error(&ratios);
     println!("veach-ajar 80×45, 30 pairs × 64 spp: SPCBPT {mis:?} / uniform = {ratio:.5} ± {se:.5}");
     // The pairs share less than PCBPT's (tests/pcbpt_reference.rs): the two counts weigh the
     // training connections differently, so their matrices, and their draws, part after the

@@ -330,3 +330,11 @@ pub fn reachable_by_light_tracing(scene: &Scene, min_alpha: f32) -> Vec<bool> {
         })
         .collect()
 }
+
+/// The mean of `xs` and its standard error (at least two values).
+pub fn mean_and_standard_error(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let mean = xs.iter().sum::<f64>() / n;
+    let se = (xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    (mean, se)
+}
