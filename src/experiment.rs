@@ -11,6 +11,7 @@ use crate::accel::Backend;
 use crate::compare;
 use crate::error::{Error, Result};
 use crate::image_io::{self, Image};
+use crate::integrator::bidir::budget::Independence;
 use crate::integrator::mlt::MltBase;
 use crate::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput};
 use crate::math::Rgb;
@@ -123,7 +124,8 @@ pub struct MethodEntry {
     pub pc_sampling: Option<String>,
     pub pc_budget: Option<String>,
     pub pc_budget_iterations: Option<u32>,
-    pub pc_budget_independence: Option<f32>,
+    pub pc_budget_independence: Option<Independence>,
+    pub pc_budget_smoothing: Option<u32>,
     pub sp_eye_subspaces: Option<usize>,
     pub sp_light_subspaces: Option<usize>,
     pub sp_training_iterations: Option<u32>,
@@ -316,6 +318,7 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     pc.budget_iterations = m.pc_budget_iterations.unwrap_or(pc.budget_iterations);
     pc.budget_independence = m.pc_budget_independence.unwrap_or(pc.budget_independence);
+    pc.budget_smoothing = m.pc_budget_smoothing.unwrap_or(pc.budget_smoothing);
     pc.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
     let sp = &mut o.bidir.sp;
     sp.eye_subspaces = m.sp_eye_subspaces.unwrap_or(sp.eye_subspaces);

@@ -5,7 +5,7 @@ use pcbpt::accel::{Backend, BuildOptions, BuildQuality, BvhLayout};
 use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
-use pcbpt::integrator::bidir::budget::BudgetMode;
+use pcbpt::integrator::bidir::budget::{BudgetMode, Independence};
 use pcbpt::integrator::bidir::mis::Heuristic;
 use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
 use pcbpt::integrator::bidir::spcbpt::SpOptions;
@@ -255,10 +255,15 @@ struct RenderArgs {
     /// PCBPT and SPCBPT: iterations measured before the budget is chosen.
     #[arg(long, default_value_t = PcOptions::default().budget_iterations)]
     pc_budget_iterations: u32,
-    /// PCBPT and SPCBPT: the share of the predicted change of second moment between budgets
-    /// that counts (1 if connections were independent samples).
+    /// PCBPT and SPCBPT: the share of the connections' predicted change of second moment
+    /// between budgets that counts, 0 to 1 (1 if the draws of a camera vertex were
+    /// independent), or `measured` (from their spread about each camera vertex's mean).
     #[arg(long, default_value_t = PcOptions::default().budget_independence)]
-    pc_budget_independence: f32,
+    pc_budget_independence: Independence,
+    /// PCBPT and SPCBPT: measured pixels each side whose means are averaged for the relMSE
+    /// weights of the budget's choice (0: each pixel's own mean).
+    #[arg(long, default_value_t = PcOptions::default().budget_smoothing)]
+    pc_budget_smoothing: u32,
     /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
     /// normals).
     #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
@@ -487,6 +492,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             budget: a.pc_budget,
             budget_iterations: a.pc_budget_iterations,
             budget_independence: a.pc_budget_independence,
+            budget_smoothing: a.pc_budget_smoothing,
         },
         sp: SpOptions {
             eye_subspaces: a.sp_eye_subspaces,

@@ -435,7 +435,12 @@ fn pcbpt_cache_over_the_memory_limit_is_refused_and_bad_options_are_named() {
         suggested += 1;
     }
     assert!(suggested >= 2, "{err}");
-    for (flag, value) in [("--pc-uniform-blend", "0"), ("--pc-budget-iterations", "1"), ("--pc-neighbours", "40")] {
+    for (flag, value) in [
+        ("--pc-uniform-blend", "0"),
+        ("--pc-budget-iterations", "1"),
+        ("--pc-budget-smoothing", "65"),
+        ("--pc-neighbours", "40"),
+    ] {
         let o = run(&[flag, value]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{err}");

@@ -58,17 +58,23 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
 /// the same plan, and the same image, whatever the number of threads.
 #[test]
 fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
-    use pcbpt::integrator::bidir::budget::BudgetMode;
+    use pcbpt::integrator::bidir::budget::{BudgetMode, Independence};
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
-    for kind in [IntegratorKind::Pcbpt, IntegratorKind::Spcbpt] {
-        let set = |o: &mut pcbpt::integrator::RenderOptions| {
-            o.bidir.pc.budget = BudgetMode::Auto;
-            o.bidir.sp.training_iterations = 2;
-        };
-        let one = render_with(&scene, kind, 6, 42, 1, &set);
-        let two = render_with(&scene, kind, 6, 42, 2, &set);
-        let (a, b) = (one.stats.budget.as_ref().unwrap(), two.stats.budget.as_ref().unwrap());
-        assert!(a.chosen.is_some() && a.chosen == b.chosen, "{kind:?}: {a:?} against {b:?}");
-        assert!(same_bits(&one.image, &two.image), "{kind:?} with a budget differs between 1 and 2 threads");
+    // The defaults, and smoothed means with the measured independence.
+    for (smoothing, independence) in [(0, Independence::Fixed(0.35)), (2, Independence::MEASURED)] {
+        for kind in [IntegratorKind::Pcbpt, IntegratorKind::Spcbpt] {
+            let set = |o: &mut pcbpt::integrator::RenderOptions| {
+                o.bidir.pc.budget = BudgetMode::Auto;
+                o.bidir.pc.budget_smoothing = smoothing;
+                o.bidir.pc.budget_independence = independence;
+                o.bidir.sp.training_iterations = 2;
+            };
+            let one = render_with(&scene, kind, 6, 42, 1, &set);
+            let two = render_with(&scene, kind, 6, 42, 2, &set);
+            let (a, b) = (one.stats.budget.as_ref().unwrap(), two.stats.budget.as_ref().unwrap());
+            assert!(a.chosen.is_some() && a.chosen == b.chosen, "{kind:?}: {a:?} against {b:?}");
+            assert_eq!(a.independence.to_bits(), b.independence.to_bits(), "{kind:?}");
+            assert!(same_bits(&one.image, &two.image), "{kind:?} with a budget differs between 1 and 2 threads");
+        }
     }
 }

@@ -22,21 +22,38 @@
 //! measured across the iterations instead, and a candidate's is that plus the change of
 //! second moment, taken in two steps: to the candidate's light tracing (light paths are
 //! independent samples), then to its connections, that change multiplied by
-//! `--pc-budget-independence` (0.35). The estimator treats connections as independent
-//! samples, but those of one camera vertex share its prefix and all pixels share the pool:
-//! with a factor of 1 it predicted on `staircase2` 3.4× the variance of the budget in use
-//! for no connections and 1.4× for one, where equal-time renders measured 1.75× and 1.15×.
+//! `--pc-budget-independence` (0.35, fitted on `staircase2`, where a factor of 1 predicted
+//! 3.4× the variance of the budget in use for no connections and 1.4× for one, and
+//! equal-time renders measured 1.75× and 1.15×). With `measured` the factor is the share of
+//! the connections' second moment that is variance about each camera vertex's own mean
+//! ([`Spread`]): given the camera vertex and the pool a vertex's `N` draws are independent,
+//! so only that part changes with `N`. It came out 0.71–0.99 on the six measured scenes, so
+//! the shared prefix is not what 0.35 makes up for.
 //!
 //! **Choice.** Per candidate, `Σ_pixels variance / (mean² + 0.01)` (the relMSE the images
 //! are judged by, on luminance) times the cost of an iteration, from the operations the
-//! measured iterations counted, priced by [`Prices`]. The least product wins. The choice is
-//! made from counts alone, never from clocks, so it is the same on every machine and for
-//! every thread count, and a chunk that re-runs the measured iterations makes it again.
-//! Iterations of different budgets are each unbiased and averaged alike; the film divides
-//! every iteration's splats by the same count of light paths ([`normalise_splats`]).
+//! measured iterations counted, priced by [`Prices`]. The least product wins. A pixel's
+//! `mean` is its own over the measured iterations, or with `--pc-budget-smoothing r` the
+//! average over its measured neighbours within `r`: a pixel's own mean of two iterations,
+//! squared, is biased up by their variance, which weighs the noisiest pixels least (on
+//! `staircase2`, with independence 1, the budget in use looked 2.7× less noisy than with
+//! `r = 2`, and no connections was predicted 5.2× as noisy as four connections, against
+//! 2.7× with `r = 2` and 1.8× in renders). Smoothed means
+//! with the measured independence predict better without a fitted factor, but chose no
+//! better at equal time (BENCHMARKS.md), so neither is the default. The choice is made from
+//! counts alone, never from clocks, so it is the same on every machine and for every thread
+//! count, and a chunk that re-runs the measured iterations makes it again. Iterations of
+//! different budgets are each unbiased and averaged alike; the film divides every
+//! iteration's splats by the same count of light paths ([`normalise_splats`]).
+//!
+//! **Known error.** The prediction for light tracing is too hopeful: on `staircase2` one
+//! light path per 4 pixels was predicted (smoothed means, independence 1) to cut the
+//! variance of path tracing by 40%, and cut it by 3%; on `cornell-ply` one per pixel by 75%,
+//! measured 66% (BENCHMARKS.md).
 
 use super::bdpt::{Bdpt, Connector};
 use super::mis::{Shares, StrategyCounts};
+use super::pcbpt::PcOptions;
 use super::pool::{LightPool, PoolPlan};
 use crate::film::{Splat, Tile};
 use crate::integrator::Counters;
@@ -57,10 +74,61 @@ pub enum BudgetMode {
     Auto,
 }
 
+/// How much of the connections' predicted change of second moment counts
+/// (`--pc-budget-independence`): a fixed share, or the share measured from their spread
+/// within camera vertices ([`Spread`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum Independence {
+    Fixed(f32),
+    Measured(MeasuredWord),
+}
+
+/// The word `measured` (of [`Independence`] in experiment files).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MeasuredWord {
+    Measured,
+}
+
+impl Independence {
+    pub const MEASURED: Independence = Independence::Measured(MeasuredWord::Measured);
+
+    /// The fixed share, `None` when measured.
+    pub fn fixed(&self) -> Option<f32> {
+        match *self {
+            Independence::Fixed(f) => Some(f),
+            Independence::Measured(_) => None,
+        }
+    }
+}
+
+impl std::str::FromStr for Independence {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Independence, String> {
+        if s == "measured" {
+            return Ok(Independence::MEASURED);
+        }
+        s.parse::<f32>()
+            .map(Independence::Fixed)
+            .map_err(|_| format!("expected a number from 0 to 1 or `measured`, not `{s}`"))
+    }
+}
+
+impl std::fmt::Display for Independence {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.fixed() {
+            Some(x) => write!(f, "{x}"),
+            None => f.write_str("measured"),
+        }
+    }
+}
+
 /// Connections per camera vertex a budget may choose.
 pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 
-/// Pixels whose moments are measured: every `k`-th, at most about this many.
+/// Pixels whose moments are measured: those of every `k`-th row and column, at most about
+/// this many.
 const MEASURED_PIXELS: usize = 65_536;
 
 /// The `0.01` of relMSE's denominator.
@@ -138,6 +206,7 @@ pub(crate) fn budget_tile(
         }
         true
     });
+    moments.end_vertex();
     result.extra = Some(Box::new(moments));
     Some(result)
 }
@@ -290,6 +359,35 @@ fn accumulate(v: f32, s: &Shares, scales: &[(f64, f64)], x: &mut f64, q: &mut [f
     }
 }
 
+/// How independent the pool connections of one camera vertex are, from their contributions
+/// `v_1 … v_N` (the `N` draws of each camera vertex, those that found nothing counting as 0):
+/// `raw` sums the second moment per draw, `Σ v_j² / N`, and `within` the unbiased variance
+/// of the draws about their own camera vertex's mean, `(Σ v_j² − (Σ v_j)² / N) / (N − 1)`.
+/// Given the camera vertex and the pool the draws are independent, so only `within` shrinks
+/// with more draws; the moment estimator counts all of `raw` as if it did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Spread {
+    pub raw: f64,
+    pub within: f64,
+}
+
+impl Spread {
+    fn add(&mut self, sum: f64, sum2: f64, draws: u32) {
+        if draws < 2 {
+            return;
+        }
+        let n = draws as f64;
+        self.raw += sum2 / n;
+        self.within += ((sum2 - sum * sum / n) / (n - 1.0)).max(0.0);
+    }
+
+    /// The share of the connections' second moment that more or fewer draws change:
+    /// `within / raw`, in `[0, 1]`; `None` with nothing measured.
+    pub fn independence(&self) -> Option<f64> {
+        (self.raw > 0.0).then(|| (self.within / self.raw).clamp(0.0, 1.0))
+    }
+}
+
 /// The moments of one tile's measured pixels in one iteration.
 pub struct TileMoments {
     scales: Vec<(f64, f64)>,
@@ -298,14 +396,46 @@ pub struct TileMoments {
     x: Vec<f64>,
     /// `q` of entry `e` at `[e * C .. (e + 1) * C]`.
     q: Vec<f64>,
+    /// Per entry: the pool connections' second moment per draw and their variance within
+    /// camera vertices, summed over the entry's camera vertices ([`Spread`]).
+    spread: Vec<Spread>,
+    /// Connections each camera vertex draws under the plan in use.
+    draws: u32,
+    /// The camera vertex whose connections are being summed: its depth, `Σ v`, `Σ v²`.
+    vertex: (usize, f64, f64),
 }
 
 impl TileMoments {
     /// Starts the entry of measured pixel `id`.
     pub fn begin(&mut self, id: usize) {
+        self.end_vertex();
         self.ids.push(id as u32);
         self.x.push(0.0);
         self.q.extend(std::iter::repeat_n(0.0, self.scales.len()));
+        self.spread.push(Spread::default());
+    }
+
+    /// Adds a pool connection's contribution `v` from the camera vertex at depth `t`. A
+    /// camera vertex's draws arrive together; those that found nothing add nothing.
+    fn connection(&mut self, t: usize, v: f32) {
+        if !(v.is_finite() && v > 0.0) {
+            return;
+        }
+        if t != self.vertex.0 {
+            self.end_vertex();
+            self.vertex.0 = t;
+        }
+        let v = v as f64;
+        self.vertex.1 += v;
+        self.vertex.2 += v * v;
+    }
+
+    /// Adds the camera vertex being summed to the entry's [`Spread`].
+    pub fn end_vertex(&mut self) {
+        let (_, sum, sum2) = std::mem::take(&mut self.vertex);
+        if let (Some(spread), true) = (self.spread.last_mut(), sum2 > 0.0) {
+            spread.add(sum, sum2, self.draws);
+        }
     }
 
     fn record(&mut self, v: f32, shares: &Shares) {
@@ -343,7 +473,11 @@ impl<S: super::Sink> super::Sink for BudgetSink<'_, S> {
     }
 
     fn add_connection(&mut self, light: &[super::Vertex], camera: &[super::Vertex], c: crate::math::Rgb, w: f32) {
-        self.moments.record(crate::math::luminance(c * w), &self.pending);
+        let v = crate::math::luminance(c * w);
+        self.moments.record(v, &self.pending);
+        if Shares::class(light.len(), camera.len()) == 1 {
+            self.moments.connection(camera.len(), v);
+        }
         self.inner.add_connection(light, camera, c, w);
     }
 
@@ -365,6 +499,11 @@ pub struct BudgetStats {
     pub measured_with: Option<Plan>,
     /// Predicted efficiency of the chosen plan over that of the measured one (> 1: better).
     pub predicted_gain: f64,
+    /// The measured iterations' connections' variance within camera vertices over their
+    /// second moment ([`Spread::independence`]); `None` with fewer than two draws per vertex.
+    pub measured_independence: Option<f64>,
+    /// The independence the choice used: given, measured, or 1 when neither.
+    pub independence: f64,
     /// Per candidate: connections, splatting paths, predicted relative variance (summed over
     /// the measured pixels), cost per iteration (extension rays).
     pub candidates: Vec<(u32, usize, f64, f64)>,
@@ -379,33 +518,34 @@ pub struct Budget {
     plan: Plan,
     candidates: Vec<Plan>,
     scales: Vec<(f64, f64)>,
-    /// Every `every`-th pixel is measured.
+    /// The pixels of every `every`-th row and column are measured.
     every: usize,
     width: usize,
+    height: usize,
     pixels: usize,
     s1: Vec<f64>,
     s2: Vec<f64>,
     q: Vec<f64>,
+    /// Per measured pixel, its pool connections' [`Spread`].
+    spread: Vec<Spread>,
     operations: Operations,
     iterations: u32,
-    independence: f64,
+    /// `--pc-budget-independence`; `None`: measured ([`Spread`]).
+    independence: Option<f64>,
+    /// `--pc-budget-smoothing`: measured pixels each side whose means are averaged for
+    /// relMSE's denominator ([`Budget::smoothed_means`]).
+    smoothing: usize,
     pub stats: BudgetStats,
 }
 
 impl Budget {
-    /// A budget that starts with `plan` and, with `BudgetMode::Auto`, measures `window`.
-    pub fn new(
-        mode: BudgetMode,
-        window: Range<u32>,
-        plan: Plan,
-        independence: f32,
-        width: usize,
-        height: usize,
-    ) -> Budget {
+    /// A budget that starts with `plan` and, with `--pc-budget auto`, measures `window`.
+    pub fn new(opts: &PcOptions, window: Range<u32>, plan: Plan, width: usize, height: usize) -> Budget {
+        let mode = opts.budget;
         let pixels = width * height;
         let candidates = if mode == BudgetMode::Auto { candidates(plan.pool_paths, pixels) } else { Vec::new() };
         let scales = scales(&plan, &candidates);
-        let every = pixels.div_ceil(MEASURED_PIXELS).max(1);
+        let every = (pixels as f64 / MEASURED_PIXELS as f64).sqrt().ceil().max(1.0) as usize;
         Budget {
             mode,
             window,
@@ -414,13 +554,16 @@ impl Budget {
             scales,
             every,
             width,
+            height,
             pixels,
             s1: Vec::new(),
             s2: Vec::new(),
             q: Vec::new(),
             operations: Operations::default(),
             iterations: 0,
-            independence: independence as f64,
+            spread: Vec::new(),
+            independence: opts.budget_independence.fixed().map(f64::from),
+            smoothing: opts.budget_smoothing as usize,
             stats: BudgetStats::default(),
         }
     }
@@ -472,24 +615,69 @@ impl Budget {
         self.mode == BudgetMode::Auto && self.window.contains(&i)
     }
 
-    /// Measured pixels: `pixels.div_ceil(every)`.
+    /// The grid of measured pixels: columns and rows.
+    fn grid(&self) -> (usize, usize) {
+        (self.width.div_ceil(self.every), self.height.div_ceil(self.every))
+    }
+
+    /// Measured pixels.
     fn measured(&self) -> usize {
-        self.pixels.div_ceil(self.every)
+        let (w, h) = self.grid();
+        w * h
     }
 
     /// The measured-pixel index of film position `pos`, if it is measured.
     pub fn measured_pixel(&self, pos: Vec2) -> Option<usize> {
         let (x, y) = (pos.x.max(0.0) as usize, pos.y.max(0.0) as usize);
-        if x >= self.width || y * self.width + x >= self.pixels {
+        if x >= self.width || y >= self.height || !x.is_multiple_of(self.every) || !y.is_multiple_of(self.every) {
             return None;
         }
-        let p = y * self.width + x;
-        p.is_multiple_of(self.every).then_some(p / self.every)
+        Some(y / self.every * self.grid().0 + x / self.every)
+    }
+
+    /// Each measured pixel's mean over the iterations, the mean relMSE divides by: with
+    /// `--pc-budget-smoothing r`, averaged over the measured pixels within `r` of it on the
+    /// grid; its own with `r = 0`.
+    fn smoothed_means(&self) -> Vec<f64> {
+        let t = self.iterations as f64;
+        let r = self.smoothing;
+        if r == 0 {
+            return self.s1.iter().map(|s| s / t).collect();
+        }
+        let (w, h) = self.grid();
+        // Summed-area table of the pixel sums.
+        let mut area = vec![0.0f64; (w + 1) * (h + 1)];
+        for y in 0..h {
+            for x in 0..w {
+                area[(y + 1) * (w + 1) + x + 1] =
+                    self.s1[y * w + x] + area[y * (w + 1) + x + 1] + area[(y + 1) * (w + 1) + x]
+                        - area[y * (w + 1) + x];
+            }
+        }
+        let mut out = vec![0.0; w * h];
+        for y in 0..h {
+            let (y0, y1) = (y.saturating_sub(r), (y + r + 1).min(h));
+            for x in 0..w {
+                let (x0, x1) = (x.saturating_sub(r), (x + r + 1).min(w));
+                let sum = area[y1 * (w + 1) + x1] - area[y0 * (w + 1) + x1] - area[y1 * (w + 1) + x0]
+                    + area[y0 * (w + 1) + x0];
+                out[y * w + x] = sum / ((y1 - y0) * (x1 - x0)) as f64 / t;
+            }
+        }
+        out
     }
 
     /// Empty moments for a tile of a measured iteration.
     pub fn tile_moments(&self) -> TileMoments {
-        TileMoments { scales: self.scales.clone(), ids: Vec::new(), x: Vec::new(), q: Vec::new() }
+        TileMoments {
+            scales: self.scales.clone(),
+            ids: Vec::new(),
+            x: Vec::new(),
+            q: Vec::new(),
+            spread: Vec::new(),
+            draws: self.plan.connections,
+            vertex: (0, 0.0, 0.0),
+        }
     }
 
     /// Adds a measured iteration: its tiles' moments (in `extra`, in tile order), its
@@ -499,6 +687,7 @@ impl Budget {
         let (n, c) = (self.measured(), self.candidates.len());
         if self.s1.is_empty() {
             self.s1 = vec![0.0; n];
+            self.spread = vec![Spread::default(); n];
             self.s2 = vec![0.0; n];
             self.q = vec![0.0; n * c];
         }
@@ -508,6 +697,8 @@ impl Budget {
             for (e, &id) in m.ids.iter().enumerate() {
                 let id = id as usize;
                 x[id] += m.x[e];
+                self.spread[id].raw += m.spread[e].raw;
+                self.spread[id].within += m.spread[e].within;
                 for (q, add) in self.q[id * c..(id + 1) * c].iter_mut().zip(&m.q[e * c..(e + 1) * c]) {
                     *q += add;
                 }
@@ -562,12 +753,21 @@ impl Budget {
                 self.candidates.iter().position(same).expect("every light-tracing count is a candidate")
             })
             .collect();
+        let means = self.smoothed_means();
+        let norm = |id: usize| 1.0 / (means[id] * means[id] + REL_EPSILON);
+        // The independence of connections: given, or their spread within camera vertices
+        // over the pixels as relMSE weighs them.
+        let mut spread = Spread::default();
+        for (id, s) in self.spread.iter().enumerate() {
+            spread.raw += s.raw * norm(id);
+            spread.within += s.within * norm(id);
+        }
+        let independence = self.independence.or(spread.independence()).unwrap_or(1.0);
         let mut variance = vec![0.0f64; c];
         for id in 0..self.s1.len() {
             let (s1, s2) = (self.s1[id], self.s2[id]);
-            let mean = s1 / t;
             let measured = ((s2 - s1 * s1 / t) / (t - 1.0).max(1.0)).max(0.0);
-            let norm = 1.0 / (mean * mean + REL_EPSILON);
+            let norm = norm(id);
             let q = &self.q[id * c..(id + 1) * c];
             for (k, v) in variance.iter_mut().enumerate() {
                 let change = if q[k].is_infinite() {
@@ -575,7 +775,7 @@ impl Budget {
                 } else if q[via[k]].is_infinite() {
                     q[k] - q[current]
                 } else {
-                    (q[via[k]] - q[current]) + self.independence * (q[k] - q[via[k]])
+                    (q[via[k]] - q[current]) + independence * (q[k] - q[via[k]])
                 };
                 *v += (measured + change / t).max(0.0) * norm;
             }
@@ -590,6 +790,8 @@ impl Budget {
             }
         }
         self.stats.measured_with = Some(from);
+        self.stats.measured_independence = spread.independence();
+        self.stats.independence = independence;
         self.stats.candidates = (0..c)
             .map(|k| {
                 let p = &self.candidates[k];
@@ -604,6 +806,7 @@ impl Budget {
         self.s1 = Vec::new();
         self.s2 = Vec::new();
         self.q = Vec::new();
+        self.spread = Vec::new();
     }
 }
 
@@ -678,6 +881,81 @@ mod tests {
         accumulate(1.0, &s, &[(1.0, 1.0), (1.0, 0.0)], &mut x, &mut q);
         assert_eq!(q[0], 1.0);
         assert!(q[1].is_infinite());
+    }
+
+    #[test]
+    fn smoothed_means_average_the_measured_neighbours() {
+        let plan = Plan { connections: 4, pool_paths: 8, splat_paths: 8 };
+        for (w, h, r) in [(7, 5, 0), (7, 5, 1), (7, 5, 2), (4, 9, 3), (600, 400, 2)] {
+            let opts = PcOptions { budget: BudgetMode::Auto, budget_smoothing: r, ..PcOptions::default() };
+            let mut b = Budget::new(&opts, 1..3, plan, w, h);
+            let (gw, gh) = b.grid();
+            assert_eq!(gw * gh, b.measured());
+            assert!(b.measured() <= MEASURED_PIXELS && (w * h > MEASURED_PIXELS) == (b.every > 1));
+            b.iterations = 2;
+            b.s1 = (0..gw * gh).map(|i| ((i * 7919) % 13) as f64).collect();
+            let got = b.smoothed_means();
+            let r = r as i64;
+            for y in 0..gh as i64 {
+                for x in 0..gw as i64 {
+                    let (mut sum, mut n) = (0.0, 0.0);
+                    for yy in (y - r).max(0)..=(y + r).min(gh as i64 - 1) {
+                        for xx in (x - r).max(0)..=(x + r).min(gw as i64 - 1) {
+                            sum += b.s1[(yy * gw as i64 + xx) as usize];
+                            n += 1.0;
+                        }
+                    }
+                    let want = sum / n / 2.0;
+                    let g = got[(y * gw as i64 + x) as usize];
+                    assert!((g - want).abs() < 1e-9, "{w}x{h} r {r} at ({x}, {y}): {g} against {want}");
+                }
+            }
+        }
+        // Every measured pixel has an index of its own.
+        let opts = PcOptions { budget: BudgetMode::Auto, ..PcOptions::default() };
+        let b = Budget::new(&opts, 1..3, plan, 600, 400);
+        let ids: std::collections::HashSet<usize> = (0..400)
+            .flat_map(|y| (0..600).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))
+            .filter_map(|p| b.measured_pixel(p))
+            .collect();
+        assert_eq!(ids.len(), b.measured());
+        assert!(ids.iter().all(|&i| i < b.measured()));
+    }
+
+    #[test]
+    fn spread_separates_camera_vertices_and_counts_draws_that_found_nothing() {
+        let mut m = TileMoments {
+            scales: vec![(1.0, 1.0)],
+            ids: Vec::new(),
+            x: Vec::new(),
+            q: Vec::new(),
+            spread: Vec::new(),
+            draws: 4,
+            vertex: (0, 0.0, 0.0),
+        };
+        // Pixel 0: a camera vertex whose four draws agree (no spread at all).
+        m.begin(0);
+        for _ in 0..4 {
+            m.connection(2, 0.5);
+        }
+        // Pixel 1: one draw of four finds light at depth 2, two of four at depth 3.
+        m.begin(1);
+        m.connection(2, 2.0);
+        m.connection(3, 1.0);
+        m.connection(3, 1.0);
+        m.end_vertex();
+        assert_eq!(m.spread[0], Spread { raw: 0.25, within: 0.0 });
+        assert_eq!(m.spread[0].independence(), Some(0.0));
+        // Depth 2: Σv² = 4, Σv = 2: raw 1, within (4 − 1) / 3 = 1. Depth 3: Σv² = 2, Σv = 2:
+        // raw 0.5, within (2 − 1) / 3.
+        let s = m.spread[1];
+        assert!((s.raw - 1.5).abs() < 1e-12 && (s.within - (1.0 + 1.0 / 3.0)).abs() < 1e-12, "{s:?}");
+        assert!((s.independence().unwrap() - 8.0 / 9.0).abs() < 1e-12);
+        // Nothing measured, or one draw per vertex: no estimate.
+        assert_eq!(Spread::default().independence(), None);
+        let mut one = Spread::default();
+        one.add(1.0, 1.0, 1);
+        assert_eq!(one.independence(), None);
     }
 
     #[test]

@@ -31,7 +31,9 @@
 
 use super::Vertex;
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{Budget, BudgetMode, CameraSample, Operations, Plan, SplatShares, TracedPool, budget_tile};
+use super::budget::{
+    Budget, BudgetMode, CameraSample, Independence, Operations, Plan, SplatShares, TracedPool, budget_tile,
+};
 use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use super::pool::{
@@ -127,10 +129,13 @@ pub struct PcOptions {
     pub budget: BudgetMode,
     /// Iterations measured before the budget is chosen.
     pub budget_iterations: u32,
-    /// The share of the predicted change of second moment between budgets that counts
-    /// ([`super::budget`]): 1 if connections were independent samples; they are not (they
-    /// share the pool and, from one camera vertex, the camera prefix).
-    pub budget_independence: f32,
+    /// The share of the connections' predicted change of second moment between budgets
+    /// that counts ([`super::budget`]): 1 if the draws of a camera vertex were independent
+    /// samples, or measured from their spread ([`super::budget::Spread`]).
+    pub budget_independence: Independence,
+    /// Measured pixels each side whose means are averaged for the relMSE weights of the
+    /// budget's choice (0: each pixel's own mean).
+    pub budget_smoothing: u32,
 }
 
 impl Default for PcOptions {
@@ -150,7 +155,8 @@ impl Default for PcOptions {
             max_cache_mb: 1024,
             budget: BudgetMode::Off,
             budget_iterations: 2,
-            budget_independence: 0.35,
+            budget_independence: Independence::Fixed(0.35),
+            budget_smoothing: 0,
         }
     }
 }
@@ -164,11 +170,13 @@ impl PcOptions {
         if self.connections == 0 && self.budget == BudgetMode::Auto {
             return Err("--pc-connections must be at least 1 with --pc-budget auto (it is what is measured)".into());
         }
-        if !(self.budget_independence >= 0.0 && self.budget_independence.is_finite()) {
-            return Err(format!(
-                "--pc-budget-independence must be non-negative and finite, not {}",
-                self.budget_independence
-            ));
+        if let Some(f) = self.budget_independence.fixed()
+            && !(0.0..=1.0).contains(&f)
+        {
+            return Err(format!("--pc-budget-independence must be between 0 and 1, not {f}"));
+        }
+        if self.budget_smoothing > 64 {
+            return Err(format!("--pc-budget-smoothing must be at most 64, not {}", self.budget_smoothing));
         }
         if self.budget_iterations < 2 {
             return Err("--pc-budget-iterations must be at least 2 (the variance is measured across them)".into());
@@ -528,7 +536,7 @@ impl Iterative for PcbptRender {
         // Iteration 0's counts have no measured concentration: the budget measures from 1.
         let plan = Plan { connections: o.connections, pool_paths: m, splat_paths: m };
         let window = 1..1 + o.budget_iterations;
-        self.budget = Some(Budget::new(o.budget, window, plan, o.budget_independence, w as usize, h as usize));
+        self.budget = Some(Budget::new(o, window, plan, w as usize, h as usize));
         Ok(())
     }
 

@@ -530,7 +530,7 @@ impl Iterative for SpcbptRender {
         // The budget is measured once `Γ` is trained.
         let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
         let window = o.training_iterations..o.training_iterations + pc.budget_iterations;
-        self.budget = Some(Budget::new(pc.budget, window, plan, pc.budget_independence, w, h));
+        self.budget = Some(Budget::new(pc, window, plan, w, h));
         let subspaces = self.model().sort_pool(scene, &pilot);
         self.measured =
             Some(Measured::of_pool(&subspaces, pilot.paths, pilot.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]));
