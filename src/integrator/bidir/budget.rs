@@ -38,18 +38,19 @@
 //! squared, is biased up by their variance, which weighs the noisiest pixels least (on
 //! `staircase2`, with independence 1, the budget in use looked 2.7× less noisy than with
 //! `r = 2`, and no connections was predicted 5.2× as noisy as four connections, against
-//! 2.7× with `r = 2` and 1.8× in renders). Smoothed means
-//! with the measured independence predict better without a fitted factor, but chose no
-//! better at equal time (BENCHMARKS.md), so neither is the default. The choice is made from
-//! counts alone, never from clocks, so it is the same on every machine and for every thread
-//! count, and a chunk that re-runs the measured iterations makes it again. Iterations of
-//! different budgets are each unbiased and averaged alike; the film divides every
-//! iteration's splats by the same count of light paths ([`normalise_splats`]).
+//! 2.7× with `r = 2` and 1.8× in renders). Smoothed means with the measured independence
+//! predict better without a fitted factor, but chose no better at equal time
+//! (BENCHMARKS.md), so neither is the default. The choice is made from counts alone, never
+//! from clocks, so it is the same on every machine and for every thread count, and a chunk
+//! that re-runs the measured iterations makes it again. Iterations of different budgets are
+//! each unbiased and averaged alike; the film divides every iteration's splats by the same
+//! count of light paths ([`normalise_splats`]).
 //!
 //! **Known error.** The prediction for light tracing is too hopeful: on `staircase2` one
 //! light path per 4 pixels was predicted (smoothed means, independence 1) to cut the
 //! variance of path tracing by 40%, and cut it by 3%; on `cornell-ply` one per pixel by 75%,
-//! measured 66% (BENCHMARKS.md).
+//! measured 66%. A pool of 14 400 paths predicts 61% on `staircase2`: not the noise of a few
+//! light paths, a bias not found yet (BENCHMARKS.md).
 
 use super::bdpt::{Bdpt, Connector};
 use super::mis::{Shares, StrategyCounts};
