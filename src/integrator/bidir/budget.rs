@@ -382,6 +382,12 @@ impl Spread {
         self.within += ((sum2 - sum * sum / n) / (n - 1.0)).max(0.0);
     }
 
+    /// Adds `other`'s sums weighted by `k`.
+    fn add_weighted(&mut self, other: &Spread, k: f64) {
+        self.raw += other.raw * k;
+        self.within += other.within * k;
+    }
+
     /// The share of the connections' second moment that more or fewer draws change:
     /// `within / raw`, in `[0, 1]`; `None` with nothing measured.
     pub fn independence(&self) -> Option<f64> {
@@ -407,6 +413,20 @@ pub struct TileMoments {
 }
 
 impl TileMoments {
+    /// No entries yet, for candidates' count scales `scales` and `draws` connections per
+    /// camera vertex.
+    fn new(scales: Vec<(f64, f64)>, draws: u32) -> TileMoments {
+        TileMoments {
+            scales,
+            ids: Vec::new(),
+            x: Vec::new(),
+            q: Vec::new(),
+            spread: Vec::new(),
+            draws,
+            vertex: (0, 0.0, 0.0),
+        }
+    }
+
     /// Starts the entry of measured pixel `id`.
     pub fn begin(&mut self, id: usize) {
         self.end_vertex();
@@ -670,15 +690,7 @@ impl Budget {
 
     /// Empty moments for a tile of a measured iteration.
     pub fn tile_moments(&self) -> TileMoments {
-        TileMoments {
-            scales: self.scales.clone(),
-            ids: Vec::new(),
-            x: Vec::new(),
-            q: Vec::new(),
-            spread: Vec::new(),
-            draws: self.plan.connections,
-            vertex: (0, 0.0, 0.0),
-        }
+        TileMoments::new(self.scales.clone(), self.plan.connections)
     }
 
     /// Adds a measured iteration: its tiles' moments (in `extra`, in tile order), its
@@ -698,8 +710,7 @@ impl Budget {
             for (e, &id) in m.ids.iter().enumerate() {
                 let id = id as usize;
                 x[id] += m.x[e];
-                self.spread[id].raw += m.spread[e].raw;
-                self.spread[id].within += m.spread[e].within;
+                self.spread[id].add_weighted(&m.spread[e], 1.0);
                 for (q, add) in self.q[id * c..(id + 1) * c].iter_mut().zip(&m.q[e * c..(e + 1) * c]) {
                     *q += add;
                 }
@@ -760,8 +771,7 @@ impl Budget {
         // over the pixels as relMSE weighs them.
         let mut spread = Spread::default();
         for (id, s) in self.spread.iter().enumerate() {
-            spread.raw += s.raw * norm(id);
-            spread.within += s.within * norm(id);
+            spread.add_weighted(s, norm(id));
         }
         let independence = self.independence.or(spread.independence()).unwrap_or(1.0);
         let mut variance = vec![0.0f64; c];
@@ -925,15 +935,7 @@ mod tests {
 
     #[test]
     fn spread_separates_camera_vertices_and_counts_draws_that_found_nothing() {
-        let mut m = TileMoments {
-            scales: vec![(1.0, 1.0)],
-            ids: Vec::new(),
-            x: Vec::new(),
-            q: Vec::new(),
-            spread: Vec::new(),
-            draws: 4,
-            vertex: (0, 0.0, 0.0),
-        };
+        let mut m = TileMoments::new(vec![(1.0, 1.0)], 4);
         // Pixel 0: a camera vertex whose four draws agree (no spread at all).
         m.begin(0);
         for _ in 0..4 {
