@@ -126,6 +126,7 @@ pub struct MethodEntry {
     pub pc_budget_iterations: Option<u32>,
     pub pc_budget_independence: Option<Independence>,
     pub pc_budget_smoothing: Option<u32>,
+    pub pc_budget_model: Option<String>,
     pub sp_eye_subspaces: Option<usize>,
     pub sp_light_subspaces: Option<usize>,
     pub sp_training_iterations: Option<u32>,
@@ -319,6 +320,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     pc.budget_iterations = m.pc_budget_iterations.unwrap_or(pc.budget_iterations);
     pc.budget_independence = m.pc_budget_independence.unwrap_or(pc.budget_independence);
     pc.budget_smoothing = m.pc_budget_smoothing.unwrap_or(pc.budget_smoothing);
+    if let Some(x) = &m.pc_budget_model {
+        pc.budget_model = value_enum(file, "pc_budget_model", x)?;
+    }
     pc.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
     let sp = &mut o.bidir.sp;
     sp.eye_subspaces = m.sp_eye_subspaces.unwrap_or(sp.eye_subspaces);

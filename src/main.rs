@@ -5,7 +5,7 @@ use pcbpt::accel::{Backend, BuildOptions, BuildQuality, BvhLayout};
 use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
-use pcbpt::integrator::bidir::budget::{BudgetMode, Independence};
+use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetModel, Independence};
 use pcbpt::integrator::bidir::mis::Heuristic;
 use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
 use pcbpt::integrator::bidir::spcbpt::SpOptions;
@@ -264,6 +264,11 @@ struct RenderArgs {
     /// weights of the budget's choice (0: each pixel's own mean).
     #[arg(long, default_value_t = PcOptions::default().budget_smoothing)]
     pc_budget_smoothing: u32,
+    /// PCBPT and SPCBPT: how the budget predicts a plan's variance: the change of the
+    /// contributions' second moments (moments), or each measured camera sample re-weighted
+    /// as the plan would weigh it, with its connections' spread (realized).
+    #[arg(long, value_enum, default_value_t = PcOptions::default().budget_model)]
+    pc_budget_model: BudgetModel,
     /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
     /// normals).
     #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
@@ -493,6 +498,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             budget_iterations: a.pc_budget_iterations,
             budget_independence: a.pc_budget_independence,
             budget_smoothing: a.pc_budget_smoothing,
+            budget_model: a.pc_budget_model,
         },
         sp: SpOptions {
             eye_subspaces: a.sp_eye_subspaces,

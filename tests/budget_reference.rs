@@ -13,14 +13,29 @@ mod common;
 
 use common::*;
 use pcbpt::image_io::Image;
-use pcbpt::integrator::bidir::budget::BudgetMode;
+use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetModel};
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
 
 fn render(scene: &Scene, kind: IntegratorKind, spp: u32, budget: BudgetMode, seed: u64) -> Image {
+    render_model(scene, kind, spp, budget, BudgetModel::Moments, seed)
+}
+
+fn render_model(
+    scene: &Scene,
+    kind: IntegratorKind,
+    spp: u32,
+    budget: BudgetMode,
+    model: BudgetModel,
+    seed: u64,
+) -> Image {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
     o.seed = seed;
     o.bidir.pc.budget = budget;
+    o.bidir.pc.budget_model = model;
+    if model == BudgetModel::Realized {
+        o.bidir.pc.budget_smoothing = 2;
+    }
     let out = integrator::render(scene, &o).unwrap();
     if let Some(b) = &out.stats.budget {
         println!("{kind:?} seed {seed}: plan {:?}, measured with {:?}", b.chosen, b.measured_with);
@@ -28,19 +43,22 @@ fn render(scene: &Scene, kind: IntegratorKind, spp: u32, budget: BudgetMode, see
     image(out)
 }
 
-fn check(case: &Case, kind: IntegratorKind, spp: u32) {
+fn check(case: &Case, kind: IntegratorKind, spp: u32, model: BudgetModel) {
     let scene = case.scene();
-    let a = render(&scene, kind, spp, BudgetMode::Auto, 1);
-    let b = render(&scene, kind, spp, BudgetMode::Auto, 2);
-    case.check(&a, &b, &format!("{kind:?} with a budget, 2 × {spp} spp"));
+    let a = render_model(&scene, kind, spp, BudgetMode::Auto, model, 1);
+    let b = render_model(&scene, kind, spp, BudgetMode::Auto, model, 2);
+    case.check(&a, &b, &format!("{kind:?} with a budget ({model:?}), 2 × {spp} spp"));
 }
 
 macro_rules! cases {
-    ($($name:ident: $case:expr, $kind:ident, $spp:expr;)*) => {
+    ($($name:ident: $case:expr, $kind:ident, $spp:expr $(, $model:ident)?;)*) => {
         $(
             #[test]
             fn $name() {
-                check(&$case, IntegratorKind::$kind, $spp);
+                #[allow(unused_mut, unused_assignments)]
+                let mut model = BudgetModel::Moments;
+                $(model = BudgetModel::$model;)?
+                check(&$case, IntegratorKind::$kind, $spp, model);
             }
         )*
     };
@@ -56,6 +74,10 @@ cases! {
     pcbpt_living_room: LIVING_ROOM, Pcbpt, 32;
     pcbpt_sunlit_room: SUNLIT_ROOM, Pcbpt, 16;
     spcbpt_sunlit_room: SUNLIT_ROOM, Spcbpt, 16;
+    // The realized model (with smoothed means) chooses other plans: path tracing on
+    // `living-room`, one connection per camera vertex for SPCBPT on `cornell-ply`.
+    pcbpt_living_room_realized: LIVING_ROOM, Pcbpt, 32, Realized;
+    spcbpt_cornell_ply_realized: CORNELL_PLY, Spcbpt, 24, Realized;
 }
 
 /// PCBPT with a budget against PCBPT without one on 12 same-seed pairs of `veach-ajar`

@@ -58,15 +58,20 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
 /// the same plan, and the same image, whatever the number of threads.
 #[test]
 fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
-    use pcbpt::integrator::bidir::budget::{BudgetMode, Independence};
+    use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetModel, Independence};
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
-    // The defaults, and smoothed means with the measured independence.
-    for (smoothing, independence) in [(0, Independence::Fixed(0.35)), (2, Independence::MEASURED)] {
+    // The defaults, smoothed means with the measured independence, and the realized model.
+    for (smoothing, independence, model) in [
+        (0, Independence::Fixed(0.35), BudgetModel::Moments),
+        (2, Independence::MEASURED, BudgetModel::Moments),
+        (2, Independence::Fixed(0.35), BudgetModel::Realized),
+    ] {
         for kind in [IntegratorKind::Pcbpt, IntegratorKind::Spcbpt] {
             let set = |o: &mut pcbpt::integrator::RenderOptions| {
                 o.bidir.pc.budget = BudgetMode::Auto;
                 o.bidir.pc.budget_smoothing = smoothing;
                 o.bidir.pc.budget_independence = independence;
+                o.bidir.pc.budget_model = model;
                 o.bidir.sp.training_iterations = 2;
             };
             let one = render_with(&scene, kind, 6, 42, 1, &set);
@@ -74,6 +79,10 @@ fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
             let (a, b) = (one.stats.budget.as_ref().unwrap(), two.stats.budget.as_ref().unwrap());
             assert!(a.chosen.is_some() && a.chosen == b.chosen, "{kind:?}: {a:?} against {b:?}");
             assert_eq!(a.independence.to_bits(), b.independence.to_bits(), "{kind:?}");
+            let bits = |s: &pcbpt::integrator::bidir::budget::BudgetStats| -> Vec<(u64, u64)> {
+                s.predictions.iter().map(|(m, r)| (m.to_bits(), r.to_bits())).collect()
+            };
+            assert_eq!(bits(a), bits(b), "{kind:?}: predictions differ between 1 and 2 threads");
             assert!(same_bits(&one.image, &two.image), "{kind:?} with a budget differs between 1 and 2 threads");
         }
     }

@@ -46,11 +46,26 @@
 //! each unbiased and averaged alike; the film divides every iteration's splats by the same
 //! count of light paths ([`normalise_splats`]).
 //!
-//! **Known error.** The prediction for light tracing is too hopeful: on `staircase2` one
-//! light path per 4 pixels was predicted (smoothed means, independence 1) to cut the
-//! variance of path tracing by 40%, and cut it by 3%; on `cornell-ply` one per pixel by 75%,
-//! measured 66%. A pool of 14 400 paths predicts 61% on `staircase2`: not the noise of a few
-//! light paths, a bias not found yet (BENCHMARKS.md).
+//! **The realized model** (`--pc-budget-model realized`, [`Realized`]). A pixel's estimate
+//! of an iteration is a sum `Y = Σ_i v_i`, and `Var Y = E[Σ v_i²] + E[Σ_{i≠j} v_i v_j] −
+//! (E Y)²`. The moments above predict only the first term's change; but the squared mean
+//! and the products of a camera path's contributions change with the weights too. Moving
+//! weight from the paths a camera path samples well to light tracing or to more draws
+//! lowers their second moment and their squared mean alike, which the moments count as a
+//! gain: on a constructed estimator (`tests` below) they predict 1.9 for a variance of
+//! 0.083. The realized model keeps the diagonal from every strategy's samples (`q`) and takes
+//! the rest from the camera samples re-weighted as the candidate would weigh them, so it
+//! needs no independence factor. Against renders of fixed plans without connections
+//! (per-sample relative variance over that of PCBPT's defaults, BENCHMARKS.md) it comes
+//! 1–23% low on `cornell-ply` where the moments come 17–37% low (smoothed means,
+//! independence 1) or half (the defaults).
+//!
+//! **Known error.** Both models find light tracing more useful than renders do: from the
+//! pool's 735 light paths to 14 400 on `staircase2` the realized model predicts 15–19% less
+//! variance (three seeds) and the moments 20%, renders 8%. Neither knows that the
+//! path-tracing plan renders with the path tracer (the power heuristic between next-event
+//! estimation and BSDF sampling), not with the camera pass's balance heuristic: on
+//! `staircase2` it has less variance than the camera pass with the pool's light tracing.
 
 use super::bdpt::{Bdpt, Connector};
 use super::mis::{Shares, StrategyCounts};
@@ -73,6 +88,19 @@ pub enum BudgetMode {
     Off,
     /// Chosen after `--pc-budget-iterations` measured iterations.
     Auto,
+}
+
+/// How a candidate's variance is predicted (`--pc-budget-model`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BudgetModel {
+    /// The measured variance plus the change of the contributions' second moments
+    /// (`Σ v² / (u + a k + c l)`), the connections' part times `--pc-budget-independence`.
+    Moments,
+    /// The variance of each camera sample re-weighted as the candidate would weigh it, with
+    /// its draws' spread for a changed number of connections, plus light tracing's second
+    /// moment ([`Realized`]).
+    Realized,
 }
 
 /// How much of the connections' predicted change of second moment counts
@@ -353,9 +381,8 @@ fn accumulate(v: f32, s: &Shares, scales: &[(f64, f64)], x: &mut f64, q: &mut [f
     }
     let v = v as f64;
     *x += v;
-    let (u, k, l) = (s.unidirectional as f64, s.connection as f64, s.light_trace as f64);
     for (q, &(a, c)) in q.iter_mut().zip(scales) {
-        let d = u + a * k + c * l;
+        let d = s.combined(a, c);
         *q += if d > 0.0 { v * v / d } else { f64::INFINITY };
     }
 }
@@ -406,24 +433,32 @@ pub struct TileMoments {
     /// Per entry: the pool connections' second moment per draw and their variance within
     /// camera vertices, summed over the entry's camera vertices ([`Spread`]).
     spread: Vec<Spread>,
+    /// Per entry and candidate (like `q`): the camera sample as the candidate would weigh
+    /// it, and its connections' correction for the candidate's number of draws ([`Realized`]).
+    realized: Vec<Realized>,
     /// Connections each camera vertex draws under the plan in use.
     draws: u32,
     /// The camera vertex whose connections are being summed: its depth, `Σ v`, `Σ v²`.
     vertex: (usize, f64, f64),
+    /// The same per candidate, of its weights' draws `v / (u + a k + c l)`.
+    vertex_realized: Vec<(f64, f64)>,
 }
 
 impl TileMoments {
     /// No entries yet, for candidates' count scales `scales` and `draws` connections per
     /// camera vertex.
     fn new(scales: Vec<(f64, f64)>, draws: u32) -> TileMoments {
+        let c = scales.len();
         TileMoments {
             scales,
             ids: Vec::new(),
             x: Vec::new(),
             q: Vec::new(),
             spread: Vec::new(),
+            realized: Vec::new(),
             draws,
             vertex: (0, 0.0, 0.0),
+            vertex_realized: vec![(0.0, 0.0); c],
         }
     }
 
@@ -433,12 +468,14 @@ impl TileMoments {
         self.ids.push(id as u32);
         self.x.push(0.0);
         self.q.extend(std::iter::repeat_n(0.0, self.scales.len()));
+        self.realized.extend(std::iter::repeat_n(Realized::default(), self.scales.len()));
         self.spread.push(Spread::default());
     }
 
-    /// Adds a pool connection's contribution `v` from the camera vertex at depth `t`. A
-    /// camera vertex's draws arrive together; those that found nothing add nothing.
-    fn connection(&mut self, t: usize, v: f32) {
+    /// Adds a pool connection's contribution `v` (shares `s`) from the camera vertex at
+    /// depth `t`. A camera vertex's draws arrive together; those that found nothing add
+    /// nothing.
+    fn connection(&mut self, t: usize, v: f32, s: &Shares) {
         if !(v.is_finite() && v > 0.0) {
             return;
         }
@@ -449,21 +486,86 @@ impl TileMoments {
         let v = v as f64;
         self.vertex.1 += v;
         self.vertex.2 += v * v;
-    }
-
-    /// Adds the camera vertex being summed to the entry's [`Spread`].
-    pub fn end_vertex(&mut self) {
-        let (_, sum, sum2) = std::mem::take(&mut self.vertex);
-        if let (Some(spread), true) = (self.spread.last_mut(), sum2 > 0.0) {
-            spread.add(sum, sum2, self.draws);
+        for (acc, &(a, c)) in self.vertex_realized.iter_mut().zip(&self.scales) {
+            let d = s.combined(a, c);
+            if d > 0.0 {
+                acc.0 += v / d;
+                acc.1 += (v / d) * (v / d);
+            }
         }
     }
 
-    fn record(&mut self, v: f32, shares: &Shares) {
+    /// Adds the camera vertex being summed to the entry's [`Spread`] and, per candidate, its
+    /// draws' correction to the entry's [`Realized`].
+    pub fn end_vertex(&mut self) {
+        let (_, sum, sum2) = std::mem::take(&mut self.vertex);
+        let c = self.scales.len();
+        if let (Some(spread), true) = (self.spread.last_mut(), sum2 > 0.0) {
+            spread.add(sum, sum2, self.draws);
+            let at = self.realized.len() - c;
+            for ((r, acc), &(a, _)) in self.realized[at..].iter_mut().zip(&mut self.vertex_realized).zip(&self.scales) {
+                r.add_pairs(std::mem::take(acc), a, self.draws);
+            }
+        }
+        self.vertex_realized.iter_mut().for_each(|acc| *acc = (0.0, 0.0));
+    }
+
+    /// Adds a contribution of luminance `v` and shares `shares` made by a strategy of
+    /// [`Shares::class`] `class` of the camera sample.
+    fn record(&mut self, v: f32, shares: &Shares, class: usize) {
         let c = self.scales.len();
         let (Some(x), true) = (self.x.last_mut(), self.q.len() >= c) else { return };
         let at = self.q.len() - c;
         accumulate(v, shares, &self.scales, x, &mut self.q[at..]);
+        if v.is_finite() && v > 0.0 {
+            for (r, &(a, l)) in self.realized[at..].iter_mut().zip(&self.scales) {
+                let d = shares.combined(a, l);
+                let own = if class == 1 { a } else { 1.0 };
+                if d > 0.0 && own > 0.0 {
+                    let w = v as f64 * own / d;
+                    r.sample += w;
+                    r.diagonal += w * w;
+                }
+            }
+        }
+    }
+}
+
+/// A camera sample as a candidate would weigh it (`--pc-budget-model realized`). Under a
+/// budget that scales the connection counts by `a` and light tracing's by `c`, a contribution
+/// `v` of the camera path's own strategies weighs `v' = v / (u + a k + c l)` and a
+/// connection's `a v'` (the `N' = a N` draws estimated from the `N` made), so `sample` is the
+/// candidate's estimate from the same camera path. A pixel's variance under the candidate is
+/// `E[Σ_i v_i²] + E[Σ_{i≠j} v_i v_j] − (E Y)²`: the first, the diagonal, is the second moment
+/// `Σ v² / (u + a k + c l)` that every strategy's samples estimate (light tracing's
+/// included); the others come from the realized samples, `sample² − diagonal` over the
+/// iterations and the product of different iterations' `sample`s. Given the camera vertex
+/// the draws are independent, so their pairs' products, `N (N − 1)` of them made and
+/// `N' (N' − 1)` wanted, are rescaled (`pairs`). Unlike the change of second moments alone
+/// this keeps the squared means and the correlation of a camera path's contributions
+/// (depths, draws of one vertex, the shared prefix): moving weight from the well-sampled
+/// paths of the camera path to light tracing or to more draws lowers their second moment and
+/// their squared mean as much, which the moments took for a gain. The realized samples
+/// alone would give the variance too, but they see the paths a candidate's own strategies
+/// sample rarely only as rarely: the diagonal from all strategies' samples is the part
+/// that needs them.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Realized {
+    pub sample: f64,
+    pub diagonal: f64,
+    pub pairs: f64,
+}
+
+impl Realized {
+    /// Adds one camera vertex's draws under a candidate, `Σ v'` and `Σ v'²` over its `n`
+    /// draws, for `a n` draws: the products of pairs, `(Σ v')² − Σ v'²` of them made with
+    /// weight `a²` in `sample²`, count `a n (a n − 1) / (n (n − 1))`.
+    fn add_pairs(&mut self, (sum, sum2): (f64, f64), a: f64, n: u32) {
+        if n < 2 || a == 1.0 {
+            return;
+        }
+        let n = n as f64;
+        self.pairs += (a * (a * n - 1.0) / (n - 1.0) - a * a) * (sum * sum - sum2);
     }
 }
 
@@ -478,7 +580,7 @@ pub struct BudgetSink<'a, S> {
 impl<S: super::Sink> super::Sink for BudgetSink<'_, S> {
     #[inline]
     fn add(&mut self, s: usize, t: usize, value: crate::math::Rgb) {
-        self.moments.record(crate::math::luminance(value), &self.pending);
+        self.moments.record(crate::math::luminance(value), &self.pending, Shares::class(s, t));
         self.inner.add(s, t, value);
     }
 
@@ -489,15 +591,16 @@ impl<S: super::Sink> super::Sink for BudgetSink<'_, S> {
     }
 
     fn add_emission(&mut self, camera: &[super::Vertex], value: crate::math::Rgb) {
-        self.moments.record(crate::math::luminance(value), &self.pending);
+        self.moments.record(crate::math::luminance(value), &self.pending, 0);
         self.inner.add_emission(camera, value);
     }
 
     fn add_connection(&mut self, light: &[super::Vertex], camera: &[super::Vertex], c: crate::math::Rgb, w: f32) {
         let v = crate::math::luminance(c * w);
-        self.moments.record(v, &self.pending);
-        if Shares::class(light.len(), camera.len()) == 1 {
-            self.moments.connection(camera.len(), v);
+        let class = Shares::class(light.len(), camera.len());
+        self.moments.record(v, &self.pending, class);
+        if class == 1 {
+            self.moments.connection(camera.len(), v, &self.pending);
         }
         self.inner.add_connection(light, camera, c, w);
     }
@@ -528,6 +631,10 @@ pub struct BudgetStats {
     /// Per candidate: connections, splatting paths, predicted relative variance (summed over
     /// the measured pixels), cost per iteration (extension rays).
     pub candidates: Vec<(u32, usize, f64, f64)>,
+    /// The model the choice used.
+    pub model: Option<BudgetModel>,
+    /// Per candidate, the relative variance both models predict: moments, realized.
+    pub predictions: Vec<(f64, f64)>,
 }
 
 /// The budget of a pool integrator over a render: the plan in use, and the measurement that
@@ -547,6 +654,14 @@ pub struct Budget {
     s1: Vec<f64>,
     s2: Vec<f64>,
     q: Vec<f64>,
+    /// Per measured pixel and candidate (like `q`), for [`BudgetModel::Realized`]: the sums
+    /// over the iterations of the pixel's camera samples as the candidate weighs them
+    /// ([`Realized`]), of their squares, and of their cross terms (square less diagonal,
+    /// draws' pairs rescaled).
+    y1: Vec<f64>,
+    y2: Vec<f64>,
+    cross: Vec<f64>,
+    model: BudgetModel,
     /// Per measured pixel, its pool connections' [`Spread`].
     spread: Vec<Spread>,
     operations: Operations,
@@ -580,6 +695,10 @@ impl Budget {
             s1: Vec::new(),
             s2: Vec::new(),
             q: Vec::new(),
+            y1: Vec::new(),
+            y2: Vec::new(),
+            cross: Vec::new(),
+            model: opts.budget_model,
             operations: Operations::default(),
             iterations: 0,
             spread: Vec::new(),
@@ -703,16 +822,26 @@ impl Budget {
             self.spread = vec![Spread::default(); n];
             self.s2 = vec![0.0; n];
             self.q = vec![0.0; n * c];
+            self.y1 = vec![0.0; n * c];
+            self.y2 = vec![0.0; n * c];
+            self.cross = vec![0.0; n * c];
         }
         let mut x = vec![0.0f64; n];
+        let mut y = vec![Realized::default(); n * c];
         for r in results {
             let Some(m) = r.extra.as_ref().and_then(|e| e.downcast_ref::<TileMoments>()) else { continue };
             for (e, &id) in m.ids.iter().enumerate() {
                 let id = id as usize;
                 x[id] += m.x[e];
                 self.spread[id].add_weighted(&m.spread[e], 1.0);
-                for (q, add) in self.q[id * c..(id + 1) * c].iter_mut().zip(&m.q[e * c..(e + 1) * c]) {
+                let (to, from) = (id * c..(id + 1) * c, e * c..(e + 1) * c);
+                for (q, add) in self.q[to.clone()].iter_mut().zip(&m.q[from.clone()]) {
                     *q += add;
+                }
+                for (y, r) in y[to].iter_mut().zip(&m.realized[from]) {
+                    y.sample += r.sample;
+                    y.diagonal += r.diagonal;
+                    y.pairs += r.pairs;
                 }
             }
         }
@@ -728,6 +857,11 @@ impl Budget {
         for (id, x) in x.into_iter().enumerate() {
             self.s1[id] += x;
             self.s2[id] += x * x;
+        }
+        for (k, y) in y.into_iter().enumerate() {
+            self.y1[k] += y.sample;
+            self.y2[k] += y.sample * y.sample;
+            self.cross[k] += y.sample * y.sample - y.diagonal + y.pairs;
         }
         let o = &mut self.operations;
         o.camera_rays += operations.camera_rays;
@@ -774,13 +908,24 @@ impl Budget {
             spread.add_weighted(s, norm(id));
         }
         let independence = self.independence.or(spread.independence()).unwrap_or(1.0);
-        let mut variance = vec![0.0f64; c];
+        let sample_variance = |s1: f64, s2: f64| ((s2 - s1 * s1 / t) / (t - 1.0).max(1.0)).max(0.0);
+        let mut moments = vec![0.0f64; c];
+        let mut realized = vec![0.0f64; c];
         for id in 0..self.s1.len() {
-            let (s1, s2) = (self.s1[id], self.s2[id]);
-            let measured = ((s2 - s1 * s1 / t) / (t - 1.0).max(1.0)).max(0.0);
+            let measured = sample_variance(self.s1[id], self.s2[id]);
             let norm = norm(id);
-            let q = &self.q[id * c..(id + 1) * c];
-            for (k, v) in variance.iter_mut().enumerate() {
+            let at = id * c;
+            let q = &self.q[at..at + c];
+            // The realized model ([`Realized`]): diagonal, cross terms, less the squared mean
+            // (products of different iterations), the candidate's in place of the plan in
+            // use's on top of the measured variance (which keeps what neither sees, such as
+            // the covariance of the camera pass and the light pool).
+            let own = |k: usize| {
+                let (y1, y2) = (self.y1[at + k], self.y2[at + k]);
+                (q[k] + self.cross[at + k]) / t - (y1 * y1 - y2) / (t * (t - 1.0)).max(1.0)
+            };
+            let base = measured - own(current);
+            for k in 0..c {
                 let change = if q[k].is_infinite() {
                     f64::INFINITY
                 } else if q[via[k]].is_infinite() {
@@ -788,9 +933,14 @@ impl Budget {
                 } else {
                     (q[via[k]] - q[current]) + independence * (q[k] - q[via[k]])
                 };
-                *v += (measured + change / t).max(0.0) * norm;
+                moments[k] += (measured + change / t).max(0.0) * norm;
+                realized[k] += if q[k].is_infinite() { f64::INFINITY } else { (base + own(k)).max(0.0) * norm };
             }
         }
+        let variance = match self.model {
+            BudgetModel::Moments => &moments,
+            BudgetModel::Realized => &realized,
+        };
         let per_iteration = |p: &Plan| self.operations.cost(&from, p, &PRICES) / t;
         let score = |k: usize| variance[k].max(0.0) * per_iteration(&self.candidates[k]);
         let mut best: Option<usize> = None;
@@ -803,6 +953,8 @@ impl Budget {
         self.stats.measured_with = Some(from);
         self.stats.measured_independence = spread.independence();
         self.stats.independence = independence;
+        self.stats.model = Some(self.model);
+        self.stats.predictions = (0..c).map(|k| (moments[k], realized[k])).collect();
         self.stats.candidates = (0..c)
             .map(|k| {
                 let p = &self.candidates[k];
@@ -818,6 +970,9 @@ impl Budget {
         self.s2 = Vec::new();
         self.q = Vec::new();
         self.spread = Vec::new();
+        self.y1 = Vec::new();
+        self.y2 = Vec::new();
+        self.cross = Vec::new();
     }
 }
 
@@ -883,6 +1038,78 @@ mod tests {
         }
     }
 
+    /// The realized model predicts another budget's variance where the change of second
+    /// moments does not: a camera sample of one "unidirectional" sample and `N` independent
+    /// "connection" draws, with the balance heuristic, re-weighted for `N' = a N` draws,
+    /// against the exact variance of the `N'`-draw estimator. The moments leave out the
+    /// squared means, which change with the weights: they must miss by more.
+    #[test]
+    fn realized_variance_of_another_budget_matches_its_integral() {
+        let f = |x: f64| 1.0 + x;
+        let (pu, pk) = (|_x: f64| 1.0, |x: f64| 2.0 * x);
+        let n = 4u32;
+        let scales = vec![(1.0, 0.0), (0.0, 0.0), (0.25, 0.0), (0.5, 0.0), (2.0, 0.0)];
+        let c = scales.len();
+        let mut rng = crate::sampling::Sampler::new(&[11]);
+        let runs = 2_000_000;
+        let shares = |y: f64, draws: f64| {
+            let total = pu(y) + draws * pk(y);
+            Shares {
+                unidirectional: (pu(y) / total) as f32,
+                connection: (draws * pk(y) / total) as f32,
+                light_trace: 0.0,
+            }
+        };
+        let (mut y1, mut y2, mut cross, mut x1, mut x2, mut q) =
+            (vec![0.0; c], vec![0.0; c], vec![0.0; c], 0.0, 0.0, vec![0.0; c]);
+        let mut m = TileMoments::new(scales.clone(), n);
+        for run in 0..runs {
+            if run % 10_000 == 0 {
+                m = TileMoments::new(scales.clone(), n);
+            }
+            m.begin(0);
+            let y = rng.next_1d() as f64;
+            m.record((f(y) / (pu(y) + n as f64 * pk(y))) as f32, &shares(y, n as f64), 0);
+            for _ in 0..n {
+                let y = (rng.next_1d() as f64).sqrt();
+                let v = (f(y) / (pu(y) + n as f64 * pk(y))) as f32;
+                m.record(v, &shares(y, n as f64), 1);
+                m.connection(2, v, &shares(y, n as f64));
+            }
+            m.end_vertex();
+            let e = m.ids.len() - 1;
+            x1 += m.x[e];
+            x2 += m.x[e] * m.x[e];
+            for k in 0..c {
+                let r = m.realized[e * c + k];
+                y1[k] += r.sample;
+                y2[k] += r.sample * r.sample;
+                cross[k] += r.sample * r.sample - r.diagonal + r.pairs;
+                q[k] += m.q[e * c + k];
+            }
+        }
+        let t = runs as f64;
+        let variance = |s1: f64, s2: f64| (s2 - s1 * s1 / t) / (t - 1.0);
+        let measured = variance(x1, x2);
+        let integral = |g: &dyn Fn(f64) -> f64| {
+            let m = 100_000;
+            (0..m).map(|i| g((i as f64 + 0.5) / m as f64)).sum::<f64>() / m as f64
+        };
+        for (k, &(a, _)) in scales.iter().enumerate() {
+            let n2 = a * n as f64;
+            let g = |x: f64| f(x) / (pu(x) + n2 * pk(x));
+            let var_u = integral(&|x| g(x) * g(x)) - integral(&g).powi(2);
+            let var_k = integral(&|x| g(x) * g(x) * pk(x)) - integral(&|x| g(x) * pk(x)).powi(2);
+            let exact = var_u + n2 * var_k;
+            let realized = (q[k] + cross[k]) / t - (y1[k] * y1[k] - y2[k]) / (t * (t - 1.0));
+            let moments = measured + (q[k] - q[0]) / t;
+            assert!((realized / exact - 1.0).abs() < 0.03, "a = {a}: realized {realized} against {exact}");
+            if a != 1.0 {
+                assert!((moments / exact - 1.0).abs() > 0.1, "a = {a}: moments {moments} close to {exact}");
+            }
+        }
+    }
+
     /// A budget without the only strategy that makes a path predicts an infinite moment.
     #[test]
     fn losing_a_paths_only_strategy_costs_an_infinite_moment() {
@@ -939,13 +1166,13 @@ mod tests {
         // Pixel 0: a camera vertex whose four draws agree (no spread at all).
         m.begin(0);
         for _ in 0..4 {
-            m.connection(2, 0.5);
+            m.connection(2, 0.5, &Shares::default());
         }
         // Pixel 1: one draw of four finds light at depth 2, two of four at depth 3.
         m.begin(1);
-        m.connection(2, 2.0);
-        m.connection(3, 1.0);
-        m.connection(3, 1.0);
+        m.connection(2, 2.0, &Shares::default());
+        m.connection(3, 1.0, &Shares::default());
+        m.connection(3, 1.0, &Shares::default());
         m.end_vertex();
         assert_eq!(m.spread[0], Spread { raw: 0.25, within: 0.0 });
         assert_eq!(m.spread[0].independence(), Some(0.0));

@@ -448,6 +448,13 @@ impl Shares {
         }
     }
 
+    /// The path's combined density under counts that scale the connections' by `a` and
+    /// light tracing's by `c`, over its combined density now: `u + a k + c l`.
+    #[inline]
+    pub fn combined(&self, a: f64, c: f64) -> f64 {
+        self.unidirectional as f64 + a * self.connection as f64 + c * self.light_trace as f64
+    }
+
     fn add(&mut self, class: usize, x: f32) {
         match class {
             0 => self.unidirectional += x,

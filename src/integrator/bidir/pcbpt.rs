@@ -32,7 +32,7 @@
 use super::Vertex;
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
-    Budget, BudgetMode, CameraSample, Independence, Operations, Plan, SplatShares, TracedPool, budget_tile,
+    Budget, BudgetMode, BudgetModel, CameraSample, Independence, Operations, Plan, SplatShares, TracedPool, budget_tile,
 };
 use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
@@ -136,6 +136,8 @@ pub struct PcOptions {
     /// Measured pixels each side whose means are averaged for the relMSE weights of the
     /// budget's choice (0: each pixel's own mean).
     pub budget_smoothing: u32,
+    /// How the budget predicts a candidate's variance.
+    pub budget_model: BudgetModel,
 }
 
 impl Default for PcOptions {
@@ -157,6 +159,7 @@ impl Default for PcOptions {
             budget_iterations: 2,
             budget_independence: Independence::Fixed(0.35),
             budget_smoothing: 0,
+            budget_model: BudgetModel::Moments,
         }
     }
 }
