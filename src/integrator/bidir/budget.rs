@@ -40,7 +40,8 @@
 //! `r = 2`, and no connections was predicted 5.2× as noisy as four connections, against
 //! 2.7× with `r = 2` and 1.8× in renders). Smoothed means with the measured independence
 //! predict better without a fitted factor, but chose no better at equal time
-//! (BENCHMARKS.md), so neither is the default. The choice is made from counts alone, never
+//! (BENCHMARKS.md). The default is the realized model below with `r = 2`, which chose
+//! better than the moments at equal time (four seeds). The choice is made from counts alone, never
 //! from clocks, so it is the same on every machine and for every thread count, and a chunk
 //! that re-runs the measured iterations makes it again. Iterations of different budgets are
 //! each unbiased and averaged alike; the film divides every iteration's splats by the same
@@ -54,15 +55,20 @@
 //! lowers their second moment and their squared mean alike, which the moments count as a
 //! gain: on a constructed estimator (`tests` below) they predict 1.9 for a variance of
 //! 0.083. The realized model keeps the diagonal from every strategy's samples (`q`) and takes
-//! the rest from the camera samples re-weighted as the candidate would weigh them, so it
-//! needs no independence factor. Against renders of fixed plans without connections
-//! (per-sample relative variance over that of PCBPT's defaults, BENCHMARKS.md) it comes
-//! 1–23% low on `cornell-ply` where the moments come 17–37% low (smoothed means,
-//! independence 1) or half (the defaults).
+//! the rest from the camera samples re-weighted as the candidate would weigh them (the
+//! cross terms of the camera path's own strategies scaled by how much of their heavy tail two
+//! iterations miss), so it needs no independence factor. Against renders of fixed plans without connections (per-sample
+//! relative variance over that of PCBPT's defaults, BENCHMARKS.md) it comes within 3% on
+//! `cornell-ply` but for path tracing, 5–9% high (renders: 4.08, with the path tracer), where
+//! the moments come 17–37% low (smoothed means, independence 1) or half (the defaults); on
+//! `staircase2` within 3% for path tracing and 4–8% low for the pool's light tracing (seeds 2
+//! and 3; seed 1 put path tracing at 3.0 against 1.8); on `veach-ajar` 8 connections at
+//! 0.66× the variance of 4 and 2 at 1.65× (renders: 0.63–0.77×, 1.37–1.49×; the moments 0.88×
+//! and 1.21×).
 //!
-//! **Known error.** Both models find light tracing more useful than renders do: from the
-//! pool's 735 light paths to 14 400 on `staircase2` the realized model predicts 15–19% less
-//! variance (three seeds) and the moments 20%, renders 8%. Neither knows that the
+//! **Known error.** Both models find more light tracing more useful than renders do: from
+//! the pool's 735 light paths to 14 400 on `staircase2` the realized model predicts 13–20%
+//! less variance (three seeds) and the moments 20%, renders 8%. Neither knows that the
 //! path-tracing plan renders with the path tracer (the power heuristic between next-event
 //! estimation and BSDF sampling), not with the camera pass's balance heuristic: on
 //! `staircase2` it has less variance than the camera pass with the pool's light tracing.
@@ -372,6 +378,13 @@ fn scales(from: &Plan, candidates: &[Plan]) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// The camera path's own strategies' part of a contribution's second moment under a
+/// candidate whose combined density is `d` times the plan in use's: `v² u / d²`.
+#[inline]
+fn own_moment(v: f32, s: &Shares, d: f64) -> f64 {
+    if d > 0.0 && v.is_finite() && v > 0.0 { (v as f64).powi(2) * s.unidirectional as f64 / (d * d) } else { 0.0 }
+}
+
 /// Adds a contribution of luminance `v` and shares `s` to a pixel's moments: its value to
 /// `x`, and `v² / (u + a k + c l)` for every candidate's scales to `q`.
 #[inline]
@@ -525,7 +538,12 @@ impl TileMoments {
                     let w = v as f64 * own / d;
                     r.sample += w;
                     r.diagonal += w * w;
+                    if class == 0 {
+                        r.own_sample += w;
+                        r.own_diagonal += w * w;
+                    }
                 }
+                r.own_moment += own_moment(v, shares, d);
             }
         }
     }
@@ -545,15 +563,41 @@ impl TileMoments {
 /// this keeps the squared means and the correlation of a camera path's contributions
 /// (depths, draws of one vertex, the shared prefix): moving weight from the well-sampled
 /// paths of the camera path to light tracing or to more draws lowers their second moment and
-/// their squared mean as much, which the moments took for a gain. The realized samples
-/// alone would give the variance too, but they see the paths a candidate's own strategies
-/// sample rarely only as rarely: the diagonal from all strategies' samples is the part
-/// that needs them.
+/// their squared mean as much, which the moments took for a gain.
+///
+/// The realized samples see the paths that the camera path's own strategies sample rarely
+/// only as rarely, so in two iterations their sums miss much of a heavy tail. The diagonal
+/// is taken from every strategy's samples for that reason; the cross terms cannot be, and
+/// those with a contribution of the camera path's own strategies ([`Realized::cross`]) are
+/// scaled by how much the realized samples miss of those strategies' diagonal (`own_moment`,
+/// from every strategy's samples, over `own_diagonal`, realized; summed over the pixels as
+/// relMSE weighs them: [`BudgetStats::missed`]). Without it the model put path tracing on
+/// `cornell-ply` at 3.3× the variance of PCBPT's defaults (renders: 4.1×), with it at
+/// 4.3–4.4× (the realized samples missed 42% of the camera path's diagonal). Scaling the
+/// connections' cross terms too (they have no such tail) put 8 connections on `veach-ajar`
+/// at 0.61× the variance of 4 and 2 at 1.76× (renders: 0.63–0.77×, 1.37–1.49×); without, at
+/// 0.66× and 1.65×.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Realized {
     pub sample: f64,
     pub diagonal: f64,
     pub pairs: f64,
+    /// The camera path's own strategies' share of `sample`, of `diagonal`, and of `q`
+    /// (their second moment `Σ v² u / (u + a k + c l)²` from every strategy's samples).
+    pub own_sample: f64,
+    pub own_diagonal: f64,
+    pub own_moment: f64,
+}
+
+impl Realized {
+    /// The cross terms `sample² − diagonal` (draws' pairs rescaled), split into those with
+    /// a contribution of the camera path's own strategies and the others (connections with
+    /// connections).
+    fn cross(&self) -> (f64, f64) {
+        let (own, other) = (self.own_sample, self.sample - self.own_sample);
+        let with_own = own * own - self.own_diagonal + 2.0 * own * other;
+        (with_own, other * other - (self.diagonal - self.own_diagonal) + self.pairs)
+    }
 }
 
 impl Realized {
@@ -635,6 +679,10 @@ pub struct BudgetStats {
     pub model: Option<BudgetModel>,
     /// Per candidate, the relative variance both models predict: moments, realized.
     pub predictions: Vec<(f64, f64)>,
+    /// Per candidate, the camera path's own strategies' second moment from every strategy's
+    /// samples over that of the realized camera samples: how much of it they miss, which
+    /// scales their cross terms in the realized model ([`Realized`]).
+    pub missed: Vec<f64>,
 }
 
 /// The budget of a pool integrator over a render: the plan in use, and the measurement that
@@ -660,7 +708,10 @@ pub struct Budget {
     /// draws' pairs rescaled).
     y1: Vec<f64>,
     y2: Vec<f64>,
-    cross: Vec<f64>,
+    cross: Vec<(f64, f64)>,
+    /// Per measured pixel and candidate: the camera path's own strategies' diagonal, as
+    /// realized and from every strategy's samples, summed over the iterations.
+    own: Vec<(f64, f64)>,
     model: BudgetModel,
     /// Per measured pixel, its pool connections' [`Spread`].
     spread: Vec<Spread>,
@@ -698,6 +749,7 @@ impl Budget {
             y1: Vec::new(),
             y2: Vec::new(),
             cross: Vec::new(),
+            own: Vec::new(),
             model: opts.budget_model,
             operations: Operations::default(),
             iterations: 0,
@@ -824,7 +876,8 @@ impl Budget {
             self.q = vec![0.0; n * c];
             self.y1 = vec![0.0; n * c];
             self.y2 = vec![0.0; n * c];
-            self.cross = vec![0.0; n * c];
+            self.cross = vec![(0.0, 0.0); n * c];
+            self.own = vec![(0.0, 0.0); n * c];
         }
         let mut x = vec![0.0f64; n];
         let mut y = vec![Realized::default(); n * c];
@@ -842,6 +895,9 @@ impl Budget {
                     y.sample += r.sample;
                     y.diagonal += r.diagonal;
                     y.pairs += r.pairs;
+                    y.own_sample += r.own_sample;
+                    y.own_diagonal += r.own_diagonal;
+                    y.own_moment += r.own_moment;
                 }
             }
         }
@@ -852,6 +908,9 @@ impl Budget {
             if let Some(id) = self.measured_pixel(sp.pos) {
                 let v = sp.value * per_path;
                 accumulate(v, &sp.shares, &self.scales, &mut x[id], &mut self.q[id * c..(id + 1) * c]);
+                for (y, &(a, l)) in y[id * c..(id + 1) * c].iter_mut().zip(&self.scales) {
+                    y.own_moment += own_moment(v, &sp.shares, sp.shares.combined(a, l));
+                }
             }
         }
         for (id, x) in x.into_iter().enumerate() {
@@ -861,7 +920,11 @@ impl Budget {
         for (k, y) in y.into_iter().enumerate() {
             self.y1[k] += y.sample;
             self.y2[k] += y.sample * y.sample;
-            self.cross[k] += y.sample * y.sample - y.diagonal + y.pairs;
+            let (with_own, other) = y.cross();
+            self.cross[k].0 += with_own;
+            self.cross[k].1 += other;
+            self.own[k].0 += y.own_diagonal;
+            self.own[k].1 += y.own_moment;
         }
         let o = &mut self.operations;
         o.camera_rays += operations.camera_rays;
@@ -911,18 +974,30 @@ impl Budget {
         let sample_variance = |s1: f64, s2: f64| ((s2 - s1 * s1 / t) / (t - 1.0).max(1.0)).max(0.0);
         let mut moments = vec![0.0f64; c];
         let mut realized = vec![0.0f64; c];
+        // How much of the camera path's own strategies' second moment its realized samples
+        // see, per candidate, over the pixels as relMSE weighs them ([`Realized`]).
+        let mut seen = vec![(0.0f64, 0.0f64); c];
+        for id in 0..self.s1.len() {
+            for (s, o) in seen.iter_mut().zip(&self.own[id * c..(id + 1) * c]) {
+                s.0 += o.0 * norm(id);
+                s.1 += o.1 * norm(id);
+            }
+        }
+        let missed: Vec<f64> = seen.iter().map(|&(r, m)| if r > 0.0 { m / r } else { 1.0 }).collect();
         for id in 0..self.s1.len() {
             let measured = sample_variance(self.s1[id], self.s2[id]);
             let norm = norm(id);
             let at = id * c;
             let q = &self.q[at..at + c];
-            // The realized model ([`Realized`]): diagonal, cross terms, less the squared mean
-            // (products of different iterations), the candidate's in place of the plan in
-            // use's on top of the measured variance (which keeps what neither sees, such as
-            // the covariance of the camera pass and the light pool).
+            // The realized model ([`Realized`]): diagonal, cross terms scaled by what the
+            // realized samples miss, less the squared mean (products of different
+            // iterations), the candidate's in place of the plan in use's on top of the
+            // measured variance (which keeps what neither sees, such as the covariance of the
+            // camera pass and the light pool).
             let own = |k: usize| {
                 let (y1, y2) = (self.y1[at + k], self.y2[at + k]);
-                (q[k] + self.cross[at + k]) / t - (y1 * y1 - y2) / (t * (t - 1.0)).max(1.0)
+                let (with_own, other) = self.cross[at + k];
+                (q[k] + missed[k] * with_own + other) / t - (y1 * y1 - y2) / (t * (t - 1.0)).max(1.0)
             };
             let base = measured - own(current);
             for k in 0..c {
@@ -955,6 +1030,7 @@ impl Budget {
         self.stats.independence = independence;
         self.stats.model = Some(self.model);
         self.stats.predictions = (0..c).map(|k| (moments[k], realized[k])).collect();
+        self.stats.missed = missed;
         self.stats.candidates = (0..c)
             .map(|k| {
                 let p = &self.candidates[k];
@@ -1061,7 +1137,8 @@ mod tests {
             }
         };
         let (mut y1, mut y2, mut cross, mut x1, mut x2, mut q) =
-            (vec![0.0; c], vec![0.0; c], vec![0.0; c], 0.0, 0.0, vec![0.0; c]);
+            (vec![0.0; c], vec![0.0; c], vec![(0.0, 0.0); c], 0.0, 0.0, vec![0.0; c]);
+        let mut seen = vec![(0.0, 0.0); c];
         let mut m = TileMoments::new(scales.clone(), n);
         for run in 0..runs {
             if run % 10_000 == 0 {
@@ -1084,7 +1161,12 @@ mod tests {
                 let r = m.realized[e * c + k];
                 y1[k] += r.sample;
                 y2[k] += r.sample * r.sample;
-                cross[k] += r.sample * r.sample - r.diagonal + r.pairs;
+                let (with_own, other) = r.cross();
+                assert!((with_own + other - (r.sample * r.sample - r.diagonal + r.pairs)).abs() < 1e-9);
+                cross[k].0 += with_own;
+                cross[k].1 += other;
+                seen[k].0 += r.own_diagonal;
+                seen[k].1 += r.own_moment;
                 q[k] += m.q[e * c + k];
             }
         }
@@ -1101,7 +1183,9 @@ mod tests {
             let var_u = integral(&|x| g(x) * g(x)) - integral(&g).powi(2);
             let var_k = integral(&|x| g(x) * g(x) * pk(x)) - integral(&|x| g(x) * pk(x)).powi(2);
             let exact = var_u + n2 * var_k;
-            let realized = (q[k] + cross[k]) / t - (y1[k] * y1[k] - y2[k]) / (t * (t - 1.0));
+            let missed = seen[k].1 / seen[k].0;
+            assert!((missed - 1.0).abs() < 0.02, "a = {a}: the realized samples missed {missed}");
+            let realized = (q[k] + missed * cross[k].0 + cross[k].1) / t - (y1[k] * y1[k] - y2[k]) / (t * (t - 1.0));
             let moments = measured + (q[k] - q[0]) / t;
             assert!((realized / exact - 1.0).abs() < 0.03, "a = {a}: realized {realized} against {exact}");
             if a != 1.0 {

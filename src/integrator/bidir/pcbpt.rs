@@ -158,8 +158,8 @@ impl Default for PcOptions {
             budget: BudgetMode::Off,
             budget_iterations: 2,
             budget_independence: Independence::Fixed(0.35),
-            budget_smoothing: 0,
-            budget_model: BudgetModel::Moments,
+            budget_smoothing: 2,
+            budget_model: BudgetModel::Realized,
         }
     }
 }
