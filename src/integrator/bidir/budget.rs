@@ -316,6 +316,18 @@ pub struct Operations {
     pub cache_entries: u64,
 }
 
+impl std::ops::AddAssign for Operations {
+    fn add_assign(&mut self, o: Operations) {
+        self.camera_rays += o.camera_rays;
+        self.camera_shadow += o.camera_shadow;
+        self.pool_shadow += o.pool_shadow;
+        self.lookups += o.lookups;
+        self.light_rays += o.light_rays;
+        self.splat_shadow += o.splat_shadow;
+        self.cache_entries += o.cache_entries;
+    }
+}
+
 impl Operations {
     /// These operations with those of a camera pass's tiles added.
     pub(crate) fn with_camera_pass(mut self, results: &[TileResult]) -> Operations {
@@ -694,8 +706,9 @@ pub struct Budget {
     plan: Plan,
     candidates: Vec<Plan>,
     scales: Vec<(f64, f64)>,
-    /// The pixels of every `every`-th row and column are measured.
+    /// The pixels of every `every`-th row and column are measured: `columns` of them a row.
     every: usize,
+    columns: usize,
     width: usize,
     height: usize,
     pixels: usize,
@@ -740,6 +753,7 @@ impl Budget {
             candidates,
             scales,
             every,
+            columns: width.div_ceil(every),
             width,
             height,
             pixels,
@@ -809,7 +823,7 @@ impl Budget {
 
     /// The grid of measured pixels: columns and rows.
     fn grid(&self) -> (usize, usize) {
-        (self.width.div_ceil(self.every), self.height.div_ceil(self.every))
+        (self.columns, self.height.div_ceil(self.every))
     }
 
     /// Measured pixels.
@@ -824,7 +838,7 @@ impl Budget {
         if x >= self.width || y >= self.height || !x.is_multiple_of(self.every) || !y.is_multiple_of(self.every) {
             return None;
         }
-        Some(y / self.every * self.grid().0 + x / self.every)
+        Some(y / self.every * self.columns + x / self.every)
     }
 
     /// Each measured pixel's mean over the iterations, the mean relMSE divides by: with
@@ -926,14 +940,7 @@ impl Budget {
             self.own[k].0 += y.own_diagonal;
             self.own[k].1 += y.own_moment;
         }
-        let o = &mut self.operations;
-        o.camera_rays += operations.camera_rays;
-        o.camera_shadow += operations.camera_shadow;
-        o.pool_shadow += operations.pool_shadow;
-        o.lookups += operations.lookups;
-        o.light_rays += operations.light_rays;
-        o.splat_shadow += operations.splat_shadow;
-        o.cache_entries += operations.cache_entries;
+        self.operations += operations;
         self.iterations += 1;
         if self.iterations == self.window.len() as u32 {
             self.choose();
