@@ -6,16 +6,9 @@
 //! for bidirectional rendering algorithms", SIGGRAPH 2022). With no connections and no light
 //! tracing an iteration is plain path tracing with next-event estimation.
 //!
-//! **Second moments.** A budget `b'` scales the counts of the connection strategies by
-//! `a = N'/N` and those of light tracing by `c = L'/L`, and leaves the camera path's own
-//! (`s = 0`, next-event estimation) as they are. Under the balance heuristic a sample's
-//! weighted contribution is `v = f / Σ_k n_k p_k`, and with the MIS shares `u`, `k_c`, `l` of
-//! its path (the weights of its strategies summed by kind, [`Shares`]) the combined density
-//! under `b'` is `Σ_k n_k p_k · (u + a k_c + c l)`. So `Σ v² / (u + a k_c + c l)` over the
-//! samples of a pixel estimates `∫ f² / Σ n'_k p_k`, the second moment of that pixel's
-//! estimate under `b'`, from samples of the budget in use (Grittmann et al.'s estimator). A
-//! path no strategy of `b'` can make gives an infinite moment, so a budget that would lose
-//! light (a caustic of a point light with no light tracing) is never chosen.
+//! The measurement (what the measured iterations record of each contribution) is in
+//! [`measure`] (the second moments and the realized model), the costs in [`cost`]; this module
+//! predicts each candidate's variance from them and chooses.
 //!
 //! **Variance.** A pixel's estimate sums many contributions (one per strategy and path
 //! length), so its second moment is no variance: the variance under the budget in use is
@@ -40,31 +33,12 @@
 //! `r = 2`, and no connections was predicted 5.2× as noisy as four connections, against
 //! 2.7× with `r = 2` and 1.8× in renders). Smoothed means with the measured independence
 //! predict better without a fitted factor, but chose no better at equal time
-//! (BENCHMARKS.md). The default is the realized model below with `r = 2`, which chose
+//! (BENCHMARKS.md). The default is the realized model ([`measure`]) with `r = 2`, which chose
 //! better than the moments at equal time (four seeds). The choice is made from counts alone, never
 //! from clocks, so it is the same on every machine and for every thread count, and a chunk
 //! that re-runs the measured iterations makes it again. Iterations of different budgets are
 //! each unbiased and averaged alike; the film divides every iteration's splats by the same
 //! count of light paths ([`normalise_splats`]).
-//!
-//! **The realized model** (`--pc-budget-model realized`, [`Realized`]). A pixel's estimate
-//! of an iteration is a sum `Y = Σ_i v_i`, and `Var Y = E[Σ v_i²] + E[Σ_{i≠j} v_i v_j] −
-//! (E Y)²`. The moments above predict only the first term's change; but the squared mean
-//! and the products of a camera path's contributions change with the weights too. Moving
-//! weight from the paths a camera path samples well to light tracing or to more draws
-//! lowers their second moment and their squared mean alike, which the moments count as a
-//! gain: on a constructed estimator (`tests` below) they predict 1.9 for a variance of
-//! 0.083. The realized model keeps the diagonal from every strategy's samples (`q`) and takes
-//! the rest from the camera samples re-weighted as the candidate would weigh them (the
-//! cross terms of the camera path's own strategies scaled by how much of their heavy tail two
-//! iterations miss), so it needs no independence factor. Against renders of fixed plans without connections (per-sample
-//! relative variance over that of PCBPT's defaults, BENCHMARKS.md) it comes within 3% on
-//! `cornell-ply` but for path tracing, 5–9% high (renders: 4.08, with the path tracer), where
-//! the moments come 17–37% low (smoothed means, independence 1) or half (the defaults); on
-//! `staircase2` within 3% for path tracing and 4–8% low for the pool's light tracing (seeds 2
-//! and 3; seed 1 put path tracing at 3.0 against 1.8); on `veach-ajar` 8 connections at
-//! 0.66× the variance of 4 and 2 at 1.65× (renders: 0.63–0.77×, 1.37–1.49×; the moments 0.88×
-//! and 1.21×).
 //!
 //! **Known error.** Both models find more light tracing more useful than renders do: from
 //! the pool's 735 light paths to 14 400 on `staircase2` the realized model predicts 13–20%
@@ -72,6 +46,13 @@
 //! path-tracing plan renders with the path tracer (the power heuristic between next-event
 //! estimation and BSDF sampling), not with the camera pass's balance heuristic: on
 //! `staircase2` it has less variance than the camera pass with the pool's light tracing.
+
+pub mod cost;
+pub mod measure;
+
+pub use cost::{Operations, PRICES, Prices};
+pub use measure::{BudgetSink, Realized, SplatShares, Spread, TileMoments};
+use measure::{accumulate, own_moment, scales};
 
 use super::bdpt::{Bdpt, Connector};
 use super::mis::{Shares, StrategyCounts};
@@ -277,88 +258,6 @@ pub fn candidates(m: usize, pixels: usize) -> Vec<Plan> {
     out
 }
 
-/// Relative cost of the operations an iteration counts, in extension rays (a closest-hit
-/// ray and the vertex built at its hit). Measured with PCBPT on `staircase2` (320×180,
-/// 24 spp, 2 threads) with 0, 1, 4 and 8 connections per camera vertex: the camera pass took
-/// 1.68, 2.73, 4.37 and 6.53 s for 0, 2.52, 10.1 and 20.1 M pool shadow rays, so a traced
-/// connection (its draw, both BSDFs, the shadow ray and the MIS weight) costs 0.216 µs; the
-/// 4.69 M lookups that drawing needs 0.108 µs each; the pass without connections, 5.32 M
-/// extension rays and 3.14 M next-event rays priced like connections, leaves 0.187 µs per
-/// extension ray; a cache entry (its target and shadow ray) took 0.188 µs (1.0 M in 0.19 s).
-#[derive(Clone, Copy, Debug)]
-pub struct Prices {
-    pub shadow: f64,
-    pub lookup: f64,
-    pub cache_entry: f64,
-    /// The path tracer's camera pass over the bidirectional one's without connections: 124
-    /// and 151 samples per pixel in 10 s on `staircase2` (320×180, 2 threads).
-    pub path_tracer: f64,
-}
-
-pub const PRICES: Prices = Prices { shadow: 1.15, lookup: 0.58, cache_entry: 1.0, path_tracer: 0.82 };
-
-/// Operations one iteration performed, summed over the measured iterations.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct Operations {
-    /// Camera and extension rays of the camera pass.
-    pub camera_rays: u64,
-    /// Shadow rays of the camera pass other than pool connections (next-event estimation).
-    pub camera_shadow: u64,
-    /// Shadow rays of pool connections.
-    pub pool_shadow: u64,
-    /// Camera vertices that drew connections.
-    pub lookups: u64,
-    /// Rays of the light paths.
-    pub light_rays: u64,
-    /// Shadow rays of light tracing.
-    pub splat_shadow: u64,
-    /// Cache entries built for the pool (PCBPT's records × pool vertices; 0 for SPCBPT).
-    pub cache_entries: u64,
-}
-
-impl std::ops::AddAssign for Operations {
-    fn add_assign(&mut self, o: Operations) {
-        self.camera_rays += o.camera_rays;
-        self.camera_shadow += o.camera_shadow;
-        self.pool_shadow += o.pool_shadow;
-        self.lookups += o.lookups;
-        self.light_rays += o.light_rays;
-        self.splat_shadow += o.splat_shadow;
-        self.cache_entries += o.cache_entries;
-    }
-}
-
-impl Operations {
-    /// These operations with those of a camera pass's tiles added.
-    pub(crate) fn with_camera_pass(mut self, results: &[TileResult]) -> Operations {
-        for r in results {
-            let c = &r.counters;
-            self.camera_rays += c.camera_rays + c.extension_rays;
-            self.camera_shadow += c.shadow_rays - c.pool_shadow_rays;
-            self.pool_shadow += c.pool_shadow_rays;
-            self.lookups += c.pool_lookups;
-        }
-        self
-    }
-
-    /// The cost of an iteration under `to`, in extension rays, from these operations made
-    /// under `from`.
-    pub fn cost(&self, from: &Plan, to: &Plan, prices: &Prices) -> f64 {
-        let ratio = |a: usize, b: usize| if b == 0 { 0.0 } else { a as f64 / b as f64 };
-        let mut c = self.camera_rays as f64 + prices.shadow * self.camera_shadow as f64;
-        if to.path_tracing() {
-            return c * prices.path_tracer;
-        }
-        if to.connections > 0 {
-            c += prices.shadow * self.pool_shadow as f64 * to.connections as f64 / from.connections.max(1) as f64;
-            c += prices.cache_entry * self.cache_entries as f64 + prices.lookup * self.lookups as f64;
-        }
-        c += self.light_rays as f64 * ratio(to.traced(), from.traced());
-        c += prices.shadow * self.splat_shadow as f64 * ratio(to.splat_paths, from.splat_paths);
-        c
-    }
-}
-
 /// An iteration's light pool as [`Budget::trace_pool`] traced it.
 pub(crate) struct TracedPool {
     pub pool: LightPool,
@@ -369,305 +268,6 @@ pub(crate) struct TracedPool {
     pub operations: Operations,
     /// The light paths the film divides the splats by.
     pub splat_paths: u64,
-}
-
-/// A light-tracing splat's luminance and MIS shares.
-#[derive(Clone, Copy, Debug)]
-pub struct SplatShares {
-    pub pos: Vec2,
-    pub value: f32,
-    pub shares: Shares,
-}
-
-/// The count scales `(a, c)` of each candidate against the plan in use.
-fn scales(from: &Plan, candidates: &[Plan]) -> Vec<(f64, f64)> {
-    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
-    candidates
-        .iter()
-        .map(|p| {
-            (ratio(p.connections as f64, from.connections as f64), ratio(p.splat_paths as f64, from.splat_paths as f64))
-        })
-        .collect()
-}
-
-/// The camera path's own strategies' part of a contribution's second moment under a
-/// candidate whose combined density is `d` times the plan in use's: `v² u / d²`.
-#[inline]
-fn own_moment(v: f32, s: &Shares, d: f64) -> f64 {
-    if d > 0.0 && v.is_finite() && v > 0.0 { (v as f64).powi(2) * s.unidirectional as f64 / (d * d) } else { 0.0 }
-}
-
-/// Adds a contribution of luminance `v` and shares `s` to a pixel's moments: its value to
-/// `x`, and `v² / (u + a k + c l)` for every candidate's scales to `q`.
-#[inline]
-fn accumulate(v: f32, s: &Shares, scales: &[(f64, f64)], x: &mut f64, q: &mut [f64]) {
-    if !(v.is_finite() && v > 0.0) {
-        return;
-    }
-    let v = v as f64;
-    *x += v;
-    for (q, &(a, c)) in q.iter_mut().zip(scales) {
-        let d = s.combined(a, c);
-        *q += if d > 0.0 { v * v / d } else { f64::INFINITY };
-    }
-}
-
-/// How independent the pool connections of one camera vertex are, from their contributions
-/// `v_1 … v_N` (the `N` draws of each camera vertex, those that found nothing counting as 0):
-/// `raw` sums the second moment per draw, `Σ v_j² / N`, and `within` the unbiased variance
-/// of the draws about their own camera vertex's mean, `(Σ v_j² − (Σ v_j)² / N) / (N − 1)`.
-/// Given the camera vertex and the pool the draws are independent, so only `within` shrinks
-/// with more draws; the moment estimator counts all of `raw` as if it did.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Spread {
-    pub raw: f64,
-    pub within: f64,
-}
-
-impl Spread {
-    fn add(&mut self, sum: f64, sum2: f64, draws: u32) {
-        if draws < 2 {
-            return;
-        }
-        let n = draws as f64;
-        self.raw += sum2 / n;
-        self.within += ((sum2 - sum * sum / n) / (n - 1.0)).max(0.0);
-    }
-
-    /// Adds `other`'s sums weighted by `k`.
-    fn add_weighted(&mut self, other: &Spread, k: f64) {
-        self.raw += other.raw * k;
-        self.within += other.within * k;
-    }
-
-    /// The share of the connections' second moment that more or fewer draws change:
-    /// `within / raw`, in `[0, 1]`; `None` with nothing measured.
-    pub fn independence(&self) -> Option<f64> {
-        (self.raw > 0.0).then(|| (self.within / self.raw).clamp(0.0, 1.0))
-    }
-}
-
-/// The moments of one tile's measured pixels in one iteration.
-pub struct TileMoments {
-    scales: Vec<(f64, f64)>,
-    /// Measured-pixel index of each entry.
-    ids: Vec<u32>,
-    x: Vec<f64>,
-    /// `q` of entry `e` at `[e * C .. (e + 1) * C]`.
-    q: Vec<f64>,
-    /// Per entry: the pool connections' second moment per draw and their variance within
-    /// camera vertices, summed over the entry's camera vertices ([`Spread`]).
-    spread: Vec<Spread>,
-    /// Per entry and candidate (like `q`): the camera sample as the candidate would weigh
-    /// it, and its connections' correction for the candidate's number of draws ([`Realized`]).
-    realized: Vec<Realized>,
-    /// Connections each camera vertex draws under the plan in use.
-    draws: u32,
-    /// The camera vertex whose connections are being summed: its depth, `Σ v`, `Σ v²`.
-    vertex: (usize, f64, f64),
-    /// The same per candidate, of its weights' draws `v / (u + a k + c l)`.
-    vertex_realized: Vec<(f64, f64)>,
-}
-
-impl TileMoments {
-    /// No entries yet, for candidates' count scales `scales` and `draws` connections per
-    /// camera vertex.
-    fn new(scales: Vec<(f64, f64)>, draws: u32) -> TileMoments {
-        let c = scales.len();
-        TileMoments {
-            scales,
-            ids: Vec::new(),
-            x: Vec::new(),
-            q: Vec::new(),
-            spread: Vec::new(),
-            realized: Vec::new(),
-            draws,
-            vertex: (0, 0.0, 0.0),
-            vertex_realized: vec![(0.0, 0.0); c],
-        }
-    }
-
-    /// Starts the entry of measured pixel `id`.
-    pub fn begin(&mut self, id: usize) {
-        self.end_vertex();
-        self.ids.push(id as u32);
-        self.x.push(0.0);
-        self.q.extend(std::iter::repeat_n(0.0, self.scales.len()));
-        self.realized.extend(std::iter::repeat_n(Realized::default(), self.scales.len()));
-        self.spread.push(Spread::default());
-    }
-
-    /// Adds a pool connection's contribution `v` (shares `s`) from the camera vertex at
-    /// depth `t`. A camera vertex's draws arrive together; those that found nothing add
-    /// nothing.
-    fn connection(&mut self, t: usize, v: f32, s: &Shares) {
-        if !(v.is_finite() && v > 0.0) {
-            return;
-        }
-        if t != self.vertex.0 {
-            self.end_vertex();
-            self.vertex.0 = t;
-        }
-        let v = v as f64;
-        self.vertex.1 += v;
-        self.vertex.2 += v * v;
-        for (acc, &(a, c)) in self.vertex_realized.iter_mut().zip(&self.scales) {
-            let d = s.combined(a, c);
-            if d > 0.0 {
-                acc.0 += v / d;
-                acc.1 += (v / d) * (v / d);
-            }
-        }
-    }
-
-    /// Adds the camera vertex being summed to the entry's [`Spread`] and, per candidate, its
-    /// draws' correction to the entry's [`Realized`].
-    pub fn end_vertex(&mut self) {
-        let (_, sum, sum2) = std::mem::take(&mut self.vertex);
-        let c = self.scales.len();
-        if let (Some(spread), true) = (self.spread.last_mut(), sum2 > 0.0) {
-            spread.add(sum, sum2, self.draws);
-            let at = self.realized.len() - c;
-            for ((r, acc), &(a, _)) in self.realized[at..].iter_mut().zip(&mut self.vertex_realized).zip(&self.scales) {
-                r.add_pairs(std::mem::take(acc), a, self.draws);
-            }
-        }
-        self.vertex_realized.iter_mut().for_each(|acc| *acc = (0.0, 0.0));
-    }
-
-    /// Adds a contribution of luminance `v` and shares `shares` made by a strategy of
-    /// [`Shares::class`] `class` of the camera sample.
-    fn record(&mut self, v: f32, shares: &Shares, class: usize) {
-        let c = self.scales.len();
-        let (Some(x), true) = (self.x.last_mut(), self.q.len() >= c) else { return };
-        let at = self.q.len() - c;
-        accumulate(v, shares, &self.scales, x, &mut self.q[at..]);
-        if v.is_finite() && v > 0.0 {
-            for (r, &(a, l)) in self.realized[at..].iter_mut().zip(&self.scales) {
-                let d = shares.combined(a, l);
-                let own = if class == 1 { a } else { 1.0 };
-                if d > 0.0 && own > 0.0 {
-                    let w = v as f64 * own / d;
-                    r.sample += w;
-                    r.diagonal += w * w;
-                    if class == 0 {
-                        r.own_sample += w;
-                        r.own_diagonal += w * w;
-                    }
-                }
-                r.own_moment += own_moment(v, shares, d);
-            }
-        }
-    }
-}
-
-/// A camera sample as a candidate would weigh it (`--pc-budget-model realized`). Under a
-/// budget that scales the connection counts by `a` and light tracing's by `c`, a contribution
-/// `v` of the camera path's own strategies weighs `v' = v / (u + a k + c l)` and a
-/// connection's `a v'` (the `N' = a N` draws estimated from the `N` made), so `sample` is the
-/// candidate's estimate from the same camera path. A pixel's variance under the candidate is
-/// `E[Σ_i v_i²] + E[Σ_{i≠j} v_i v_j] − (E Y)²`: the first, the diagonal, is the second moment
-/// `Σ v² / (u + a k + c l)` that every strategy's samples estimate (light tracing's
-/// included); the others come from the realized samples, `sample² − diagonal` over the
-/// iterations and the product of different iterations' `sample`s. Given the camera vertex
-/// the draws are independent, so their pairs' products, `N (N − 1)` of them made and
-/// `N' (N' − 1)` wanted, are rescaled (`pairs`). Unlike the change of second moments alone
-/// this keeps the squared means and the correlation of a camera path's contributions
-/// (depths, draws of one vertex, the shared prefix): moving weight from the well-sampled
-/// paths of the camera path to light tracing or to more draws lowers their second moment and
-/// their squared mean as much, which the moments took for a gain.
-///
-/// The realized samples see the paths that the camera path's own strategies sample rarely
-/// only as rarely, so in two iterations their sums miss much of a heavy tail. The diagonal
-/// is taken from every strategy's samples for that reason; the cross terms cannot be, and
-/// those with a contribution of the camera path's own strategies ([`Realized::cross`]) are
-/// scaled by how much the realized samples miss of those strategies' diagonal (`own_moment`,
-/// from every strategy's samples, over `own_diagonal`, realized; summed over the pixels as
-/// relMSE weighs them: [`BudgetStats::missed`]). Without it the model put path tracing on
-/// `cornell-ply` at 3.3× the variance of PCBPT's defaults (renders: 4.1×), with it at
-/// 4.3–4.4× (the realized samples missed 42% of the camera path's diagonal). Scaling the
-/// connections' cross terms too (they have no such tail) put 8 connections on `veach-ajar`
-/// at 0.61× the variance of 4 and 2 at 1.76× (renders: 0.63–0.77×, 1.37–1.49×); without, at
-/// 0.66× and 1.65×.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Realized {
-    pub sample: f64,
-    pub diagonal: f64,
-    pub pairs: f64,
-    /// The camera path's own strategies' share of `sample`, of `diagonal`, and of `q`
-    /// (their second moment `Σ v² u / (u + a k + c l)²` from every strategy's samples).
-    pub own_sample: f64,
-    pub own_diagonal: f64,
-    pub own_moment: f64,
-}
-
-impl Realized {
-    /// The cross terms `sample² − diagonal` (draws' pairs rescaled), split into those with
-    /// a contribution of the camera path's own strategies and the others (connections with
-    /// connections).
-    fn cross(&self) -> (f64, f64) {
-        let (own, other) = (self.own_sample, self.sample - self.own_sample);
-        let with_own = own * own - self.own_diagonal + 2.0 * own * other;
-        (with_own, other * other - (self.diagonal - self.own_diagonal) + self.pairs)
-    }
-}
-
-impl Realized {
-    /// Adds one camera vertex's draws under a candidate, `Σ v'` and `Σ v'²` over its `n`
-    /// draws, for `a n` draws: the products of pairs, `(Σ v')² − Σ v'²` of them made with
-    /// weight `a²` in `sample²`, count `a n (a n − 1) / (n (n − 1))`.
-    fn add_pairs(&mut self, (sum, sum2): (f64, f64), a: f64, n: u32) {
-        if n < 2 || a == 1.0 {
-            return;
-        }
-        let n = n as f64;
-        self.pairs += (a * (a * n - 1.0) / (n - 1.0) - a * a) * (sum * sum - sum2);
-    }
-}
-
-/// Wraps a camera sample's sink: passes everything on, and records each contribution's
-/// luminance and shares into the tile's moments.
-pub struct BudgetSink<'a, S> {
-    pub inner: &'a mut S,
-    pub moments: &'a mut TileMoments,
-    pub pending: Shares,
-}
-
-impl<S: super::Sink> super::Sink for BudgetSink<'_, S> {
-    #[inline]
-    fn add(&mut self, s: usize, t: usize, value: crate::math::Rgb) {
-        self.moments.record(crate::math::luminance(value), &self.pending, Shares::class(s, t));
-        self.inner.add(s, t, value);
-    }
-
-    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: crate::math::Rgb) {
-        // Camera passes of the pool integrators do not splat; their light tracing is the
-        // pool's, measured through `SplatShares`.
-        self.inner.splat(s, t, pos, value);
-    }
-
-    fn add_emission(&mut self, camera: &[super::Vertex], value: crate::math::Rgb) {
-        self.moments.record(crate::math::luminance(value), &self.pending, 0);
-        self.inner.add_emission(camera, value);
-    }
-
-    fn add_connection(&mut self, light: &[super::Vertex], camera: &[super::Vertex], c: crate::math::Rgb, w: f32) {
-        let v = crate::math::luminance(c * w);
-        let class = Shares::class(light.len(), camera.len());
-        self.moments.record(v, &self.pending, class);
-        if class == 1 {
-            self.moments.connection(camera.len(), v, &self.pending);
-        }
-        self.inner.add_connection(light, camera, c, w);
-    }
-
-    fn wants_shares(&self) -> bool {
-        true
-    }
-
-    fn note_shares(&mut self, shares: Shares) {
-        self.pending = shares;
-    }
 }
 
 /// What a choice found: the plan and, per candidate, the predicted relMSE sum and cost.
@@ -906,12 +506,7 @@ impl Budget {
                     *q += add;
                 }
                 for (y, r) in y[to].iter_mut().zip(&m.realized[from]) {
-                    y.sample += r.sample;
-                    y.diagonal += r.diagonal;
-                    y.pairs += r.pairs;
-                    y.own_sample += r.own_sample;
-                    y.own_diagonal += r.own_diagonal;
-                    y.own_moment += r.own_moment;
+                    *y += r;
                 }
             }
         }
@@ -1075,143 +670,6 @@ mod tests {
         assert_eq!(candidates(100, 100).len(), 5 * 2);
     }
 
-    /// The estimator of another budget's second moment is exact for a path sampled by two
-    /// strategies with known densities: the balance-heuristic samples of budget `n` predict
-    /// `∫ f² / Σ n' p` for budget `n'`.
-    #[test]
-    fn moments_of_another_budget_match_their_integral() {
-        // On [0, 1]: f(x) = 1 + x; "unidirectional" samples uniform (p_u = 1, count 1),
-        // "connections" with density p_k(x) = 2x (count n = 2).
-        let f = |x: f64| 1.0 + x;
-        let (pu, pk) = (|_x: f64| 1.0, |x: f64| 2.0 * x);
-        let n = 2.0;
-        let mut rng = crate::sampling::Sampler::new(&[5]);
-        let scales = [(0.0, 0.0), (0.5, 0.0), (1.0, 0.0), (4.0, 0.0)];
-        let mut q = [0.0f64; 4];
-        let mut x = 0.0;
-        let runs = 200_000;
-        let shares = |y: f64| {
-            let total = pu(y) + n * pk(y);
-            Shares { unidirectional: (pu(y) / total) as f32, connection: (n * pk(y) / total) as f32, light_trace: 0.0 }
-        };
-        for _ in 0..runs {
-            // One unidirectional sample and `n` connection samples per run.
-            let y = rng.next_1d() as f64;
-            let v = f(y) / (pu(y) + n * pk(y));
-            accumulate(v as f32, &shares(y), &scales, &mut x, &mut q);
-            for _ in 0..n as usize {
-                let y = (rng.next_1d() as f64).sqrt();
-                let v = f(y) / (pu(y) + n * pk(y));
-                accumulate(v as f32, &shares(y), &scales, &mut x, &mut q);
-            }
-        }
-        assert!((x / runs as f64 - 1.5).abs() < 0.01, "mean {}", x / runs as f64);
-        for (k, &(a, _)) in scales.iter().enumerate() {
-            // ∫ (1+x)² / (1 + a n 2x) dx by the midpoint rule.
-            let m = 100_000;
-            let exact: f64 = (0..m)
-                .map(|i| {
-                    let y = (i as f64 + 0.5) / m as f64;
-                    f(y) * f(y) / (pu(y) + a * n * pk(y))
-                })
-                .sum::<f64>()
-                / m as f64;
-            let est = q[k] / runs as f64;
-            assert!((est / exact - 1.0).abs() < 0.01, "scale {a}: {est} against {exact}");
-        }
-    }
-
-    /// The realized model predicts another budget's variance where the change of second
-    /// moments does not: a camera sample of one "unidirectional" sample and `N` independent
-    /// "connection" draws, with the balance heuristic, re-weighted for `N' = a N` draws,
-    /// against the exact variance of the `N'`-draw estimator. The moments leave out the
-    /// squared means, which change with the weights: they must miss by more.
-    #[test]
-    fn realized_variance_of_another_budget_matches_its_integral() {
-        let f = |x: f64| 1.0 + x;
-        let (pu, pk) = (|_x: f64| 1.0, |x: f64| 2.0 * x);
-        let n = 4u32;
-        let scales = vec![(1.0, 0.0), (0.0, 0.0), (0.25, 0.0), (0.5, 0.0), (2.0, 0.0)];
-        let c = scales.len();
-        let mut rng = crate::sampling::Sampler::new(&[11]);
-        let runs = 2_000_000;
-        let shares = |y: f64, draws: f64| {
-            let total = pu(y) + draws * pk(y);
-            Shares {
-                unidirectional: (pu(y) / total) as f32,
-                connection: (draws * pk(y) / total) as f32,
-                light_trace: 0.0,
-            }
-        };
-        let (mut y1, mut y2, mut cross, mut x1, mut x2, mut q) =
-            (vec![0.0; c], vec![0.0; c], vec![(0.0, 0.0); c], 0.0, 0.0, vec![0.0; c]);
-        let mut seen = vec![(0.0, 0.0); c];
-        let mut m = TileMoments::new(scales.clone(), n);
-        for run in 0..runs {
-            if run % 10_000 == 0 {
-                m = TileMoments::new(scales.clone(), n);
-            }
-            m.begin(0);
-            let y = rng.next_1d() as f64;
-            m.record((f(y) / (pu(y) + n as f64 * pk(y))) as f32, &shares(y, n as f64), 0);
-            for _ in 0..n {
-                let y = (rng.next_1d() as f64).sqrt();
-                let v = (f(y) / (pu(y) + n as f64 * pk(y))) as f32;
-                m.record(v, &shares(y, n as f64), 1);
-                m.connection(2, v, &shares(y, n as f64));
-            }
-            m.end_vertex();
-            let e = m.ids.len() - 1;
-            x1 += m.x[e];
-            x2 += m.x[e] * m.x[e];
-            for k in 0..c {
-                let r = m.realized[e * c + k];
-                y1[k] += r.sample;
-                y2[k] += r.sample * r.sample;
-                let (with_own, other) = r.cross();
-                assert!((with_own + other - (r.sample * r.sample - r.diagonal + r.pairs)).abs() < 1e-9);
-                cross[k].0 += with_own;
-                cross[k].1 += other;
-                seen[k].0 += r.own_diagonal;
-                seen[k].1 += r.own_moment;
-                q[k] += m.q[e * c + k];
-            }
-        }
-        let t = runs as f64;
-        let variance = |s1: f64, s2: f64| (s2 - s1 * s1 / t) / (t - 1.0);
-        let measured = variance(x1, x2);
-        let integral = |g: &dyn Fn(f64) -> f64| {
-            let m = 100_000;
-            (0..m).map(|i| g((i as f64 + 0.5) / m as f64)).sum::<f64>() / m as f64
-        };
-        for (k, &(a, _)) in scales.iter().enumerate() {
-            let n2 = a * n as f64;
-            let g = |x: f64| f(x) / (pu(x) + n2 * pk(x));
-            let var_u = integral(&|x| g(x) * g(x)) - integral(&g).powi(2);
-            let var_k = integral(&|x| g(x) * g(x) * pk(x)) - integral(&|x| g(x) * pk(x)).powi(2);
-            let exact = var_u + n2 * var_k;
-            let missed = seen[k].1 / seen[k].0;
-            assert!((missed - 1.0).abs() < 0.02, "a = {a}: the realized samples missed {missed}");
-            let realized = (q[k] + missed * cross[k].0 + cross[k].1) / t - (y1[k] * y1[k] - y2[k]) / (t * (t - 1.0));
-            let moments = measured + (q[k] - q[0]) / t;
-            assert!((realized / exact - 1.0).abs() < 0.03, "a = {a}: realized {realized} against {exact}");
-            if a != 1.0 {
-                assert!((moments / exact - 1.0).abs() > 0.1, "a = {a}: moments {moments} close to {exact}");
-            }
-        }
-    }
-
-    /// A budget without the only strategy that makes a path predicts an infinite moment.
-    #[test]
-    fn losing_a_paths_only_strategy_costs_an_infinite_moment() {
-        let mut x = 0.0;
-        let mut q = [0.0; 2];
-        let s = Shares { unidirectional: 0.0, connection: 0.0, light_trace: 1.0 };
-        accumulate(1.0, &s, &[(1.0, 1.0), (1.0, 0.0)], &mut x, &mut q);
-        assert_eq!(q[0], 1.0);
-        assert!(q[1].is_infinite());
-    }
-
     #[test]
     fn smoothed_means_average_the_measured_neighbours() {
         let plan = Plan { connections: 4, pool_paths: 8, splat_paths: 8 };
@@ -1249,53 +707,5 @@ mod tests {
             .collect();
         assert_eq!(ids.len(), b.measured());
         assert!(ids.iter().all(|&i| i < b.measured()));
-    }
-
-    #[test]
-    fn spread_separates_camera_vertices_and_counts_draws_that_found_nothing() {
-        let mut m = TileMoments::new(vec![(1.0, 1.0)], 4);
-        // Pixel 0: a camera vertex whose four draws agree (no spread at all).
-        m.begin(0);
-        for _ in 0..4 {
-            m.connection(2, 0.5, &Shares::default());
-        }
-        // Pixel 1: one draw of four finds light at depth 2, two of four at depth 3.
-        m.begin(1);
-        m.connection(2, 2.0, &Shares::default());
-        m.connection(3, 1.0, &Shares::default());
-        m.connection(3, 1.0, &Shares::default());
-        m.end_vertex();
-        assert_eq!(m.spread[0], Spread { raw: 0.25, within: 0.0 });
-        assert_eq!(m.spread[0].independence(), Some(0.0));
-        // Depth 2: Σv² = 4, Σv = 2: raw 1, within (4 − 1) / 3 = 1. Depth 3: Σv² = 2, Σv = 2:
-        // raw 0.5, within (2 − 1) / 3.
-        let s = m.spread[1];
-        assert!((s.raw - 1.5).abs() < 1e-12 && (s.within - (1.0 + 1.0 / 3.0)).abs() < 1e-12, "{s:?}");
-        assert!((s.independence().unwrap() - 8.0 / 9.0).abs() < 1e-12);
-        // Nothing measured, or one draw per vertex: no estimate.
-        assert_eq!(Spread::default().independence(), None);
-        let mut one = Spread::default();
-        one.add(1.0, 1.0, 1);
-        assert_eq!(one.independence(), None);
-    }
-
-    #[test]
-    fn costs_scale_each_part_with_what_the_plan_changes() {
-        let from = Plan { connections: 4, pool_paths: 500, splat_paths: 500 };
-        let ops = Operations {
-            camera_rays: 1000,
-            camera_shadow: 500,
-            pool_shadow: 2000,
-            lookups: 0,
-            light_rays: 100,
-            splat_shadow: 50,
-            cache_entries: 300,
-        };
-        let p = Prices { shadow: 0.5, lookup: 0.0, cache_entry: 0.25, path_tracer: 0.8 };
-        assert_eq!(ops.cost(&from, &from, &p), 1000.0 + 250.0 + 1000.0 + 75.0 + 100.0 + 25.0);
-        let pt = Plan { connections: 0, pool_paths: 0, splat_paths: 0 };
-        assert_eq!(ops.cost(&from, &pt, &p), 1000.0);
-        let more = Plan { connections: 8, pool_paths: 500, splat_paths: 2000 };
-        assert_eq!(ops.cost(&from, &more, &p), 1250.0 + 2000.0 + 75.0 + 400.0 + 100.0);
     }
 }
