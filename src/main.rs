@@ -269,6 +269,13 @@ struct RenderArgs {
     /// as the plan would weigh it, with its connections' spread (realized).
     #[arg(long, value_enum, default_value_t = PcOptions::default().budget_model)]
     pc_budget_model: BudgetModel,
+    /// PCBPT and SPCBPT: samples per pixel the budget plans for (default: the render's
+    /// --spp, or 256 with --time). A path that a plan would sample less than (measured
+    /// iterations / horizon) times as densely as the measured plan counts by its chance of
+    /// being found in the render, as the typical render shows it, not by its expected
+    /// variance; 0 counts every path by its expected variance.
+    #[arg(long)]
+    pc_budget_horizon: Option<u32>,
     /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
     /// normals).
     #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
@@ -499,6 +506,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             budget_independence: a.pc_budget_independence,
             budget_smoothing: a.pc_budget_smoothing,
             budget_model: a.pc_budget_model,
+            budget_horizon: a.pc_budget_horizon,
         },
         sp: SpOptions {
             eye_subspaces: a.sp_eye_subspaces,
@@ -677,8 +685,13 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             && let (Some(p), Some(m)) = (b.chosen, b.measured_with)
         {
             eprintln!(
-                "  budget: {} connections per camera vertex and {} light-traced paths per iteration (measured with {} and {}; predicted efficiency {:.2}× theirs)",
-                p.connections, p.splat_paths, m.connections, m.splat_paths, b.predicted_gain
+                "  budget: {} connections per camera vertex and {} light-traced paths per iteration (measured with {} and {}; predicted efficiency {:.2}× theirs, {})",
+                p.connections,
+                p.splat_paths,
+                m.connections,
+                m.splat_paths,
+                b.predicted_gain,
+                if b.horizon == 0 { "expected moments".to_string() } else { format!("planned for {} spp", b.horizon) }
             );
         }
         if let Some(k) = &s.subspaces {

@@ -42,6 +42,9 @@ pub(crate) struct Ctx<'a> {
     pub seed: u64,
     /// Keep per-strategy layers.
     pub layers: bool,
+    /// The whole render's samples per pixel when it has a fixed count (`--spp`; every chunk
+    /// of a distributed render sees the whole count), `None` with `--time`.
+    pub planned_spp: Option<u32>,
 }
 
 /// A prepared pass: what its tiles share, and the splats and counters of the preparation
@@ -267,7 +270,11 @@ pub(crate) fn run<M: Iterative>(
     let threads = pool.current_num_threads();
     let (w, h) = (scene.film.width, scene.film.height);
     let layers = opts.strategy_images && bidirectional;
-    let ctx = Ctx { scene, seed: opts.seed, layers };
+    let planned_spp = match opts.budget {
+        Budget::Spp(spp) => Some(spp),
+        Budget::Time(_) => None,
+    };
+    let ctx = Ctx { scene, seed: opts.seed, layers, planned_spp };
     let tile_list = tiles(w, h, opts.tile_size.max(1));
     let mut film = Film::with_layers(w, h, scene.film.filter, if layers { STRATEGY_LAYERS } else { 0 });
     let (range, per) = match opts.budget {

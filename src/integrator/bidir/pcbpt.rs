@@ -138,6 +138,10 @@ pub struct PcOptions {
     pub budget_smoothing: u32,
     /// How the budget predicts a candidate's variance.
     pub budget_model: BudgetModel,
+    /// Samples per pixel the budget's choice plans for (`None`: the render's `--spp`, or
+    /// [`super::budget::DEFAULT_HORIZON`] with `--time`; 0: no horizon, the expected
+    /// moments, [`super::budget::measure::typical`]).
+    pub budget_horizon: Option<u32>,
 }
 
 impl Default for PcOptions {
@@ -160,6 +164,7 @@ impl Default for PcOptions {
             budget_independence: Independence::Fixed(0.35),
             budget_smoothing: 2,
             budget_model: BudgetModel::Realized,
+            budget_horizon: None,
         }
     }
 }
@@ -539,7 +544,7 @@ impl Iterative for PcbptRender {
         // Iteration 0's counts have no measured concentration: the budget measures from 1.
         let plan = Plan { connections: o.connections, pool_paths: m, splat_paths: m };
         let window = 1..1 + o.budget_iterations;
-        self.budget = Some(Budget::new(o, window, plan, w as usize, h as usize));
+        self.budget = Some(Budget::new(o, window, plan, w as usize, h as usize, ctx.planned_spp));
         Ok(())
     }
 

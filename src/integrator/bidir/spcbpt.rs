@@ -27,7 +27,7 @@
 //! its own light vertex), or harmonic corrected for correlation.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{Budget, BudgetMode, Operations, Plan, SplatShares, TracedPool, budget_tile};
+use super::budget::{Budget, BudgetMode, CameraSample, Operations, Plan, SplatShares, TracedPool, budget_tile};
 use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
 use super::pcbpt::{
@@ -367,6 +367,10 @@ struct TrainingSink<'a, S> {
     scene: &'a Scene,
     model: &'a Model,
     samples: &'a mut Vec<TrainingSample>,
+    /// The eye subspace of the camera vertex whose connections are arriving, with its depth:
+    /// a sink serves one camera sample, whose vertices' draws arrive together, so each
+    /// vertex is classified once, not once per draw.
+    eye: Option<(usize, usize)>,
 }
 
 impl<S: Sink> Sink for TrainingSink<'_, S> {
@@ -388,7 +392,15 @@ impl<S: Sink> Sink for TrainingSink<'_, S> {
     fn add_connection(&mut self, light: &[Vertex], camera: &[Vertex], c: Rgb, w: f32) {
         let f = luminance(c);
         if f > 0.0 && f.is_finite() && w > 0.0 {
-            let i = self.model.eye_subspace(self.scene, &camera[camera.len() - 1]);
+            let t = camera.len();
+            let i = match self.eye {
+                Some((depth, i)) if depth == t => i,
+                _ => {
+                    let i = self.model.eye_subspace(self.scene, &camera[t - 1]);
+                    self.eye = Some((t, i));
+                    i
+                }
+            };
             let j = self.model.light_subspace(self.scene, light);
             let gamma = self.model.matrix.gamma(i, j);
             self.samples.push(TrainingSample { eye: i as u32, light: j as u32, gamma, f2: f * f, w });
@@ -530,7 +542,7 @@ impl Iterative for SpcbptRender {
         // The budget is measured once `Γ` is trained.
         let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
         let window = o.training_iterations..o.training_iterations + pc.budget_iterations;
-        self.budget = Some(Budget::new(pc, window, plan, w, h));
+        self.budget = Some(Budget::new(pc, window, plan, w, h, ctx.planned_spp));
         let subspaces = self.model().sort_pool(scene, &pilot);
         self.measured =
             Some(Measured::of_pool(&subspaces, pilot.paths, pilot.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]));
@@ -584,10 +596,9 @@ impl Iterative for SpcbptRender {
         if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
             return result;
         }
-        let PoolSampler { pass: pool_pass, mut scratch, .. } = sampler;
         if !self.training(first) {
             return sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-                pool_pass.sample(&select, pos, rng, &mut scratch, sink, counters);
+                sampler.sample(pos, rng, sink, counters);
                 true
             });
         }
@@ -597,10 +608,10 @@ impl Iterative for SpcbptRender {
         let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
             let pixel = pos.y as usize * width + pos.x as usize;
             if !pixel.is_multiple_of(every) {
-                pool_pass.sample(&select, pos, rng, &mut scratch, sink, counters);
+                sampler.sample(pos, rng, sink, counters);
             } else {
-                let mut sink = TrainingSink { inner: sink, scene, model, samples: &mut samples };
-                pool_pass.sample(&select, pos, rng, &mut scratch, &mut sink, counters);
+                let mut sink = TrainingSink { inner: sink, scene, model, samples: &mut samples, eye: None };
+                sampler.sample(pos, rng, &mut sink, counters);
             }
             true
         });

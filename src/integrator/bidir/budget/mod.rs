@@ -40,6 +40,13 @@
 //! each unbiased and averaged alike; the film divides every iteration's splats by the same
 //! count of light paths ([`normalise_splats`]).
 //!
+//! **Horizon.** Every moment is the one a render of `--pc-budget-horizon` samples per pixel
+//! typically shows (the render's `--spp`, or [`DEFAULT_HORIZON`] with `--time`): a path
+//! that a candidate samples far less densely than the plan in use counts only as often as
+//! such a render finds it ([`measure::typical`]). Without it the paths that connections find
+//! and the path tracer reaches through tiny densities made path tracing look 1.5–2× worse
+//! than renders measure on `veach-ajar`, `veach-mis` and `sunlit-room` (BENCHMARKS.md).
+//!
 //! **Known error.** Both models find more light tracing more useful than renders do: from
 //! the pool's 735 light paths to 14 400 on `staircase2` the realized model predicts 13–20%
 //! less variance (three seeds) and the moments 20%, renders 8%. Neither knows that the
@@ -146,6 +153,9 @@ pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 /// Pixels whose moments are measured: those of every `k`-th row and column, at most about
 /// this many.
 const MEASURED_PIXELS: usize = 65_536;
+
+/// Samples per pixel the choice plans for with `--time` and no `--pc-budget-horizon`.
+pub const DEFAULT_HORIZON: u32 = 256;
 
 /// The `0.01` of relMSE's denominator.
 const REL_EPSILON: f64 = 0.01;
@@ -295,6 +305,9 @@ pub struct BudgetStats {
     /// samples over that of the realized camera samples: how much of it they miss, which
     /// scales their cross terms in the realized model ([`Realized`]).
     pub missed: Vec<f64>,
+    /// Samples per pixel the choice planned for (`--pc-budget-horizon`; 0: none, the
+    /// expected moments).
+    pub horizon: u32,
 }
 
 /// The budget of a pool integrator over a render: the plan in use, and the measurement that
@@ -306,6 +319,9 @@ pub struct Budget {
     plan: Plan,
     candidates: Vec<Plan>,
     scales: Vec<(f64, f64)>,
+    /// The least density ratio whose moment counts in full: the measured iterations over the
+    /// samples per pixel planned for ([`measure::typical`]).
+    floor: f64,
     /// The pixels of every `every`-th row and column are measured: `columns` of them a row.
     every: usize,
     columns: usize,
@@ -339,9 +355,19 @@ pub struct Budget {
 }
 
 impl Budget {
-    /// A budget that starts with `plan` and, with `--pc-budget auto`, measures `window`.
-    pub fn new(opts: &PcOptions, window: Range<u32>, plan: Plan, width: usize, height: usize) -> Budget {
+    /// A budget that starts with `plan` and, with `--pc-budget auto`, measures `window`, for
+    /// a render of `planned_spp` samples per pixel (`None`: of `--time`).
+    pub fn new(
+        opts: &PcOptions,
+        window: Range<u32>,
+        plan: Plan,
+        width: usize,
+        height: usize,
+        planned_spp: Option<u32>,
+    ) -> Budget {
         let mode = opts.budget;
+        let horizon = opts.budget_horizon.or(planned_spp).unwrap_or(DEFAULT_HORIZON);
+        let floor = if horizon == 0 { 0.0 } else { (window.len() as f64 / horizon as f64).min(1.0) };
         let pixels = width * height;
         let candidates = if mode == BudgetMode::Auto { candidates(plan.pool_paths, pixels) } else { Vec::new() };
         let scales = scales(&plan, &candidates);
@@ -352,6 +378,7 @@ impl Budget {
             plan,
             candidates,
             scales,
+            floor,
             every,
             columns: width.div_ceil(every),
             width,
@@ -370,7 +397,7 @@ impl Budget {
             spread: Vec::new(),
             independence: opts.budget_independence.fixed().map(f64::from),
             smoothing: opts.budget_smoothing as usize,
-            stats: BudgetStats::default(),
+            stats: BudgetStats { horizon, ..BudgetStats::default() },
         }
     }
 
@@ -475,7 +502,7 @@ impl Budget {
 
     /// Empty moments for a tile of a measured iteration.
     pub fn tile_moments(&self) -> TileMoments {
-        TileMoments::new(self.scales.clone(), self.plan.connections)
+        TileMoments::new(self.scales.clone(), self.plan.connections, self.floor)
     }
 
     /// Adds a measured iteration: its tiles' moments (in `extra`, in tile order), its
@@ -516,9 +543,9 @@ impl Budget {
         for sp in splats {
             if let Some(id) = self.measured_pixel(sp.pos) {
                 let v = sp.value * per_path;
-                accumulate(v, &sp.shares, &self.scales, &mut x[id], &mut self.q[id * c..(id + 1) * c]);
+                accumulate(v, &sp.shares, &self.scales, self.floor, &mut x[id], &mut self.q[id * c..(id + 1) * c]);
                 for (y, &(a, l)) in y[id * c..(id + 1) * c].iter_mut().zip(&self.scales) {
-                    y.own_moment += own_moment(v, &sp.shares, sp.shares.combined(a, l));
+                    y.own_moment += own_moment(v, &sp.shares, sp.shares.combined(a, l), self.floor);
                 }
             }
         }
@@ -675,7 +702,7 @@ mod tests {
         let plan = Plan { connections: 4, pool_paths: 8, splat_paths: 8 };
         for (w, h, r) in [(7, 5, 0), (7, 5, 1), (7, 5, 2), (4, 9, 3), (600, 400, 2)] {
             let opts = PcOptions { budget: BudgetMode::Auto, budget_smoothing: r, ..PcOptions::default() };
-            let mut b = Budget::new(&opts, 1..3, plan, w, h);
+            let mut b = Budget::new(&opts, 1..3, plan, w, h, None);
             let (gw, gh) = b.grid();
             assert_eq!(gw * gh, b.measured());
             assert!(b.measured() <= MEASURED_PIXELS && (w * h > MEASURED_PIXELS) == (b.every > 1));
@@ -700,7 +727,7 @@ mod tests {
         }
         // Every measured pixel has an index of its own.
         let opts = PcOptions { budget: BudgetMode::Auto, ..PcOptions::default() };
-        let b = Budget::new(&opts, 1..3, plan, 600, 400);
+        let b = Budget::new(&opts, 1..3, plan, 600, 400, None);
         let ids: std::collections::HashSet<usize> = (0..400)
             .flat_map(|y| (0..600).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))
             .filter_map(|p| b.measured_pixel(p))
