@@ -57,8 +57,8 @@ pub(super) fn scales(from: &Plan, candidates: &[Plan]) -> Vec<(f64, f64)> {
 }
 
 /// The camera path's own strategies' part of a contribution's second moment under a
-/// candidate whose combined density is `d` times the plan in use's: `v² u / d²`, the
-/// whole moment's [`typical`] share of it.
+/// candidate whose combined density is `d` times the plan in use's: `v² u / d²`, counted as
+/// [`typical`] counts the whole moment, `v² u / (d max(d, floor))`.
 #[inline]
 pub(super) fn own_moment(v: f32, s: &Shares, d: f64, floor: f64) -> f64 {
     if d > 0.0 && v.is_finite() && v > 0.0 {
@@ -83,7 +83,7 @@ pub(super) fn own_moment(v: f32, s: &Shares, d: f64, floor: f64) -> f64 {
 /// a few fireflies in a thousand renders carry. On `staircase2` SPCBPT's draws find such
 /// paths often: without the floor 100 of the 57 600 measured pixels held 93% of the path
 /// tracer's predicted second moment, which put it at 97× the variance of SPCBPT's four
-/// connections (seed 1; renders: 1.6×); with the floor of 256 samples per pixel, 4.4×.
+/// connections (seed 1; renders: 1.55×); with the floor of 256 samples per pixel, 4.4×.
 #[inline]
 pub(super) fn typical(d: f64, floor: f64) -> f64 {
     d.max(floor)

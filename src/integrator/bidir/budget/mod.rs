@@ -44,8 +44,9 @@
 //! typically shows (the render's `--spp`, or [`DEFAULT_HORIZON`] with `--time`): a path
 //! that a candidate samples far less densely than the plan in use counts only as often as
 //! such a render finds it ([`measure::typical`]). Without it the paths that connections find
-//! and the path tracer reaches through tiny densities made path tracing look 1.5–2× worse
-//! than renders measure on `veach-ajar`, `veach-mis` and `sunlit-room` (BENCHMARKS.md).
+//! and the path tracer reaches through tiny densities made path tracing look up to 2.5× worse
+//! than renders measure on `veach-ajar`, 1.8× on `veach-mis` and `staircase2` and 1.5× on
+//! `sunlit-room` (BENCHMARKS.md).
 //!
 //! **Known error.** Both models find more light tracing more useful than renders do: from
 //! the pool's 735 light paths to 14 400 on `staircase2` the realized model predicts 13–20%
