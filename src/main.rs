@@ -270,7 +270,7 @@ struct RenderArgs {
     #[arg(long, value_enum, default_value_t = PcOptions::default().budget_model)]
     pc_budget_model: BudgetModel,
     /// PCBPT and SPCBPT: samples per pixel the budget plans for (default: the render's
-    /// --spp, or 256 with --time). A path that a plan would sample less than (measured
+    /// --spp but at least 256, which --time takes). A path that a plan would sample less than (measured
     /// iterations / horizon) times as densely as the measured plan counts by its chance of
     /// being found in the render, as the typical render shows it, not by its expected
     /// variance; 0 counts every path by its expected variance.

@@ -105,3 +105,26 @@ fn pcbpt_budget_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
     assert!(se < 0.004, "pairs too noisy to judge the mean: ± {se}");
     assert!((ratio - 1.0).abs() < 0.01, "PCBPT with a budget / without = {ratio} ± {se}");
 }
+
+/// A short render still plans for at least 256 samples per pixel: the floor of the moments
+/// treats each rare sample as a region of its own, and planned for 8 samples per pixel it
+/// made path tracing look best on `veach-ajar`, whose light the connections carry (at 8
+/// spp the path tracer misses most of it). With the default horizon the plan keeps its
+/// connections.
+#[test]
+fn short_renders_plan_for_the_default_horizon_and_keep_veach_ajars_connections() {
+    use pcbpt::integrator::bidir::budget::DEFAULT_HORIZON;
+    let scene = load(
+        &root().join(VEACH_AJAR.scene),
+        &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
+        pcbpt::accel::Backend::Embree,
+    );
+    let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(8));
+    o.seed = 1;
+    o.bidir.pc.budget = BudgetMode::Auto;
+    let out = integrator::render(&scene, &o).unwrap();
+    let b = out.stats.budget.expect("a budget's statistics");
+    println!("veach-ajar 160×90, 8 spp: plan {:?}, planned for {} spp", b.chosen, b.horizon);
+    assert_eq!(b.horizon, DEFAULT_HORIZON);
+    assert!(b.chosen.is_some_and(|p| p.connections > 0), "plan {:?}", b.chosen);
+}

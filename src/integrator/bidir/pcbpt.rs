@@ -138,8 +138,8 @@ pub struct PcOptions {
     pub budget_smoothing: u32,
     /// How the budget predicts a candidate's variance.
     pub budget_model: BudgetModel,
-    /// Samples per pixel the budget's choice plans for (`None`: the render's `--spp`, or
-    /// [`super::budget::DEFAULT_HORIZON`] with `--time`; 0: no horizon, the expected
+    /// Samples per pixel the budget's choice plans for (`None`: the render's `--spp` but at
+    /// least [`super::budget::DEFAULT_HORIZON`], which `--time` takes; 0: no horizon, the expected
     /// moments, [`super::budget::measure::typical`]).
     pub budget_horizon: Option<u32>,
 }

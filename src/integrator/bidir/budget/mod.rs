@@ -41,7 +41,7 @@
 //! count of light paths ([`normalise_splats`]).
 //!
 //! **Horizon.** Every moment is the one a render of `--pc-budget-horizon` samples per pixel
-//! typically shows (the render's `--spp`, or [`DEFAULT_HORIZON`] with `--time`): a path
+//! typically shows (the render's `--spp` but at least [`DEFAULT_HORIZON`], 256): a path
 //! that a candidate samples far less densely than the plan in use counts only as often as
 //! such a render finds it ([`measure::typical`]). Without it the paths that connections find
 //! and the path tracer reaches through tiny densities made path tracing look up to 2.5× worse
@@ -155,7 +155,12 @@ pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 /// this many.
 const MEASURED_PIXELS: usize = 65_536;
 
-/// Samples per pixel the choice plans for with `--time` and no `--pc-budget-horizon`.
+/// Samples per pixel the choice plans for without `--pc-budget-horizon`: with `--time`, and
+/// the least with `--spp`. [`measure::typical`] treats each measured sample as a region of
+/// its own, and where many such samples carry a pixel's light together a short render misses
+/// all of them more often than it predicts: planned for 8 samples per pixel, PCBPT's budget
+/// took path tracing on `veach-ajar` (from 32 on, four connections). The floor was measured
+/// against renders at 256.
 pub const DEFAULT_HORIZON: u32 = 256;
 
 /// The `0.01` of relMSE's denominator.
@@ -357,7 +362,8 @@ pub struct Budget {
 
 impl Budget {
     /// A budget that starts with `plan` and, with `--pc-budget auto`, measures `window`, for
-    /// a render of `planned_spp` samples per pixel (`None`: of `--time`).
+    /// a render of `planned_spp` samples per pixel (`None`: of `--time`; the horizon is at
+    /// least [`DEFAULT_HORIZON`] unless given).
     pub fn new(
         opts: &PcOptions,
         window: Range<u32>,
@@ -367,7 +373,7 @@ impl Budget {
         planned_spp: Option<u32>,
     ) -> Budget {
         let mode = opts.budget;
-        let horizon = opts.budget_horizon.or(planned_spp).unwrap_or(DEFAULT_HORIZON);
+        let horizon = opts.budget_horizon.unwrap_or(planned_spp.unwrap_or(0).max(DEFAULT_HORIZON));
         let floor = if horizon == 0 { 0.0 } else { (window.len() as f64 / horizon as f64).min(1.0) };
         let pixels = width * height;
         let candidates = if mode == BudgetMode::Auto { candidates(plan.pool_paths, pixels) } else { Vec::new() };
