@@ -82,17 +82,22 @@ cases! {
     spcbpt_staircase2_moments: STAIRCASE2, Spcbpt, 32, Moments;
 }
 
+/// `veach-ajar` at `resx` × `resy` with unlimited depth, on Embree.
+fn veach_ajar(resx: &str, resy: &str) -> Scene {
+    load(
+        &root().join(VEACH_AJAR.scene),
+        &[("resx", resx), ("resy", resy), ("max_depth", "-1")],
+        pcbpt::accel::Backend::Embree,
+    )
+}
+
 /// PCBPT with a budget against PCBPT without one on 12 same-seed pairs of `veach-ajar`
 /// renders (80×45, unlimited depth, 48 spp), which share their pools: the ratio of their
 /// image means is free of most of the pool's common error. A plan that lost a strategy's
 /// share would move it by far more than the 1% allowed.
 #[test]
 fn pcbpt_budget_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
-    let scene = load(
-        &root().join(VEACH_AJAR.scene),
-        &[("resx", "80"), ("resy", "45"), ("max_depth", "-1")],
-        pcbpt::accel::Backend::Embree,
-    );
+    let scene = veach_ajar("80", "45");
     let pcbpt = IntegratorKind::Pcbpt;
     let ratios: Vec<f64> = (1000..1012)
         .map(|seed| {
@@ -114,11 +119,7 @@ fn pcbpt_budget_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
 #[test]
 fn short_renders_plan_for_the_default_horizon_and_keep_veach_ajars_connections() {
     use pcbpt::integrator::bidir::budget::DEFAULT_HORIZON;
-    let scene = load(
-        &root().join(VEACH_AJAR.scene),
-        &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
-        pcbpt::accel::Backend::Embree,
-    );
+    let scene = veach_ajar("160", "90");
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(8));
     o.seed = 1;
     o.bidir.pc.budget = BudgetMode::Auto;
