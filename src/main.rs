@@ -276,6 +276,15 @@ struct RenderArgs {
     /// variance; 0 counts every path by its expected variance.
     #[arg(long)]
     pc_budget_horizon: Option<u32>,
+    /// PCBPT and SPCBPT: the least predicted efficiency gain over the measured plan for
+    /// which the budget leaves it (1: any gain; the predictions are within about a third
+    /// of what renders measure, so smaller gains are noise).
+    #[arg(long, default_value_t = PcOptions::default().budget_margin)]
+    pc_budget_margin: f32,
+    /// PCBPT and SPCBPT: pixels whose moments the budget measures, at most about (those of
+    /// every k-th row and column).
+    #[arg(long, default_value_t = PcOptions::default().budget_pixels)]
+    pc_budget_pixels: usize,
     /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
     /// normals).
     #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
@@ -507,6 +516,8 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             budget_smoothing: a.pc_budget_smoothing,
             budget_model: a.pc_budget_model,
             budget_horizon: a.pc_budget_horizon,
+            budget_margin: a.pc_budget_margin,
+            budget_pixels: a.pc_budget_pixels,
         },
         sp: SpOptions {
             eye_subspaces: a.sp_eye_subspaces,
@@ -684,13 +695,19 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         if let Some(b) = &s.budget
             && let (Some(p), Some(m)) = (b.chosen, b.measured_with)
         {
+            let why = match b.best {
+                Some(best) if best != p => format!(
+                    "kept: the best, {} and {}, predicted {:.2}×, is within the margin {:.2}",
+                    best.connections, best.splat_paths, b.best_gain, b.margin
+                ),
+                _ => format!("predicted efficiency {:.2}× theirs", b.predicted_gain),
+            };
             eprintln!(
-                "  budget: {} connections per camera vertex and {} light-traced paths per iteration (measured with {} and {}; predicted efficiency {:.2}× theirs, {})",
+                "  budget: {} connections per camera vertex and {} light-traced paths per iteration (measured with {} and {}; {why}, {})",
                 p.connections,
                 p.splat_paths,
                 m.connections,
                 m.splat_paths,
-                b.predicted_gain,
                 if b.horizon == 0 { "expected moments".to_string() } else { format!("planned for {} spp", b.horizon) }
             );
         }

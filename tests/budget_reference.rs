@@ -33,10 +33,12 @@ fn render_model(
     o.seed = seed;
     o.bidir.pc.budget = budget;
     // The realized model with smoothed means is the default; the moments as they were chosen
-    // by default before, with each pixel's own mean.
+    // by default before, with each pixel's own mean and no margin (they are here for the
+    // other plans they choose).
     o.bidir.pc.budget_model = model;
     if model == BudgetModel::Moments {
         o.bidir.pc.budget_smoothing = 0;
+        o.bidir.pc.budget_margin = 1.0;
     }
     let out = integrator::render(scene, &o).unwrap();
     if let Some(b) = &out.stats.budget {
@@ -128,4 +130,41 @@ fn short_renders_plan_for_the_default_horizon_and_keep_veach_ajars_connections()
     println!("veach-ajar 160×90, 8 spp: plan {:?}, planned for {} spp", b.chosen, b.horizon);
     assert_eq!(b.horizon, DEFAULT_HORIZON);
     assert!(b.chosen.is_some_and(|p| p.connections > 0), "plan {:?}", b.chosen);
+}
+
+/// `--pc-budget-margin`: on `veach-mis` (96×54) PCBPT's budget predicts light tracing
+/// without connections about 1.7 times as efficient as its measured plan, and the path
+/// tracer's plan less efficient than that plan. With a margin just above the best
+/// candidate's predicted gain the measured plan stays, and the render is then the one
+/// without a budget bit for bit (the measurement only reads the samples); just below it,
+/// that candidate is taken.
+#[test]
+fn a_gain_within_the_margin_keeps_the_measured_plan_and_its_image() {
+    let scene =
+        load_at(&root().join(VEACH_MIS.scene), VEACH_MIS.defines, Some((96, 54)), pcbpt::accel::Backend::Embree);
+    let run = |budget: BudgetMode, margin: f32| {
+        let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(6));
+        o.seed = 2;
+        o.bidir.pc.budget = budget;
+        o.bidir.pc.budget_margin = margin;
+        integrator::render(&scene, &o).unwrap()
+    };
+    let free = run(BudgetMode::Auto, 1.0).stats.budget.expect("a budget's statistics");
+    let (best, gain, measured) = (free.best.unwrap(), free.best_gain, free.measured_with.unwrap());
+    println!("veach-mis 96×54: measured with {measured:?}, best {best:?} at {gain:.3}×");
+    assert!(best != measured && !best.path_tracing());
+    assert!(gain > 1.2, "the best candidate's predicted gain {gain}");
+    assert_eq!(free.chosen, Some(best));
+
+    let below = run(BudgetMode::Auto, (gain * 0.99) as f32).stats.budget.unwrap();
+    assert_eq!(below.chosen, Some(best));
+    assert!((below.predicted_gain - gain).abs() < 1e-9 * gain);
+
+    let above = run(BudgetMode::Auto, (gain * 1.01) as f32);
+    let b = above.stats.budget.clone().unwrap();
+    assert_eq!((b.chosen, b.predicted_gain, b.best), (Some(measured), 1.0, Some(best)));
+    let off = run(BudgetMode::Off, 1.1);
+    let bits =
+        |o: &integrator::RenderOutput| o.image.iter().flat_map(|c| c.to_array()).map(f32::to_bits).collect::<Vec<_>>();
+    assert!(bits(&above) == bits(&off), "the kept plan's image differs from the render without a budget");
 }

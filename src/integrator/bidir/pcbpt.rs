@@ -142,6 +142,13 @@ pub struct PcOptions {
     /// least [`super::budget::DEFAULT_HORIZON`], which `--time` takes; 0: no horizon, the expected
     /// moments, [`super::budget::measure::typical`]).
     pub budget_horizon: Option<u32>,
+    /// The least predicted efficiency gain over the measured plan for which the budget
+    /// leaves it (1: any gain): smaller gains are within the prediction's error
+    /// ([`super::budget`]).
+    pub budget_margin: f32,
+    /// Pixels whose moments are measured, at most about: those of every `k`-th row and
+    /// column, `k` the least that keeps them within this many.
+    pub budget_pixels: usize,
 }
 
 impl Default for PcOptions {
@@ -165,6 +172,8 @@ impl Default for PcOptions {
             budget_smoothing: 2,
             budget_model: BudgetModel::Realized,
             budget_horizon: None,
+            budget_margin: 1.1,
+            budget_pixels: 16_384,
         }
     }
 }
@@ -185,6 +194,15 @@ impl PcOptions {
         }
         if self.budget_smoothing > 64 {
             return Err(format!("--pc-budget-smoothing must be at most 64, not {}", self.budget_smoothing));
+        }
+        if !(self.budget_margin >= 1.0 && self.budget_margin.is_finite()) {
+            return Err(format!(
+                "--pc-budget-margin must be at least 1 and finite (a predicted gain below 1 is a loss), not {}",
+                self.budget_margin
+            ));
+        }
+        if self.budget_pixels == 0 {
+            return Err("--pc-budget-pixels must be at least 1".into());
         }
         if self.budget_iterations < 2 {
             return Err("--pc-budget-iterations must be at least 2 (the variance is measured across them)".into());

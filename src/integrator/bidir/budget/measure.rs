@@ -164,17 +164,17 @@ pub struct TileMoments {
 }
 
 impl TileMoments {
-    /// No entries yet, for candidates' count scales `scales`, `draws` connections per
-    /// camera vertex and the [`typical`] floor `floor`.
-    pub(super) fn new(scales: Vec<(f64, f64)>, draws: u32, floor: f64) -> TileMoments {
+    /// No entries yet, with room for `entries`, for candidates' count scales `scales`,
+    /// `draws` connections per camera vertex and the [`typical`] floor `floor`.
+    pub(super) fn new(scales: Vec<(f64, f64)>, draws: u32, floor: f64, entries: usize) -> TileMoments {
         let c = scales.len();
         TileMoments {
             scales,
-            ids: Vec::new(),
-            x: Vec::new(),
-            q: Vec::new(),
-            spread: Vec::new(),
-            realized: Vec::new(),
+            ids: Vec::with_capacity(entries),
+            x: Vec::with_capacity(entries),
+            q: Vec::with_capacity(entries * c),
+            spread: Vec::with_capacity(entries),
+            realized: Vec::with_capacity(entries * c),
             draws,
             floor,
             vertex: (0, 0.0, 0.0),
@@ -235,23 +235,33 @@ impl TileMoments {
     fn record(&mut self, v: f32, shares: &Shares, class: usize) {
         let c = self.scales.len();
         let (Some(x), true) = (self.x.last_mut(), self.q.len() >= c) else { return };
+        if !(v.is_finite() && v > 0.0) {
+            return;
+        }
         let at = self.q.len() - c;
-        accumulate(v, shares, &self.scales, self.floor, x, &mut self.q[at..]);
-        if v.is_finite() && v > 0.0 {
-            for (r, &(a, l)) in self.realized[at..].iter_mut().zip(&self.scales) {
-                let d = shares.combined(a, l);
-                let own = if class == 1 { a } else { 1.0 };
-                if d > 0.0 && own > 0.0 {
-                    let w = v as f64 * own / d;
-                    r.sample += w;
-                    r.diagonal += w * w;
-                    if class == 0 {
-                        r.own_sample += w;
-                        r.own_diagonal += w * w;
-                    }
-                }
-                r.own_moment += own_moment(v, shares, d, self.floor);
+        let (v, floor) = (v as f64, self.floor);
+        *x += v;
+        // `accumulate`'s moments and the candidate's weighing of the sample, with each
+        // candidate's combined density computed once.
+        for ((q, r), &(a, l)) in self.q[at..].iter_mut().zip(&mut self.realized[at..]).zip(&self.scales) {
+            let d = shares.combined(a, l);
+            if d <= 0.0 {
+                *q = f64::INFINITY;
+                continue;
             }
+            let typical = typical(d, floor);
+            *q += v * v / typical;
+            let own = if class == 1 { a } else { 1.0 };
+            if own > 0.0 {
+                let w = v * own / d;
+                r.sample += w;
+                r.diagonal += w * w;
+                if class == 0 {
+                    r.own_sample += w;
+                    r.own_diagonal += w * w;
+                }
+            }
+            r.own_moment += v * v * shares.unidirectional as f64 / (d * typical);
         }
     }
 }
@@ -451,10 +461,10 @@ mod tests {
         let (mut y1, mut y2, mut cross, mut x1, mut x2, mut q) =
             (vec![0.0; c], vec![0.0; c], vec![(0.0, 0.0); c], 0.0, 0.0, vec![0.0; c]);
         let mut seen = vec![(0.0, 0.0); c];
-        let mut m = TileMoments::new(scales.clone(), n, 0.0);
+        let mut m = TileMoments::new(scales.clone(), n, 0.0, 0);
         for run in 0..runs {
             if run % 10_000 == 0 {
-                m = TileMoments::new(scales.clone(), n, 0.0);
+                m = TileMoments::new(scales.clone(), n, 0.0, 0);
             }
             m.begin(0);
             let y = rng.next_1d() as f64;
@@ -549,7 +559,7 @@ mod tests {
 
     #[test]
     fn spread_separates_camera_vertices_and_counts_draws_that_found_nothing() {
-        let mut m = TileMoments::new(vec![(1.0, 1.0)], 4, 0.0);
+        let mut m = TileMoments::new(vec![(1.0, 1.0)], 4, 0.0, 0);
         // Pixel 0: a camera vertex whose four draws agree (no spread at all).
         m.begin(0);
         for _ in 0..4 {

@@ -151,10 +151,6 @@ impl std::fmt::Display for Independence {
 /// Connections per camera vertex a budget may choose.
 pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 
-/// Pixels whose moments are measured: those of every `k`-th row and column, at most about
-/// this many.
-const MEASURED_PIXELS: usize = 65_536;
-
 /// Samples per pixel the choice plans for without `--pc-budget-horizon`: with `--time`, and
 /// the least with `--spp`. [`measure::typical`] treats each measured sample as a region of
 /// its own, and where many such samples carry a pixel's light together a short render misses
@@ -226,7 +222,7 @@ pub(crate) fn budget_tile(
     if !budget.measures(first) {
         return (budget.plan().path_tracing() && !ctx.layers).then(|| path_traced_tile(ctx, tile, first, count));
     }
-    let mut moments = budget.tile_moments();
+    let mut moments = budget.tile_moments(&tile);
     let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
         match budget.measured_pixel(pos) {
             Some(id) => {
@@ -295,6 +291,14 @@ pub struct BudgetStats {
     pub measured_with: Option<Plan>,
     /// Predicted efficiency of the chosen plan over that of the measured one (> 1: better).
     pub predicted_gain: f64,
+    /// The candidate predicted most efficient, chosen only when its gain
+    /// (`best_gain`) reaches `--pc-budget-margin`.
+    pub best: Option<Plan>,
+    pub best_gain: f64,
+    /// `--pc-budget-margin`.
+    pub margin: f64,
+    /// Pixels whose moments were measured (`--pc-budget-pixels`, at most about).
+    pub measured_pixels: usize,
     /// The measured iterations' connections' variance within camera vertices over their
     /// second moment ([`Spread::independence`]); `None` with fewer than two draws per vertex.
     pub measured_independence: Option<f64>,
@@ -354,6 +358,8 @@ pub struct Budget {
     iterations: u32,
     /// `--pc-budget-independence`; `None`: measured ([`Spread`]).
     independence: Option<f64>,
+    /// `--pc-budget-margin`: the least predicted gain that leaves the measured plan.
+    margin: f64,
     /// `--pc-budget-smoothing`: measured pixels each side whose means are averaged for
     /// relMSE's denominator ([`Budget::smoothed_means`]).
     smoothing: usize,
@@ -378,7 +384,7 @@ impl Budget {
         let pixels = width * height;
         let candidates = if mode == BudgetMode::Auto { candidates(plan.pool_paths, pixels) } else { Vec::new() };
         let scales = scales(&plan, &candidates);
-        let every = (pixels as f64 / MEASURED_PIXELS as f64).sqrt().ceil().max(1.0) as usize;
+        let every = (pixels as f64 / opts.budget_pixels.max(1) as f64).sqrt().ceil().max(1.0) as usize;
         Budget {
             mode,
             window,
@@ -404,7 +410,13 @@ impl Budget {
             spread: Vec::new(),
             independence: opts.budget_independence.fixed().map(f64::from),
             smoothing: opts.budget_smoothing as usize,
-            stats: BudgetStats { horizon, ..BudgetStats::default() },
+            margin: f64::from(opts.budget_margin),
+            stats: BudgetStats {
+                horizon,
+                margin: f64::from(opts.budget_margin),
+                measured_pixels: width.div_ceil(every) * height.div_ceil(every),
+                ..BudgetStats::default()
+            },
         }
     }
 
@@ -507,9 +519,11 @@ impl Budget {
         out
     }
 
-    /// Empty moments for a tile of a measured iteration.
-    pub fn tile_moments(&self) -> TileMoments {
-        TileMoments::new(self.scales.clone(), self.plan.connections, self.floor)
+    /// Empty moments for `tile` of a measured iteration, with room for its measured pixels.
+    pub fn tile_moments(&self, tile: &Tile) -> TileMoments {
+        let span = |from: u32, len: u32| (from + len).div_ceil(self.every as u32) - from.div_ceil(self.every as u32);
+        let pixels = span(tile.x0, tile.width) * span(tile.y0, tile.height);
+        TileMoments::new(self.scales.clone(), self.plan.connections, self.floor, pixels as usize)
     }
 
     /// Adds a measured iteration: its tiles' moments (in `extra`, in tile order), its
@@ -528,7 +542,8 @@ impl Budget {
             self.own = vec![(0.0, 0.0); n * c];
         }
         let mut x = vec![0.0f64; n];
-        let mut y = vec![Realized::default(); n * c];
+        // An iteration samples each pixel once, so each measured pixel has one entry: its
+        // realized sums are the pixel's estimate of the iteration as each candidate weighs it.
         for r in results {
             let Some(m) = r.extra.as_ref().and_then(|e| e.downcast_ref::<TileMoments>()) else { continue };
             for (e, &id) in m.ids.iter().enumerate() {
@@ -539,8 +554,14 @@ impl Budget {
                 for (q, add) in self.q[to.clone()].iter_mut().zip(&m.q[from.clone()]) {
                     *q += add;
                 }
-                for (y, r) in y[to].iter_mut().zip(&m.realized[from]) {
-                    *y += r;
+                for (k, y) in to.zip(&m.realized[from]) {
+                    self.y1[k] += y.sample;
+                    self.y2[k] += y.sample * y.sample;
+                    let (with_own, other) = y.cross();
+                    self.cross[k].0 += with_own;
+                    self.cross[k].1 += other;
+                    self.own[k].0 += y.own_diagonal;
+                    self.own[k].1 += y.own_moment;
                 }
             }
         }
@@ -551,23 +572,14 @@ impl Budget {
             if let Some(id) = self.measured_pixel(sp.pos) {
                 let v = sp.value * per_path;
                 accumulate(v, &sp.shares, &self.scales, self.floor, &mut x[id], &mut self.q[id * c..(id + 1) * c]);
-                for (y, &(a, l)) in y[id * c..(id + 1) * c].iter_mut().zip(&self.scales) {
-                    y.own_moment += own_moment(v, &sp.shares, sp.shares.combined(a, l), self.floor);
+                for (own, &(a, l)) in self.own[id * c..(id + 1) * c].iter_mut().zip(&self.scales) {
+                    own.1 += own_moment(v, &sp.shares, sp.shares.combined(a, l), self.floor);
                 }
             }
         }
         for (id, x) in x.into_iter().enumerate() {
             self.s1[id] += x;
             self.s2[id] += x * x;
-        }
-        for (k, y) in y.into_iter().enumerate() {
-            self.y1[k] += y.sample;
-            self.y2[k] += y.sample * y.sample;
-            let (with_own, other) = y.cross();
-            self.cross[k].0 += with_own;
-            self.cross[k].1 += other;
-            self.own[k].0 += y.own_diagonal;
-            self.own[k].1 += y.own_moment;
         }
         self.operations += operations;
         self.iterations += 1;
@@ -674,8 +686,15 @@ impl Budget {
             })
             .collect();
         if let Some(b) = best {
-            self.plan = self.candidates[b];
-            self.stats.predicted_gain = score(current) / score(b).max(f64::MIN_POSITIVE);
+            let mut gains: Vec<f64> = (0..c).map(|k| score(current) / score(k).max(f64::MIN_POSITIVE)).collect();
+            gains[current] = 1.0;
+            // A measured plan that cannot make every measured path gives way to the best
+            // that can.
+            let chosen = if score(current).is_finite() { pick(&gains, current, self.margin) } else { b };
+            self.stats.best = Some(self.candidates[b]);
+            self.stats.best_gain = gains[b];
+            self.plan = self.candidates[chosen];
+            self.stats.predicted_gain = gains[chosen];
         }
         self.stats.chosen = Some(self.plan);
         self.s1 = Vec::new();
@@ -686,6 +705,22 @@ impl Budget {
         self.y2 = Vec::new();
         self.cross = Vec::new();
     }
+}
+
+/// The candidate a budget takes, from each candidate's predicted efficiency over the
+/// measured plan's (`gains`; that of `current`, the measured plan, is 1): the greatest gain,
+/// the measured plan's counted `margin` times. Its variance is measured, the others'
+/// predicted, and the predictions came within about a third of renders (BENCHMARKS.md), so a
+/// gain within the margin is within their error and the plan stays (and with it the image of
+/// the render without a budget). A candidate whose gain is not finite is never taken.
+pub(crate) fn pick(gains: &[f64], current: usize, margin: f64) -> usize {
+    let credited = |k: usize| match gains[k] {
+        g if !(g.is_finite() && g >= 0.0) => f64::NEG_INFINITY,
+        g if k == current => g * margin,
+        g => g,
+    };
+    // Ties go to the measured plan, then to the earlier candidate.
+    (0..gains.len()).fold(current, |best, k| if credited(k) > credited(best) { k } else { best })
 }
 
 #[cfg(test)]
@@ -705,6 +740,24 @@ mod tests {
     }
 
     #[test]
+    fn the_pick_keeps_the_measured_plan_within_the_margin() {
+        // Candidate 1 is the measured plan.
+        let pick = |g: [f64; 4], margin: f64| pick(&g, 1, margin);
+        // Another plan predicted 5% better stays unused with a margin of 1.1, not with 1.
+        assert_eq!(pick([0.5, 1.0, 1.05, 0.9], 1.1), 1);
+        assert_eq!(pick([0.5, 1.0, 1.05, 0.9], 1.0), 2);
+        // 20% and 30% better: the best of them is taken.
+        assert_eq!(pick([0.5, 1.0, 1.2, 1.3], 1.1), 3);
+        assert_eq!(pick([1.3, 1.0, 1.2, 0.3], 1.1), 0);
+        // Exactly at the margin the measured plan stays; ties among others go to the first.
+        assert_eq!(pick([0.5, 1.0, 1.1, 0.3], 1.1), 1);
+        assert_eq!(pick([0.5, 1.0, 1.2, 1.2], 1.1), 2);
+        // A candidate whose gain is not finite is never taken.
+        assert_eq!(pick([f64::NAN, 1.0, f64::INFINITY, 1.2], 1.1), 3);
+        assert_eq!(pick([1.0, 1.0, 1.0, 1.0], 1.0), 1);
+    }
+
+    #[test]
     fn smoothed_means_average_the_measured_neighbours() {
         let plan = Plan { connections: 4, pool_paths: 8, splat_paths: 8 };
         for (w, h, r) in [(7, 5, 0), (7, 5, 1), (7, 5, 2), (4, 9, 3), (600, 400, 2)] {
@@ -712,7 +765,8 @@ mod tests {
             let mut b = Budget::new(&opts, 1..3, plan, w, h, None);
             let (gw, gh) = b.grid();
             assert_eq!(gw * gh, b.measured());
-            assert!(b.measured() <= MEASURED_PIXELS && (w * h > MEASURED_PIXELS) == (b.every > 1));
+            let most = opts.budget_pixels;
+            assert!(b.measured() <= most && (w * h > most) == (b.every > 1));
             b.iterations = 2;
             b.s1 = (0..gw * gh).map(|i| ((i * 7919) % 13) as f64).collect();
             let got = b.smoothed_means();
