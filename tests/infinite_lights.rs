@@ -12,6 +12,7 @@ mod common;
 use common::*;
 use glam::Vec3;
 use pcbpt::accel::Backend;
+use pcbpt::integrator::bidir::budget::BudgetMode;
 use pcbpt::integrator::bidir::pcbpt::PcMis;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
@@ -21,19 +22,24 @@ fn methods() -> Vec<(String, RenderOptions)> {
     use IntegratorKind::*;
     let mut out: Vec<(String, RenderOptions)> =
         [Path, Lighttrace, Bdpt, Eorr, Lvc].into_iter().map(|k| (format!("{k:?}"), options(k))).collect();
+    // Each MIS option with the connections it weighs (no budget), and the defaults (a budget).
     for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(Pcbpt);
         o.bidir.pc.mis = mis;
         o.bidir.pc.light_paths = 200;
         o.bidir.pc.stride = 8;
+        o.bidir.pc.budget = BudgetMode::Off;
         out.push((format!("Pcbpt {mis:?}"), o));
         let mut o = options(Spcbpt);
         o.bidir.sp.mis = mis;
         o.bidir.pc.light_paths = 200;
         o.bidir.sp.eye_subspaces = 32;
         o.bidir.sp.light_subspaces = 64;
+        o.bidir.pc.budget = BudgetMode::Off;
         out.push((format!("Spcbpt {mis:?}"), o));
     }
+    out.push(("Pcbpt, defaults".into(), options(Pcbpt)));
+    out.push(("Spcbpt, defaults".into(), options(Spcbpt)));
     let mut o = options(Pssmlt);
     o.mlt.bootstrap = 20_000;
     out.push(("Pssmlt".into(), o));

@@ -26,6 +26,8 @@ fn render(scene: &Scene, spp: u32, opts: &SpOptions, seed: u64) -> Image {
     let mut o = RenderOptions::new(IntegratorKind::Spcbpt, Budget::Spp(spp));
     o.seed = seed;
     o.bidir.sp = opts.clone();
+    // The subspace connections themselves (`tests/budget_reference.rs` has the budget).
+    o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
     image(integrator::render(scene, &o).unwrap())
 }
 

@@ -144,14 +144,19 @@ fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
         ("eorr", options(IntegratorKind::Eorr, 32)),
         ("lvc", options(IntegratorKind::Lvc, 32)),
     ];
+    // Each MIS option with the connections it weighs (no budget), and the defaults (a budget).
     for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(IntegratorKind::Pcbpt, 16);
         o.bidir.pc.mis = mis;
+        o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
         methods.push(("pcbpt", o));
         let mut o = options(IntegratorKind::Spcbpt, 16);
         o.bidir.sp.mis = mis;
+        o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
         methods.push(("spcbpt", o));
     }
+    methods.push(("pcbpt, defaults", options(IntegratorKind::Pcbpt, 16)));
+    methods.push(("spcbpt, defaults", options(IntegratorKind::Spcbpt, 16)));
     let mut o = options(IntegratorKind::Pssmlt, 32);
     o.mlt.bootstrap = 20_000;
     methods.push(("pssmlt", o));

@@ -166,7 +166,7 @@ impl Default for PcOptions {
             mis: PcMis::Harmonic,
             sampling: PcSampling::Mixture,
             max_cache_mb: 1024,
-            budget: BudgetMode::Off,
+            budget: BudgetMode::Auto,
             budget_iterations: 2,
             budget_independence: Independence::Fixed(0.35),
             budget_smoothing: 2,
@@ -185,7 +185,9 @@ impl PcOptions {
             return Err("--pc-light-paths must be at least 1".into());
         }
         if self.connections == 0 && self.budget == BudgetMode::Auto {
-            return Err("--pc-connections must be at least 1 with --pc-budget auto (it is what is measured)".into());
+            return Err(
+                "--pc-connections 0 needs --pc-budget off: the budget (on by default) measures the connections it then chooses among".into(),
+            );
         }
         if let Some(f) = self.budget_independence.fixed()
             && !(0.0..=1.0).contains(&f)

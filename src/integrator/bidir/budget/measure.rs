@@ -45,15 +45,35 @@ pub struct SplatShares {
     pub shares: Shares,
 }
 
-/// The count scales `(a, c)` of each candidate against the plan in use.
-pub(super) fn scales(from: &Plan, candidates: &[Plan]) -> Vec<(f64, f64)> {
-    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
-    candidates
-        .iter()
-        .map(|p| {
-            (ratio(p.connections as f64, from.connections as f64), ratio(p.splat_paths as f64, from.splat_paths as f64))
-        })
-        .collect()
+/// How the measured contributions count for the candidates: each candidate's count scales
+/// `(a, c)` against the plan in use, and the least density ratio whose moment counts in full
+/// (the measured iterations over the samples per pixel planned for, [`typical`]).
+#[derive(Clone, Debug, Default)]
+pub(super) struct Weighing {
+    pub scales: Vec<(f64, f64)>,
+    pub floor: f64,
+}
+
+impl Weighing {
+    /// The weighing of `candidates` measured under `from`.
+    pub(super) fn new(from: &Plan, candidates: &[Plan], floor: f64) -> Weighing {
+        let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.0 };
+        let scales = candidates
+            .iter()
+            .map(|p| {
+                (
+                    ratio(p.connections as f64, from.connections as f64),
+                    ratio(p.splat_paths as f64, from.splat_paths as f64),
+                )
+            })
+            .collect();
+        Weighing { scales, floor }
+    }
+
+    /// Candidates weighed.
+    pub(super) fn len(&self) -> usize {
+        self.scales.len()
+    }
 }
 
 /// The camera path's own strategies' part of a contribution's second moment under a
@@ -90,17 +110,17 @@ pub(super) fn typical(d: f64, floor: f64) -> f64 {
 }
 
 /// Adds a contribution of luminance `v` and shares `s` to a pixel's moments: its value to
-/// `x`, and `v² / (u + a k + c l)` ([`typical`]) for every candidate's scales to `q`.
+/// `x`, and `v² / (u + a k + c l)` ([`typical`]) for every candidate of `w` to `q`.
 #[inline]
-pub(super) fn accumulate(v: f32, s: &Shares, scales: &[(f64, f64)], floor: f64, x: &mut f64, q: &mut [f64]) {
+pub(super) fn accumulate(v: f32, s: &Shares, w: &Weighing, x: &mut f64, q: &mut [f64]) {
     if !(v.is_finite() && v > 0.0) {
         return;
     }
     let v = v as f64;
     *x += v;
-    for (q, &(a, c)) in q.iter_mut().zip(scales) {
+    for (q, &(a, c)) in q.iter_mut().zip(&w.scales) {
         let d = s.combined(a, c);
-        *q += if d > 0.0 { v * v / typical(d, floor) } else { f64::INFINITY };
+        *q += if d > 0.0 { v * v / typical(d, w.floor) } else { f64::INFINITY };
     }
 }
 
@@ -141,7 +161,7 @@ impl Spread {
 
 /// The moments of one tile's measured pixels in one iteration.
 pub struct TileMoments {
-    scales: Vec<(f64, f64)>,
+    weighing: Weighing,
     /// Measured-pixel index of each entry.
     pub(super) ids: Vec<u32>,
     pub(super) x: Vec<f64>,
@@ -155,8 +175,6 @@ pub struct TileMoments {
     pub(super) realized: Vec<Realized>,
     /// Connections each camera vertex draws under the plan in use.
     draws: u32,
-    /// The least density ratio a moment counts in full ([`typical`]).
-    floor: f64,
     /// The camera vertex whose connections are being summed: its depth, `Σ v`, `Σ v²`.
     vertex: (usize, f64, f64),
     /// The same per candidate, of its weights' draws `v / (u + a k + c l)`.
@@ -164,19 +182,18 @@ pub struct TileMoments {
 }
 
 impl TileMoments {
-    /// No entries yet, with room for `entries`, for candidates' count scales `scales`,
-    /// `draws` connections per camera vertex and the [`typical`] floor `floor`.
-    pub(super) fn new(scales: Vec<(f64, f64)>, draws: u32, floor: f64, entries: usize) -> TileMoments {
-        let c = scales.len();
+    /// No entries yet, with room for `entries`, for the candidates of `weighing` and
+    /// `draws` connections per camera vertex.
+    pub(super) fn new(weighing: Weighing, draws: u32, entries: usize) -> TileMoments {
+        let c = weighing.len();
         TileMoments {
-            scales,
+            weighing,
             ids: Vec::with_capacity(entries),
             x: Vec::with_capacity(entries),
             q: Vec::with_capacity(entries * c),
             spread: Vec::with_capacity(entries),
             realized: Vec::with_capacity(entries * c),
             draws,
-            floor,
             vertex: (0, 0.0, 0.0),
             vertex_realized: vec![(0.0, 0.0); c],
         }
@@ -187,8 +204,8 @@ impl TileMoments {
         self.end_vertex();
         self.ids.push(id as u32);
         self.x.push(0.0);
-        self.q.extend(std::iter::repeat_n(0.0, self.scales.len()));
-        self.realized.extend(std::iter::repeat_n(Realized::default(), self.scales.len()));
+        self.q.extend(std::iter::repeat_n(0.0, self.weighing.len()));
+        self.realized.extend(std::iter::repeat_n(Realized::default(), self.weighing.len()));
         self.spread.push(Spread::default());
     }
 
@@ -206,7 +223,7 @@ impl TileMoments {
         let v = v as f64;
         self.vertex.1 += v;
         self.vertex.2 += v * v;
-        for (acc, &(a, c)) in self.vertex_realized.iter_mut().zip(&self.scales) {
+        for (acc, &(a, c)) in self.vertex_realized.iter_mut().zip(&self.weighing.scales) {
             let d = s.combined(a, c);
             if d > 0.0 {
                 acc.0 += v / d;
@@ -219,11 +236,13 @@ impl TileMoments {
     /// draws' correction to the entry's [`Realized`].
     pub fn end_vertex(&mut self) {
         let (_, sum, sum2) = std::mem::take(&mut self.vertex);
-        let c = self.scales.len();
+        let c = self.weighing.len();
         if let (Some(spread), true) = (self.spread.last_mut(), sum2 > 0.0) {
             spread.add(sum, sum2, self.draws);
             let at = self.realized.len() - c;
-            for ((r, acc), &(a, _)) in self.realized[at..].iter_mut().zip(&mut self.vertex_realized).zip(&self.scales) {
+            for ((r, acc), &(a, _)) in
+                self.realized[at..].iter_mut().zip(&mut self.vertex_realized).zip(&self.weighing.scales)
+            {
                 r.add_pairs(std::mem::take(acc), a, self.draws);
             }
         }
@@ -233,17 +252,17 @@ impl TileMoments {
     /// Adds a contribution of luminance `v` and shares `shares` made by a strategy of
     /// [`Shares::class`] `class` of the camera sample.
     fn record(&mut self, v: f32, shares: &Shares, class: usize) {
-        let c = self.scales.len();
+        let c = self.weighing.len();
         let (Some(x), true) = (self.x.last_mut(), self.q.len() >= c) else { return };
         if !(v.is_finite() && v > 0.0) {
             return;
         }
         let at = self.q.len() - c;
-        let (v, floor) = (v as f64, self.floor);
+        let (v, floor) = (v as f64, self.weighing.floor);
         *x += v;
         // `accumulate`'s moments and the candidate's weighing of the sample, with each
         // candidate's combined density computed once.
-        for ((q, r), &(a, l)) in self.q[at..].iter_mut().zip(&mut self.realized[at..]).zip(&self.scales) {
+        for ((q, r), &(a, l)) in self.q[at..].iter_mut().zip(&mut self.realized[at..]).zip(&self.weighing.scales) {
             let d = shares.combined(a, l);
             if d <= 0.0 {
                 *q = f64::INFINITY;
@@ -402,6 +421,7 @@ mod tests {
         let n = 2.0;
         let mut rng = crate::sampling::Sampler::new(&[5]);
         let scales = [(0.0, 0.0), (0.5, 0.0), (1.0, 0.0), (4.0, 0.0)];
+        let w = Weighing { scales: scales.to_vec(), floor: 0.0 };
         let mut q = [0.0f64; 4];
         let mut x = 0.0;
         let runs = 200_000;
@@ -413,11 +433,11 @@ mod tests {
             // One unidirectional sample and `n` connection samples per run.
             let y = rng.next_1d() as f64;
             let v = f(y) / (pu(y) + n * pk(y));
-            accumulate(v as f32, &shares(y), &scales, 0.0, &mut x, &mut q);
+            accumulate(v as f32, &shares(y), &w, &mut x, &mut q);
             for _ in 0..n as usize {
                 let y = (rng.next_1d() as f64).sqrt();
                 let v = f(y) / (pu(y) + n * pk(y));
-                accumulate(v as f32, &shares(y), &scales, 0.0, &mut x, &mut q);
+                accumulate(v as f32, &shares(y), &w, &mut x, &mut q);
             }
         }
         assert!((x / runs as f64 - 1.5).abs() < 0.01, "mean {}", x / runs as f64);
@@ -461,10 +481,11 @@ mod tests {
         let (mut y1, mut y2, mut cross, mut x1, mut x2, mut q) =
             (vec![0.0; c], vec![0.0; c], vec![(0.0, 0.0); c], 0.0, 0.0, vec![0.0; c]);
         let mut seen = vec![(0.0, 0.0); c];
-        let mut m = TileMoments::new(scales.clone(), n, 0.0, 0);
+        let w = Weighing { scales: scales.clone(), floor: 0.0 };
+        let mut m = TileMoments::new(w.clone(), n, 0);
         for run in 0..runs {
             if run % 10_000 == 0 {
-                m = TileMoments::new(scales.clone(), n, 0.0, 0);
+                m = TileMoments::new(w.clone(), n, 0);
             }
             m.begin(0);
             let y = rng.next_1d() as f64;
@@ -529,7 +550,7 @@ mod tests {
         let half = u as f64 + 0.5 * (1.0 - u as f64);
         let floor = 1.0 / 64.0;
         let (mut x, mut q) = (0.0, [0.0; 3]);
-        accumulate(2.0, &s, &scales, floor, &mut x, &mut q);
+        accumulate(2.0, &s, &Weighing { scales: scales.to_vec(), floor }, &mut x, &mut q);
         assert_eq!(x, 2.0);
         let close = |a: f64, b: f64| (a / b - 1.0).abs() < 1e-6;
         assert!(close(q[0], 4.0) && close(q[1], 4.0 / floor) && close(q[2], 4.0 / half), "{q:?}");
@@ -538,11 +559,11 @@ mod tests {
         assert!(close(own, 4.0 / floor), "{own}");
         assert!(close(own_moment(2.0, &s, half, floor), 4.0 * u as f64 / (half * half)));
         let mut none = [0.0; 3];
-        accumulate(2.0, &s, &scales, 0.0, &mut x, &mut none);
+        accumulate(2.0, &s, &Weighing { scales: scales.to_vec(), floor: 0.0 }, &mut x, &mut none);
         assert!(close(none[1], 4.0 / u as f64), "{none:?}");
         let light = Shares { unidirectional: 0.0, connection: 0.0, light_trace: 1.0 };
         let mut q = [0.0; 2];
-        accumulate(1.0, &light, &[(1.0, 1.0), (1.0, 0.0)], 0.5, &mut x, &mut q);
+        accumulate(1.0, &light, &Weighing { scales: vec![(1.0, 1.0), (1.0, 0.0)], floor: 0.5 }, &mut x, &mut q);
         assert!(q[0] == 1.0 && q[1].is_infinite(), "{q:?}");
     }
 
@@ -552,14 +573,14 @@ mod tests {
         let mut x = 0.0;
         let mut q = [0.0; 2];
         let s = Shares { unidirectional: 0.0, connection: 0.0, light_trace: 1.0 };
-        accumulate(1.0, &s, &[(1.0, 1.0), (1.0, 0.0)], 0.0, &mut x, &mut q);
+        accumulate(1.0, &s, &Weighing { scales: vec![(1.0, 1.0), (1.0, 0.0)], floor: 0.0 }, &mut x, &mut q);
         assert_eq!(q[0], 1.0);
         assert!(q[1].is_infinite());
     }
 
     #[test]
     fn spread_separates_camera_vertices_and_counts_draws_that_found_nothing() {
-        let mut m = TileMoments::new(vec![(1.0, 1.0)], 4, 0.0, 0);
+        let mut m = TileMoments::new(Weighing { scales: vec![(1.0, 1.0)], floor: 0.0 }, 4, 0);
         // Pixel 0: a camera vertex whose four draws agree (no spread at all).
         m.begin(0);
         for _ in 0..4 {
