@@ -216,8 +216,9 @@ struct RenderArgs {
     /// (judged on a pilot pool), up to one per pixel; 0 keeps --pc-light-paths exactly.
     #[arg(long, default_value_t = PcOptions::default().pool_vertices)]
     pc_pool_vertices: usize,
-    /// PCBPT and SPCBPT: connections drawn per camera vertex (N; 0: none, the pool only light
-    /// traces). With --pc-budget auto, the number the budget is measured with.
+    /// PCBPT and SPCBPT: connections drawn per camera vertex (N; 0, with --pc-budget off:
+    /// none, the pool only light traces). With --pc-budget auto (the default), the number the
+    /// budget is measured with.
     #[arg(long, default_value_t = PcOptions::default().connections)]
     pc_connections: u32,
     /// PCBPT: one cache record pixel per stride × stride tile.
