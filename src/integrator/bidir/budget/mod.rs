@@ -30,8 +30,8 @@
 //! measured, the others' predicted within about a third of renders, so a smaller predicted
 //! gain is noise, and where the plan stays the render is the one without a budget bit for
 //! bit. The moments are those of every `k`-th row and column, at most about
-//! `--pc-budget-pixels` (16 384), which keeps a measured iteration's bookkeeping to about a
-//! third of an ordinary iteration on `cornell-ply` (all 65 536 pixels: 1.5×). A pixel's
+//! `--pc-budget-pixels` (16 384): on `cornell-ply` (one thread) a measured iteration then
+//! costs 1.1–1.3× an ordinary one, with all its 65 536 pixels about 2.2×. A pixel's
 //! `mean` is its own over the measured iterations, or with `--pc-budget-smoothing r` the
 //! average over its measured neighbours within `r`: a pixel's own mean of two iterations,
 //! squared, is biased up by their variance, which weighs the noisiest pixels least (on
@@ -297,8 +297,8 @@ pub struct BudgetStats {
     pub measured_with: Option<Plan>,
     /// Predicted efficiency of the chosen plan over that of the measured one (> 1: better).
     pub predicted_gain: f64,
-    /// The candidate predicted most efficient, chosen only when its gain
-    /// (`best_gain`) reaches `--pc-budget-margin`.
+    /// The candidate predicted most efficient, chosen only when its gain (`best_gain`)
+    /// exceeds `--pc-budget-margin`.
     pub best: Option<Plan>,
     pub best_gain: f64,
     /// `--pc-budget-margin`.
@@ -362,7 +362,8 @@ pub struct Budget {
     iterations: u32,
     /// `--pc-budget-independence`; `None`: measured ([`Spread`]).
     independence: Option<f64>,
-    /// `--pc-budget-margin`: the least predicted gain that leaves the measured plan.
+    /// `--pc-budget-margin`: the predicted gain another plan must exceed to replace the
+    /// measured one.
     margin: f64,
     /// `--pc-budget-smoothing`: measured pixels each side whose means are averaged for
     /// relMSE's denominator ([`Budget::smoothed_means`]).
