@@ -29,6 +29,12 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
         f(&mut o);
         o
     };
+    let pcbpt = |f: &dyn Fn(&mut RenderOptions)| {
+        with(Pcbpt, &|o| {
+            o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+            f(o)
+        })
+    };
     vec![
         ("path", base(Path)),
         ("lighttrace", base(Lighttrace)),
@@ -39,17 +45,20 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
         ("eorr", base(Eorr)),
         ("lvc", base(Lvc)),
         ("lvc_3_connections", with(Lvc, &|o| o.bidir.lvc_connections = 3)),
-        ("pcbpt", base(Pcbpt)),
-        ("pcbpt_uniform", with(Pcbpt, &|o| o.bidir.pc.mis = PcMis::Uniform)),
-        ("pcbpt_resampling", with(Pcbpt, &|o| o.bidir.pc.mis = PcMis::Resampling)),
+        // PCBPT's options with the fixed plan (`--pc-budget off`), then its defaults (the
+        // budget, which changes the plan after iteration 2 of these 5).
+        ("pcbpt", pcbpt(&|_| {})),
+        ("pcbpt_uniform", pcbpt(&|o| o.bidir.pc.mis = PcMis::Uniform)),
+        ("pcbpt_resampling", pcbpt(&|o| o.bidir.pc.mis = PcMis::Resampling)),
         (
             "pcbpt_cmf_printed",
-            with(Pcbpt, &|o| {
+            pcbpt(&|o| {
                 o.bidir.pc.sampling = PcSampling::Cmf;
                 o.bidir.pc.distance_term = DistanceTerm::Printed;
             }),
         ),
-        ("pcbpt_layers", with(Pcbpt, &|o| o.strategy_images = true)),
+        ("pcbpt_layers", pcbpt(&|o| o.strategy_images = true)),
+        ("pcbpt_budget", base(Pcbpt)),
         ("pssmlt", with(Pssmlt, &|o| o.mlt.bootstrap = 2000)),
         (
             "pssmlt_path",
