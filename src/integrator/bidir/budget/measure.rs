@@ -336,17 +336,6 @@ impl Realized {
     }
 }
 
-impl std::ops::AddAssign<&Realized> for Realized {
-    fn add_assign(&mut self, o: &Realized) {
-        self.sample += o.sample;
-        self.diagonal += o.diagonal;
-        self.pairs += o.pairs;
-        self.own_sample += o.own_sample;
-        self.own_diagonal += o.own_diagonal;
-        self.own_moment += o.own_moment;
-    }
-}
-
 impl Realized {
     /// Adds one camera vertex's draws under a candidate, `Σ v'` and `Σ v'²` over its `n`
     /// draws, for `a n` draws: the products of pairs, `(Σ v')² − Σ v'²` of them made with

@@ -301,7 +301,8 @@ pub struct BudgetStats {
     /// exceeds `--pc-budget-margin`.
     pub best: Option<Plan>,
     pub best_gain: f64,
-    /// `--pc-budget-margin`.
+    /// `--pc-budget-margin`: the predicted gain another plan must exceed to replace the
+    /// measured one.
     pub margin: f64,
     /// Pixels whose moments were measured (`--pc-budget-pixels`, at most about).
     pub measured_pixels: usize,
@@ -362,9 +363,6 @@ pub struct Budget {
     iterations: u32,
     /// `--pc-budget-independence`; `None`: measured ([`Spread`]).
     independence: Option<f64>,
-    /// `--pc-budget-margin`: the predicted gain another plan must exceed to replace the
-    /// measured one.
-    margin: f64,
     /// `--pc-budget-smoothing`: measured pixels each side whose means are averaged for
     /// relMSE's denominator ([`Budget::smoothed_means`]).
     smoothing: usize,
@@ -390,7 +388,7 @@ impl Budget {
         let candidates = if mode == BudgetMode::Auto { candidates(plan.pool_paths, pixels) } else { Vec::new() };
         let weighing = Weighing::new(&plan, &candidates, floor);
         let every = (pixels as f64 / opts.budget_pixels.max(1) as f64).sqrt().ceil().max(1.0) as usize;
-        Budget {
+        let mut budget = Budget {
             mode,
             window,
             plan,
@@ -414,14 +412,10 @@ impl Budget {
             spread: Vec::new(),
             independence: opts.budget_independence.fixed().map(f64::from),
             smoothing: opts.budget_smoothing as usize,
-            margin: f64::from(opts.budget_margin),
-            stats: BudgetStats {
-                horizon,
-                margin: f64::from(opts.budget_margin),
-                measured_pixels: width.div_ceil(every) * height.div_ceil(every),
-                ..BudgetStats::default()
-            },
-        }
+            stats: BudgetStats { horizon, margin: f64::from(opts.budget_margin), ..BudgetStats::default() },
+        };
+        budget.stats.measured_pixels = budget.measured();
+        budget
     }
 
     pub fn plan(&self) -> Plan {
@@ -694,7 +688,7 @@ impl Budget {
             gains[current] = 1.0;
             // A measured plan that cannot make every measured path gives way to the best
             // that can.
-            let chosen = if score(current).is_finite() { pick(&gains, current, self.margin) } else { b };
+            let chosen = if score(current).is_finite() { pick(&gains, current, self.stats.margin) } else { b };
             self.stats.best = Some(self.candidates[b]);
             self.stats.best_gain = gains[b];
             self.plan = self.candidates[chosen];
