@@ -47,32 +47,44 @@ def main():
         sys.exit(__doc__)
     rel, spp, mean = read(args)
     scenes = [s for s in SCENES if any(k[0] == s for k in rel)]
+    methods = [me for me in METHODS if any(k[1] == me for k in rel)]
     m = lambda sc, me: st.mean(rel[(sc, me)].values()) / time
     print(f"{len(args)} seeds; relMSE x s / {time:g}, mean over the seeds (mean samples per pixel)\n")
-    print("| scene | " + " | ".join(METHODS) + " |")
-    print("|---" * (len(METHODS) + 1) + "|")
+    print("| scene | " + " | ".join(methods) + " |")
+    print("|---" * (len(methods) + 1) + "|")
     for sc in scenes:
-        cells = [f"{m(sc, me):.3g} ({st.mean(spp[(sc, me)].values()):.0f})" for me in METHODS]
+        cells = [f"{m(sc, me):.3g} ({st.mean(spp[(sc, me)].values()):.0f})" for me in methods]
         print(f"| `{sc}` | " + " | ".join(cells) + " |")
-    print("\n| scene | PCBPT budget / PCBPT | / BDPT | / best | SPCBPT budget / SPCBPT | / BDPT | / best "
-          "| SPCBPT / PCBPT | SPCBPT budget / PCBPT budget |")
-    print("|---" * 9 + "|")
+    # The ratios whose methods the experiment ran.
+    ratios = [
+        ("PCBPT budget / PCBPT", "pcbpt-budget", "pcbpt"),
+        ("PCBPT budget / BDPT", "pcbpt-budget", "bdpt"),
+        ("PCBPT budget / best", "pcbpt-budget", "best"),
+        ("SPCBPT budget / SPCBPT", "spcbpt-budget", "spcbpt"),
+        ("SPCBPT budget / BDPT", "spcbpt-budget", "bdpt"),
+        ("SPCBPT budget / best", "spcbpt-budget", "best"),
+        ("SPCBPT / PCBPT", "spcbpt", "pcbpt"),
+        ("SPCBPT budget / PCBPT budget", "spcbpt-budget", "pcbpt-budget"),
+    ]
+    have = set(methods) | ({"best"} if {"path", "bdpt"} <= set(methods) else set())
+    ratios = [r for r in ratios if r[1] in have and r[2] in have]
+    print("\n| scene | " + " | ".join(r[0] for r in ratios) + " |")
+    print("|---" * (len(ratios) + 1) + "|")
     for sc in scenes:
-        best = min(m(sc, "path"), m(sc, "bdpt"))
-        pb, sb = m(sc, "pcbpt-budget"), m(sc, "spcbpt-budget")
-        cells = [pb / m(sc, "pcbpt"), pb / m(sc, "bdpt"), pb / best, sb / m(sc, "spcbpt"), sb / m(sc, "bdpt"),
-                 sb / best, m(sc, "spcbpt") / m(sc, "pcbpt"), sb / pb]
-        print(f"| `{sc}` | " + " | ".join(f"{x:.2f}" for x in cells) + " |")
+        value = lambda me: min(m(sc, "path"), m(sc, "bdpt")) if me == "best" else m(sc, me)
+        print(f"| `{sc}` | " + " | ".join(f"{value(a) / value(b):.2f}" for _, a, b in ratios) + " |")
     print("\nPer seed, a budget over the same integrator without one (relMSE x s):")
     for sc in scenes:
         for a, b in [("pcbpt-budget", "pcbpt"), ("spcbpt-budget", "spcbpt")]:
+            if a not in methods or b not in methods:
+                continue
             r = [rel[(sc, a)][k] / rel[(sc, b)][k] for k in sorted(rel[(sc, a)])]
             print(f"  {sc} {a}: " + " / ".join(f"{x:.2f}" for x in r) + f" (median {st.median(r):.2f})")
     print("\nImage means over the reference's, mean / median over the seeds:\n")
-    print("| scene | " + " | ".join(METHODS) + " |")
-    print("|---" * (len(METHODS) + 1) + "|")
+    print("| scene | " + " | ".join(methods) + " |")
+    print("|---" * (len(methods) + 1) + "|")
     for sc in scenes:
-        cells = [f"{st.mean(mean[(sc, me)].values()):.4f} / {st.median(mean[(sc, me)].values()):.4f}" for me in METHODS]
+        cells = [f"{st.mean(mean[(sc, me)].values()):.4f} / {st.median(mean[(sc, me)].values()):.4f}" for me in methods]
         print(f"| `{sc}` | " + " | ".join(cells) + " |")
 
 

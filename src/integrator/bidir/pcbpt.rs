@@ -32,7 +32,8 @@
 use super::Vertex;
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
-    Budget, BudgetMode, BudgetModel, CameraSample, Independence, Operations, Plan, SplatShares, TracedPool, budget_tile,
+    Budget, BudgetMode, BudgetModel, CameraSample, Independence, Operations, PRICES, Plan, SplatShares, TracedPool,
+    budget_tile,
 };
 use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
@@ -564,7 +565,7 @@ impl Iterative for PcbptRender {
         // Iteration 0's counts have no measured concentration: the budget measures from 1.
         let plan = Plan { connections: o.connections, pool_paths: m, splat_paths: m };
         let window = 1..1 + o.budget_iterations;
-        self.budget = Some(Budget::new(o, window, plan, w as usize, h as usize, ctx.planned_spp));
+        self.budget = Some(Budget::new(o, PRICES, window, plan, w as usize, h as usize, ctx.planned_spp));
         Ok(())
     }
 

@@ -27,7 +27,9 @@
 //! its own light vertex), or harmonic corrected for correlation.
 
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{Budget, BudgetMode, CameraSample, Operations, Plan, SplatShares, TracedPool, budget_tile};
+use super::budget::{
+    Budget, BudgetMode, CameraSample, Operations, Plan, SPCBPT_PRICES, SplatShares, TracedPool, budget_tile,
+};
 use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
 use super::pcbpt::{
@@ -542,7 +544,7 @@ impl Iterative for SpcbptRender {
         // The budget is measured once `Γ` is trained.
         let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
         let window = o.training_iterations..o.training_iterations + pc.budget_iterations;
-        self.budget = Some(Budget::new(pc, window, plan, w, h, ctx.planned_spp));
+        self.budget = Some(Budget::new(pc, SPCBPT_PRICES, window, plan, w, h, ctx.planned_spp));
         let subspaces = self.model().sort_pool(scene, &pilot);
         self.measured =
             Some(Measured::of_pool(&subspaces, pilot.paths, pilot.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]));

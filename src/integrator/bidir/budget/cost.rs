@@ -13,9 +13,18 @@ use serde::Serialize;
 /// 4.69 M lookups that drawing needs 0.108 µs each; the pass without connections, 5.32 M
 /// extension rays and 3.14 M next-event rays priced like connections, leaves 0.187 µs per
 /// extension ray; a cache entry (its target and shadow ray) took 0.188 µs (1.0 M in 0.19 s).
+///
+/// SPCBPT's connection costs more (its draw samples a light subspace from `Γ` and resamples
+/// within it, and the training keeps its contributions): on `staircase2` (24 spp, 2 threads,
+/// the same runs for both) its camera pass went from 2.91–3.06 s with one connection to
+/// 8.33–8.48 s with eight, 0.318 µs per added connection, against PCBPT's 0.237 µs, so
+/// [`SPCBPT_PRICES`] prices its connections 1.34 times PCBPT's.
 #[derive(Clone, Copy, Debug)]
 pub struct Prices {
+    /// A shadow ray of next-event estimation or light tracing.
     pub shadow: f64,
+    /// A traced pool connection.
+    pub connection: f64,
     pub lookup: f64,
     pub cache_entry: f64,
     /// The path tracer's camera pass over the bidirectional one's without connections: 124
@@ -23,7 +32,11 @@ pub struct Prices {
     pub path_tracer: f64,
 }
 
-pub const PRICES: Prices = Prices { shadow: 1.15, lookup: 0.58, cache_entry: 1.0, path_tracer: 0.82 };
+/// PCBPT's prices.
+pub const PRICES: Prices = Prices { shadow: 1.15, connection: 1.15, lookup: 0.58, cache_entry: 1.0, path_tracer: 0.82 };
+
+/// SPCBPT's prices: PCBPT's, with its dearer connections.
+pub const SPCBPT_PRICES: Prices = Prices { connection: 1.55, ..PRICES };
 
 /// Operations one iteration performed, summed over the measured iterations.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
@@ -78,7 +91,7 @@ impl Operations {
             return c * prices.path_tracer;
         }
         if to.connections > 0 {
-            c += prices.shadow * self.pool_shadow as f64 * to.connections as f64 / from.connections.max(1) as f64;
+            c += prices.connection * self.pool_shadow as f64 * to.connections as f64 / from.connections.max(1) as f64;
             c += prices.cache_entry * self.cache_entries as f64 + prices.lookup * self.lookups as f64;
         }
         c += self.light_rays as f64 * ratio(to.traced(), from.traced());
@@ -103,11 +116,11 @@ mod tests {
             splat_shadow: 50,
             cache_entries: 300,
         };
-        let p = Prices { shadow: 0.5, lookup: 0.0, cache_entry: 0.25, path_tracer: 0.8 };
-        assert_eq!(ops.cost(&from, &from, &p), 1000.0 + 250.0 + 1000.0 + 75.0 + 100.0 + 25.0);
+        let p = Prices { shadow: 0.5, connection: 0.75, lookup: 0.0, cache_entry: 0.25, path_tracer: 0.8 };
+        assert_eq!(ops.cost(&from, &from, &p), 1000.0 + 250.0 + 1500.0 + 75.0 + 100.0 + 25.0);
         let pt = Plan { connections: 0, pool_paths: 0, splat_paths: 0 };
         assert_eq!(ops.cost(&from, &pt, &p), 1000.0);
         let more = Plan { connections: 8, pool_paths: 500, splat_paths: 2000 };
-        assert_eq!(ops.cost(&from, &more, &p), 1250.0 + 2000.0 + 75.0 + 400.0 + 100.0);
+        assert_eq!(ops.cost(&from, &more, &p), 1250.0 + 3000.0 + 75.0 + 400.0 + 100.0);
     }
 }

@@ -349,6 +349,46 @@ impl Realized {
     }
 }
 
+/// A measured pixel's realized samples under one candidate ([`Realized`]), summed over the
+/// measured iterations: what the realized model predicts the candidate's variance from.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct RealizedSums {
+    /// `Σ sample` and `Σ sample²` over the iterations.
+    pub sample: f64,
+    pub square: f64,
+    /// The cross terms ([`Realized::cross`]): with a contribution of the camera path's own
+    /// strategies, and the others.
+    pub with_own: f64,
+    pub other: f64,
+    /// The camera path's own strategies' diagonal as realized, and their second moment from
+    /// every strategy's samples (light tracing's splats included, [`own_moment`]).
+    pub own_diagonal: f64,
+    pub own_moment: f64,
+}
+
+impl RealizedSums {
+    /// Adds an iteration's realized camera sample of the pixel.
+    pub(super) fn add(&mut self, r: &Realized) {
+        let (with_own, other) = r.cross();
+        self.sample += r.sample;
+        self.square += r.sample * r.sample;
+        self.with_own += with_own;
+        self.other += other;
+        self.own_diagonal += r.own_diagonal;
+        self.own_moment += r.own_moment;
+    }
+
+    /// The variance of the pixel's estimate of an iteration under the candidate, from `t`
+    /// iterations: the diagonal `q` (its second moment from every strategy's samples), the
+    /// cross terms with the camera path's own strategies scaled by `missed` (how much of
+    /// their heavy tail the realized samples miss), less the squared mean (the products of
+    /// different iterations' samples).
+    pub(super) fn variance(&self, q: f64, missed: f64, t: f64) -> f64 {
+        (q + missed * self.with_own + self.other) / t
+            - (self.sample * self.sample - self.square) / (t * (t - 1.0)).max(1.0)
+    }
+}
+
 /// Wraps a camera sample's sink: passes everything on, and records each contribution's
 /// luminance and shares into the tile's moments.
 pub struct BudgetSink<'a, S> {
@@ -467,9 +507,7 @@ mod tests {
                 light_trace: 0.0,
             }
         };
-        let (mut y1, mut y2, mut cross, mut x1, mut x2, mut q) =
-            (vec![0.0; c], vec![0.0; c], vec![(0.0, 0.0); c], 0.0, 0.0, vec![0.0; c]);
-        let mut seen = vec![(0.0, 0.0); c];
+        let (mut sums, mut x1, mut x2, mut q) = (vec![RealizedSums::default(); c], 0.0, 0.0, vec![0.0; c]);
         let w = Weighing { scales: scales.clone(), floor: 0.0 };
         let mut m = TileMoments::new(w.clone(), n, 0);
         for run in 0..runs {
@@ -491,14 +529,9 @@ mod tests {
             x2 += m.x[e] * m.x[e];
             for k in 0..c {
                 let r = m.realized[e * c + k];
-                y1[k] += r.sample;
-                y2[k] += r.sample * r.sample;
                 let (with_own, other) = r.cross();
                 assert!((with_own + other - (r.sample * r.sample - r.diagonal + r.pairs)).abs() < 1e-9);
-                cross[k].0 += with_own;
-                cross[k].1 += other;
-                seen[k].0 += r.own_diagonal;
-                seen[k].1 += r.own_moment;
+                sums[k].add(&r);
                 q[k] += m.q[e * c + k];
             }
         }
@@ -515,9 +548,9 @@ mod tests {
             let var_u = integral(&|x| g(x) * g(x)) - integral(&g).powi(2);
             let var_k = integral(&|x| g(x) * g(x) * pk(x)) - integral(&|x| g(x) * pk(x)).powi(2);
             let exact = var_u + n2 * var_k;
-            let missed = seen[k].1 / seen[k].0;
+            let missed = sums[k].own_moment / sums[k].own_diagonal;
             assert!((missed - 1.0).abs() < 0.02, "a = {a}: the realized samples missed {missed}");
-            let realized = (q[k] + missed * cross[k].0 + cross[k].1) / t - (y1[k] * y1[k] - y2[k]) / (t * (t - 1.0));
+            let realized = sums[k].variance(q[k], missed, t);
             let moments = measured + (q[k] - q[0]) / t;
             assert!((realized / exact - 1.0).abs() < 0.03, "a = {a}: realized {realized} against {exact}");
             if a != 1.0 {

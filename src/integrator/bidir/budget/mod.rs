@@ -64,9 +64,9 @@
 pub mod cost;
 pub mod measure;
 
-pub use cost::{Operations, PRICES, Prices};
+pub use cost::{Operations, PRICES, Prices, SPCBPT_PRICES};
 pub use measure::{BudgetSink, Realized, SplatShares, Spread, TileMoments};
-use measure::{Weighing, accumulate, own_moment};
+use measure::{RealizedSums, Weighing, accumulate, own_moment};
 
 use super::bdpt::{Bdpt, Connector};
 use super::mis::{Shares, StrategyCounts};
@@ -346,20 +346,16 @@ pub struct Budget {
     s1: Vec<f64>,
     s2: Vec<f64>,
     q: Vec<f64>,
-    /// Per measured pixel and candidate (like `q`), for [`BudgetModel::Realized`]: the sums
-    /// over the iterations of the pixel's camera samples as the candidate weighs them
-    /// ([`Realized`]), of their squares, and of their cross terms (square less diagonal,
-    /// draws' pairs rescaled).
-    y1: Vec<f64>,
-    y2: Vec<f64>,
-    cross: Vec<(f64, f64)>,
-    /// Per measured pixel and candidate: the camera path's own strategies' diagonal, as
-    /// realized and from every strategy's samples, summed over the iterations.
-    own: Vec<(f64, f64)>,
+    /// Per measured pixel and candidate (like `q`), for [`BudgetModel::Realized`]: the
+    /// pixel's camera samples as the candidate weighs them ([`Realized`]), summed over the
+    /// iterations.
+    realized: Vec<RealizedSums>,
     model: BudgetModel,
     /// Per measured pixel, its pool connections' [`Spread`].
     spread: Vec<Spread>,
     operations: Operations,
+    /// The integrator's prices of the operations ([`Prices`]).
+    prices: Prices,
     iterations: u32,
     /// `--pc-budget-independence`; `None`: measured ([`Spread`]).
     independence: Option<f64>,
@@ -372,9 +368,10 @@ pub struct Budget {
 impl Budget {
     /// A budget that starts with `plan` and, with `--pc-budget auto`, measures `window`, for
     /// a render of `planned_spp` samples per pixel (`None`: of `--time`; the horizon is at
-    /// least [`DEFAULT_HORIZON`] unless given).
+    /// least [`DEFAULT_HORIZON`] unless given), pricing the integrator's operations by `prices`.
     pub fn new(
         opts: &PcOptions,
+        prices: Prices,
         window: Range<u32>,
         plan: Plan,
         width: usize,
@@ -402,12 +399,10 @@ impl Budget {
             s1: Vec::new(),
             s2: Vec::new(),
             q: Vec::new(),
-            y1: Vec::new(),
-            y2: Vec::new(),
-            cross: Vec::new(),
-            own: Vec::new(),
+            realized: Vec::new(),
             model: opts.budget_model,
             operations: Operations::default(),
+            prices,
             iterations: 0,
             spread: Vec::new(),
             independence: opts.budget_independence.fixed().map(f64::from),
@@ -534,10 +529,7 @@ impl Budget {
             self.spread = vec![Spread::default(); n];
             self.s2 = vec![0.0; n];
             self.q = vec![0.0; n * c];
-            self.y1 = vec![0.0; n * c];
-            self.y2 = vec![0.0; n * c];
-            self.cross = vec![(0.0, 0.0); n * c];
-            self.own = vec![(0.0, 0.0); n * c];
+            self.realized = vec![RealizedSums::default(); n * c];
         }
         let mut x = vec![0.0f64; n];
         // An iteration samples each pixel once, so each measured pixel has one entry: its
@@ -552,14 +544,8 @@ impl Budget {
                 for (q, add) in self.q[to.clone()].iter_mut().zip(&m.q[from.clone()]) {
                     *q += add;
                 }
-                for (k, y) in to.zip(&m.realized[from]) {
-                    self.y1[k] += y.sample;
-                    self.y2[k] += y.sample * y.sample;
-                    let (with_own, other) = y.cross();
-                    self.cross[k].0 += with_own;
-                    self.cross[k].1 += other;
-                    self.own[k].0 += y.own_diagonal;
-                    self.own[k].1 += y.own_moment;
+                for (sums, y) in self.realized[to].iter_mut().zip(&m.realized[from]) {
+                    sums.add(y);
                 }
             }
         }
@@ -570,8 +556,8 @@ impl Budget {
             if let Some(id) = self.measured_pixel(sp.pos) {
                 let v = sp.value * per_path;
                 accumulate(v, &sp.shares, &self.weighing, &mut x[id], &mut self.q[id * c..(id + 1) * c]);
-                for (own, &(a, l)) in self.own[id * c..(id + 1) * c].iter_mut().zip(&self.weighing.scales) {
-                    own.1 += own_moment(v, &sp.shares, sp.shares.combined(a, l), self.weighing.floor);
+                for (sums, &(a, l)) in self.realized[id * c..(id + 1) * c].iter_mut().zip(&self.weighing.scales) {
+                    sums.own_moment += own_moment(v, &sp.shares, sp.shares.combined(a, l), self.weighing.floor);
                 }
             }
         }
@@ -624,9 +610,9 @@ impl Budget {
         // see, per candidate, over the pixels as relMSE weighs them ([`Realized`]).
         let mut seen = vec![(0.0f64, 0.0f64); c];
         for id in 0..self.s1.len() {
-            for (s, o) in seen.iter_mut().zip(&self.own[id * c..(id + 1) * c]) {
-                s.0 += o.0 * norm(id);
-                s.1 += o.1 * norm(id);
+            for (s, o) in seen.iter_mut().zip(&self.realized[id * c..(id + 1) * c]) {
+                s.0 += o.own_diagonal * norm(id);
+                s.1 += o.own_moment * norm(id);
             }
         }
         let missed: Vec<f64> = seen.iter().map(|&(r, m)| if r > 0.0 { m / r } else { 1.0 }).collect();
@@ -640,11 +626,7 @@ impl Budget {
             // iterations), the candidate's in place of the plan in use's on top of the
             // measured variance (which keeps what neither sees, such as the covariance of the
             // camera pass and the light pool).
-            let own = |k: usize| {
-                let (y1, y2) = (self.y1[at + k], self.y2[at + k]);
-                let (with_own, other) = self.cross[at + k];
-                (q[k] + missed[k] * with_own + other) / t - (y1 * y1 - y2) / (t * (t - 1.0)).max(1.0)
-            };
+            let own = |k: usize| self.realized[at + k].variance(q[k], missed[k], t);
             let base = measured - own(current);
             for k in 0..c {
                 let change = if q[k].is_infinite() {
@@ -662,7 +644,7 @@ impl Budget {
             BudgetModel::Moments => &moments,
             BudgetModel::Realized => &realized,
         };
-        let per_iteration = |p: &Plan| self.operations.cost(&from, p, &PRICES) / t;
+        let per_iteration = |p: &Plan| self.operations.cost(&from, p, &self.prices) / t;
         let score = |k: usize| variance[k].max(0.0) * per_iteration(&self.candidates[k]);
         let mut best: Option<usize> = None;
         for k in 0..c {
@@ -699,9 +681,7 @@ impl Budget {
         self.s2 = Vec::new();
         self.q = Vec::new();
         self.spread = Vec::new();
-        self.y1 = Vec::new();
-        self.y2 = Vec::new();
-        self.cross = Vec::new();
+        self.realized = Vec::new();
     }
 }
 
@@ -760,7 +740,7 @@ mod tests {
         let plan = Plan { connections: 4, pool_paths: 8, splat_paths: 8 };
         for (w, h, r) in [(7, 5, 0), (7, 5, 1), (7, 5, 2), (4, 9, 3), (600, 400, 2)] {
             let opts = PcOptions { budget: BudgetMode::Auto, budget_smoothing: r, ..PcOptions::default() };
-            let mut b = Budget::new(&opts, 1..3, plan, w, h, None);
+            let mut b = Budget::new(&opts, PRICES, 1..3, plan, w, h, None);
             let (gw, gh) = b.grid();
             assert_eq!(gw * gh, b.measured());
             let most = opts.budget_pixels;
@@ -786,7 +766,7 @@ mod tests {
         }
         // Every measured pixel has an index of its own.
         let opts = PcOptions { budget: BudgetMode::Auto, ..PcOptions::default() };
-        let b = Budget::new(&opts, 1..3, plan, 600, 400, None);
+        let b = Budget::new(&opts, PRICES, 1..3, plan, 600, 400, None);
         let ids: std::collections::HashSet<usize> = (0..400)
             .flat_map(|y| (0..600).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))
             .filter_map(|p| b.measured_pixel(p))
