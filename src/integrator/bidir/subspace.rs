@@ -204,7 +204,7 @@ impl Matrix {
 
     /// Bytes the matrix takes.
     pub fn bytes(&self) -> usize {
-        (self.gamma.len() + self.cdf.len() + self.guide.len()) * std::mem::size_of::<f32>()
+        (self.gamma.len() + self.cdf.len()) * std::mem::size_of::<f32>() + self.guide.len() * std::mem::size_of::<u32>()
     }
 
     /// `Γ` fitted to `samples`, mixed with the uniform distribution in proportion `uniform`.
