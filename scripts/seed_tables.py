@@ -5,7 +5,9 @@ Reads each seed's `results.md` and prints, per scene, the mean over the seeds of
 seconds / T (T, the experiments' time, 10 by default) and of the samples per pixel for each
 method; the ratios of the means of the pool integrators with and without budgets, against
 BDPT and against the better of the path tracer and BDPT; each seed's ratio of a budget to
-the same integrator without one; and the image means (mean and median over the seeds).
+the same integrator without one; each pool integrator as the experiment ran it (its
+defaults, or without a budget) against BDPT and the better of the two; and the image
+means (mean and median over the seeds).
 
     python3 scripts/seed_tables.py experiments/results/budget-margin-seed-{1..9} [--time 10]
 """
@@ -63,6 +65,10 @@ def main():
         ("SPCBPT budget / SPCBPT", "spcbpt-budget", "spcbpt"),
         ("SPCBPT budget / BDPT", "spcbpt-budget", "bdpt"),
         ("SPCBPT budget / best", "spcbpt-budget", "best"),
+        ("PCBPT / BDPT", "pcbpt", "bdpt"),
+        ("PCBPT / best", "pcbpt", "best"),
+        ("SPCBPT / BDPT", "spcbpt", "bdpt"),
+        ("SPCBPT / best", "spcbpt", "best"),
         ("SPCBPT / PCBPT", "spcbpt", "pcbpt"),
         ("SPCBPT budget / PCBPT budget", "spcbpt-budget", "pcbpt-budget"),
     ]

@@ -93,7 +93,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         }
         let w = mis_weight_with(self.scene, &[], camera, None, self.heuristic, self.counts);
         if sink.wants_shares() {
-            sink.note_shares(mis_shares_with(self.scene, &[], camera, None, self.counts));
+            sink.note_shares(mis_shares_with(self.scene, &[], camera, None, self.counts, None));
         }
         sink.add_emission(camera, pt.beta * le * w);
     }
@@ -140,7 +140,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
             let light_end = End { f: Rgb::ZERO, pdf_fwd: light.pdf_emission_direction(ls.n, -ls.wi), pdf_rev: 0.0 };
             (y0, Connection { w: -ls.wi, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
         };
-        self.finish(from_ref(&y0), camera, &conn, c, pos, rng, sink, counters, |s, c, w| s.add(1, t, c * w));
+        self.finish(from_ref(&y0), camera, &conn, c, None, pos, rng, sink, counters, |s, c, w| s.add(1, t, c * w));
     }
 
     /// `t = 1`: `y_{s-1}` connects to the camera and splats onto the film.
@@ -168,7 +168,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
             // What `z0.end(scene, -k.wi, ..)` gives, without projecting the direction again.
             camera_end: End { f: Rgb::ZERO, pdf_fwd: k.pdf_dir, pdf_rev: 0.0 },
         };
-        self.finish(light, from_ref(&z0), &conn, c, k.raster, rng, sink, counters, |sk, c, w| {
+        self.finish(light, from_ref(&z0), &conn, c, None, k.raster, rng, sink, counters, |sk, c, w| {
             sk.splat(s, 1, k.raster, c * w)
         });
     }
@@ -199,21 +199,30 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return false;
         }
         let c = qs.beta * f * pt.beta * (scale * conn.inv_dist2);
-        self.finish(light, camera, &conn, c, pos, rng, sink, counters, |sk, c, w| {
+        self.finish(light, camera, &conn, c, Some(scale), pos, rng, sink, counters, |sk, c, w| {
             sk.add_connection(light, camera, c, w)
         })
     }
 
-    /// Tells a sink that wants them the MIS shares of the connection about to be delivered.
+    /// Tells a sink that wants them the MIS shares of the connection about to be delivered,
+    /// re-based on its draw's factor `drawn` for a drawn connection ([`Shares::drawn`]).
     #[inline]
-    fn note_shares(&self, light: &[Vertex], camera: &[Vertex], conn: &Connection, sink: &mut impl Sink) {
+    fn note_shares(
+        &self,
+        light: &[Vertex],
+        camera: &[Vertex],
+        conn: &Connection,
+        drawn: Option<f32>,
+        sink: &mut impl Sink,
+    ) {
         if sink.wants_shares() {
-            sink.note_shares(mis_shares_with(self.scene, light, camera, Some(conn), self.counts));
+            sink.note_shares(mis_shares_with(self.scene, light, camera, Some(conn), self.counts, drawn));
         }
     }
 
     /// Weights an unweighted connection contribution, applies roulette, traces the shadow
     /// ray and delivers the result; `true` when the shadow ray was traced and unoccluded.
+    /// `drawn` is the factor of a drawn connection (its shares are re-based on it).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn finish<R: Random, S: Sink>(
@@ -222,6 +231,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
         camera: &[Vertex],
         conn: &Connection,
         c: Rgb,
+        drawn: Option<f32>,
         pos: Vec2,
         rng: &mut R,
         sink: &mut S,
@@ -238,13 +248,13 @@ impl<C: StrategyCounts> Connector<'_, C> {
             let Some(k) = self.roulette(c * w, pos, rng, counters) else { return false };
             let visible = self.trace(a, b, counters);
             if visible {
-                self.note_shares(light, camera, conn, sink);
+                self.note_shares(light, camera, conn, drawn, sink);
                 deliver(sink, c, w * k);
             }
             visible
         } else if self.trace(a, b, counters) {
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
-            self.note_shares(light, camera, conn, sink);
+            self.note_shares(light, camera, conn, drawn, sink);
             deliver(sink, c, w);
             true
         } else {
