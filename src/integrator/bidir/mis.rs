@@ -487,6 +487,9 @@ impl Shares {
 /// they sum to one. With other counts `n'` that scale each class's counts by `a_k`, the
 /// path's combined density changes by `Σ_k a_k share_k`, which is what an efficiency
 /// estimate needs to predict the second moment of another budget from this one's samples.
+/// `drawn`, the factor of a connection drawn from a pool (`1 / (N M P(y | z))`), re-bases
+/// them on the density it was drawn with ([`Shares::drawn`]); they then sum to one only
+/// where the draw's count is the MIS count.
 pub fn mis_shares_with(
     scene: &Scene,
     light: &[Vertex],
