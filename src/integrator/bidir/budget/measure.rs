@@ -507,27 +507,23 @@ mod tests {
         let w = Weighing { scales: vec![(0.0, 0.0)], floor: 0.0 };
         let (mut rebased, mut plain, mut x) = ([0.0f64], [0.0f64], 0.0);
         let runs = 400_000;
+        // The MIS weights' combined density and shares, from the assumed counts.
+        let total = |y: f64| pu(y) + n * assumed(y);
+        let shares = |y: f64| Shares {
+            unidirectional: (pu(y) / total(y)) as f32,
+            connection: (n * assumed(y) / total(y)) as f32,
+            light_trace: 0.0,
+        };
         for _ in 0..runs {
             let y = rng.next_1d() as f64;
-            let total = pu(y) + n * assumed(y);
-            let own = Shares {
-                unidirectional: (pu(y) / total) as f32,
-                connection: (n * assumed(y) / total) as f32,
-                light_trace: 0.0,
-            };
-            let v = (pu(y) / total * f(y) / pu(y)) as f32;
-            accumulate(v, &own, &w, &mut x, &mut rebased);
-            accumulate(v, &own, &w, &mut x, &mut plain);
+            let v = (f(y) / total(y)) as f32;
+            accumulate(v, &shares(y), &w, &mut x, &mut rebased);
+            accumulate(v, &shares(y), &w, &mut x, &mut plain);
             for _ in 0..n as usize {
                 let y = (rng.next_1d() as f64).max(1e-12).sqrt();
-                let total = pu(y) + n * assumed(y);
-                let shares = Shares {
-                    unidirectional: (pu(y) / total) as f32,
-                    connection: (n * assumed(y) / total) as f32,
-                    light_trace: 0.0,
-                };
+                let shares = shares(y);
                 // The MIS weight of the assumed counts over the density drawn with.
-                let v = (n * assumed(y) / total * f(y) / (n * drawn(y))) as f32;
+                let v = (n * assumed(y) / total(y) * f(y) / (n * drawn(y))) as f32;
                 accumulate(v, &shares.drawn((assumed(y) / drawn(y)) as f32), &w, &mut x, &mut rebased);
                 accumulate(v, &shares, &w, &mut x, &mut plain);
             }
