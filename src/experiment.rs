@@ -130,6 +130,7 @@ pub struct MethodEntry {
     pub pc_budget_horizon: Option<u32>,
     pub pc_budget_margin: Option<f32>,
     pub pc_budget_pixels: Option<usize>,
+    pub pc_budget_rarity: Option<bool>,
     pub sp_eye_subspaces: Option<usize>,
     pub sp_light_subspaces: Option<usize>,
     pub sp_training_iterations: Option<u32>,
@@ -326,6 +327,7 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     pc.budget_horizon = m.pc_budget_horizon.or(pc.budget_horizon);
     pc.budget_margin = m.pc_budget_margin.unwrap_or(pc.budget_margin);
     pc.budget_pixels = m.pc_budget_pixels.unwrap_or(pc.budget_pixels);
+    pc.budget_rarity = m.pc_budget_rarity.unwrap_or(pc.budget_rarity);
     if let Some(x) = &m.pc_budget_model {
         pc.budget_model = value_enum(file, "pc_budget_model", x)?;
     }

@@ -286,6 +286,11 @@ struct RenderArgs {
     /// every k-th row and column).
     #[arg(long, default_value_t = PcOptions::default().budget_pixels)]
     pc_budget_pixels: usize,
+    /// PCBPT and SPCBPT: whether each measured pixel's largest contribution counts, at the
+    /// horizon, as rarely as its value against the pixel's mean says (false: as a region the
+    /// measured iterations found once, like every other sample).
+    #[arg(long, default_value_t = PcOptions::default().budget_rarity, action = clap::ArgAction::Set)]
+    pc_budget_rarity: bool,
     /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
     /// normals).
     #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
@@ -519,6 +524,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             budget_horizon: a.pc_budget_horizon,
             budget_margin: a.pc_budget_margin,
             budget_pixels: a.pc_budget_pixels,
+            budget_rarity: a.pc_budget_rarity,
         },
         sp: SpOptions {
             eye_subspaces: a.sp_eye_subspaces,

@@ -150,6 +150,10 @@ pub struct PcOptions {
     /// Pixels whose moments are measured, at most about: those of every `k`-th row and
     /// column, `k` the least that keeps them within this many.
     pub budget_pixels: usize,
+    /// Whether each measured pixel's largest contribution counts at the horizon as rarely
+    /// as its value against the pixel's mean says ([`super::budget::Top::rarity`]), not as a
+    /// region the measured iterations found once.
+    pub budget_rarity: bool,
 }
 
 impl Default for PcOptions {
@@ -175,6 +179,7 @@ impl Default for PcOptions {
             budget_horizon: None,
             budget_margin: 1.1,
             budget_pixels: 16_384,
+            budget_rarity: true,
         }
     }
 }

@@ -132,6 +132,37 @@ pub(super) fn accumulate(v: f32, s: &Shares, w: &Weighing, x: &mut f64, q: &mut 
     }
 }
 
+/// A measured pixel's largest contribution and its shares: the one sample whose moments
+/// [`Top::rarity`] re-counts at the horizon when it is rare against the pixel's mean.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Top {
+    pub v: f32,
+    pub shares: Shares,
+}
+
+impl Top {
+    /// Keeps `v` (with `shares`) when it is the largest so far.
+    #[inline]
+    pub(super) fn offer(&mut self, v: f32, shares: &Shares) {
+        if v.is_finite() && v > self.v {
+            *self = Top { v, shares: *shares };
+        }
+    }
+
+    /// How much rarer than [`typical`] assumes this sample's region of paths is: its value
+    /// over the `t` measured iterations' share of the pixel's mean `mean`, at least 1.
+    ///
+    /// [`typical`] counts each sample as a region the `t` measured iterations found about
+    /// once. A region found with chance `ρ` per iteration has its paths' contributions `v`
+    /// sum to about `ρ v` of the pixel's mean, so `ρ ≤ mean / v`, and where that is below
+    /// `1 / t` a render at the horizon finds the region `t ρ` times as often as the floor
+    /// assumes: the floor grows by `v / (t mean)`.
+    pub(super) fn rarity(&self, mean: f64, t: f64) -> f64 {
+        let v = self.v as f64;
+        if v > 0.0 && mean > 0.0 { (v / (t * mean)).max(1.0) } else { 1.0 }
+    }
+}
+
 /// How independent the pool connections of one camera vertex are, from their contributions
 /// `v_1 … v_N` (the `N` draws of each camera vertex, those that found nothing counting as 0):
 /// `raw` sums the second moment per draw, `Σ v_j² / N`, and `within` the unbiased variance
@@ -181,6 +212,8 @@ pub struct TileMoments {
     /// Per entry and candidate (like `q`): the camera sample as the candidate would weigh
     /// it, and its connections' correction for the candidate's number of draws ([`Realized`]).
     pub(super) realized: Vec<Realized>,
+    /// Per entry: its largest contribution and that contribution's shares ([`Top`]).
+    pub(super) top: Vec<Top>,
     /// Connections each camera vertex draws under the plan in use.
     draws: u32,
     /// The camera vertex whose connections are being summed: its depth, `Σ v`, `Σ v²`.
@@ -201,6 +234,7 @@ impl TileMoments {
             q: Vec::with_capacity(entries * c),
             spread: Vec::with_capacity(entries),
             realized: Vec::with_capacity(entries * c),
+            top: Vec::with_capacity(entries),
             draws,
             vertex: (0, 0.0, 0.0),
             vertex_realized: vec![(0.0, 0.0); c],
@@ -215,6 +249,7 @@ impl TileMoments {
         self.q.extend(std::iter::repeat_n(0.0, self.weighing.len()));
         self.realized.extend(std::iter::repeat_n(Realized::default(), self.weighing.len()));
         self.spread.push(Spread::default());
+        self.top.push(Top::default());
     }
 
     /// Adds a pool connection's contribution `v` (shares `s`) from the camera vertex at
@@ -266,6 +301,9 @@ impl TileMoments {
             return;
         }
         let at = self.q.len() - c;
+        if let Some(top) = self.top.last_mut() {
+            top.offer(v, shares);
+        }
         let (v, floor) = (v as f64, self.weighing.floor);
         *x += v;
         // `accumulate`'s moments and the candidate's weighing of the sample, with each

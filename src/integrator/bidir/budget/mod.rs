@@ -68,8 +68,8 @@ pub mod cost;
 pub mod measure;
 
 pub use cost::{Operations, PRICES, Prices, SPCBPT_PRICES};
-pub use measure::{BudgetSink, Realized, SplatShares, Spread, TileMoments};
-use measure::{RealizedSums, Weighing, accumulate, own_moment};
+pub use measure::{BudgetSink, Realized, SplatShares, Spread, TileMoments, Top};
+use measure::{RealizedSums, Weighing, accumulate, own_moment, typical};
 
 use super::bdpt::{Bdpt, Connector};
 use super::mis::{Shares, StrategyCounts};
@@ -356,6 +356,8 @@ pub struct Budget {
     model: BudgetModel,
     /// Per measured pixel, its pool connections' [`Spread`].
     spread: Vec<Spread>,
+    /// Per measured pixel, its largest contribution over the iterations ([`Top`]).
+    top: Vec<Top>,
     operations: Operations,
     /// The integrator's prices of the operations ([`Prices`]).
     prices: Prices,
@@ -365,6 +367,8 @@ pub struct Budget {
     /// `--pc-budget-smoothing`: measured pixels each side whose means are averaged for
     /// relMSE's denominator ([`Budget::smoothed_means`]).
     smoothing: usize,
+    /// `--pc-budget-rarity` ([`Budget::recount_rare_tops`]).
+    rarity: bool,
     pub stats: BudgetStats,
 }
 
@@ -408,8 +412,10 @@ impl Budget {
             prices,
             iterations: 0,
             spread: Vec::new(),
+            top: Vec::new(),
             independence: opts.budget_independence.fixed().map(f64::from),
             smoothing: opts.budget_smoothing as usize,
+            rarity: opts.budget_rarity,
             stats: BudgetStats { horizon, margin: f64::from(opts.budget_margin), ..BudgetStats::default() },
         };
         budget.stats.measured_pixels = budget.measured();
@@ -533,6 +539,7 @@ impl Budget {
             self.s2 = vec![0.0; n];
             self.q = vec![0.0; n * c];
             self.realized = vec![RealizedSums::default(); n * c];
+            self.top = vec![Top::default(); n];
         }
         let mut x = vec![0.0f64; n];
         // An iteration samples each pixel once, so each measured pixel has one entry: its
@@ -543,6 +550,8 @@ impl Budget {
                 let id = id as usize;
                 x[id] += m.x[e];
                 self.spread[id].add_weighted(&m.spread[e], 1.0);
+                let top = m.top[e];
+                self.top[id].offer(top.v, &top.shares);
                 let (to, from) = (id * c..(id + 1) * c, e * c..(e + 1) * c);
                 for (q, add) in self.q[to.clone()].iter_mut().zip(&m.q[from.clone()]) {
                     *q += add;
@@ -558,6 +567,7 @@ impl Budget {
         for sp in splats {
             if let Some(id) = self.measured_pixel(sp.pos) {
                 let v = sp.value * per_path;
+                self.top[id].offer(v, &sp.shares);
                 accumulate(v, &sp.shares, &self.weighing, &mut x[id], &mut self.q[id * c..(id + 1) * c]);
                 for (sums, &(a, l)) in self.realized[id * c..(id + 1) * c].iter_mut().zip(&self.weighing.scales) {
                     sums.own_moment += own_moment(v, &sp.shares, sp.shares.combined(a, l), self.weighing.floor);
@@ -598,6 +608,7 @@ impl Budget {
             })
             .collect();
         let means = self.smoothed_means();
+        self.recount_rare_tops(&means);
         let norm = |id: usize| 1.0 / (means[id] * means[id] + REL_EPSILON);
         // The independence of connections: given, or their spread within camera vertices
         // over the pixels as relMSE weighs them.
@@ -685,6 +696,38 @@ impl Budget {
         self.q = Vec::new();
         self.spread = Vec::new();
         self.realized = Vec::new();
+        self.top = Vec::new();
+    }
+
+    /// Re-counts each measured pixel's largest contribution at the horizon with the floor
+    /// its rarity gives ([`Top::rarity`]): against the larger of the pixel's smoothed mean
+    /// `means` and its own mean without that contribution, so that only a sample that stands
+    /// out from both its neighbours and the pixel's other samples counts as rarer than the
+    /// measured iterations found it.
+    fn recount_rare_tops(&mut self, means: &[f64]) {
+        let (t, c, floor) = (self.iterations as f64, self.candidates.len(), self.weighing.floor);
+        if floor <= 0.0 || !self.rarity {
+            return;
+        }
+        for (id, top) in self.top.iter().enumerate() {
+            let v = top.v as f64;
+            let own = (self.s1[id] - v).max(0.0) / (t - 1.0).max(1.0);
+            let rarity = top.rarity(means[id].max(own), t);
+            if rarity <= 1.0 {
+                continue;
+            }
+            let rare_floor = floor * rarity;
+            let at = id * c;
+            for (k, &(a, l)) in self.weighing.scales.iter().enumerate() {
+                let d = top.shares.combined(a, l);
+                if d <= 0.0 || self.q[at + k].is_infinite() {
+                    continue;
+                }
+                let less = v * v * (1.0 / typical(d, floor) - 1.0 / typical(d, rare_floor));
+                self.q[at + k] -= less;
+                self.realized[at + k].own_moment -= less * top.shares.unidirectional as f64 / d;
+            }
+        }
     }
 }
 
@@ -736,6 +779,76 @@ mod tests {
         // A candidate whose gain is not finite is never taken.
         assert_eq!(pick([f64::NAN, 1.0, f64::INFINITY, 1.2], 1.1), 3);
         assert_eq!(pick([1.0, 1.0, 1.0, 1.0], 1.0), 1);
+    }
+
+    /// A pixel's largest contribution that stands out from its neighbours and from the
+    /// pixel's other samples is re-counted at the horizon with the floor its rarity gives,
+    /// for every candidate that samples it less densely than that floor; one that does not
+    /// stand out, the plan in use's own moments, and `--pc-budget-rarity false` stay.
+    #[test]
+    fn rare_tops_are_recounted_with_the_floor_their_rarity_gives() {
+        let plan = Plan { connections: 4, pool_paths: 8, splat_paths: 8 };
+        let shares = Shares { unidirectional: 0.001, connection: 0.999, light_trace: 0.0 };
+        // What a contribution `v` adds to a candidate's moments under `floor`.
+        let u = shares.unidirectional as f64;
+        let counted = |v: f64, d: f64, floor: f64| (v * v / typical(d, floor), v * v * u / (d * typical(d, floor)));
+        let recount = |rarity: bool| {
+            let opts = PcOptions { budget: BudgetMode::Auto, budget_rarity: rarity, ..PcOptions::default() };
+            let mut b = Budget::new(&opts, PRICES, 1..3, plan, 5, 5, None);
+            let (n, c, floor) = (b.measured(), b.candidates.len(), b.weighing.floor);
+            b.iterations = 2;
+            b.s1 = vec![2.0; n];
+            b.q = vec![1.0; n * c];
+            b.realized = vec![RealizedSums::default(); n * c];
+            b.top = vec![Top::default(); n];
+            // Pixel 12 holds a connection of 100 beside 1 of its camera path's own; pixel 3
+            // two samples of 1, the larger of them a connection too.
+            b.s1[12] = 101.0;
+            b.top[12] = Top { v: 100.0, shares };
+            b.top[3] = Top { v: 1.0, shares };
+            for (k, &(a, l)) in b.weighing.scales.iter().enumerate() {
+                let (q, own) = counted(100.0, shares.combined(a, l), floor);
+                b.q[12 * c + k] += q;
+                b.realized[12 * c + k].own_moment = own;
+            }
+            let means = b.smoothed_means();
+            b.recount_rare_tops(&means);
+            (b, means)
+        };
+        let (on, means) = recount(true);
+        let (c, floor) = (on.candidates.len(), on.weighing.floor);
+        assert!((floor - 2.0 / DEFAULT_HORIZON as f64).abs() < 1e-12);
+        // Against the larger of its smoothed mean and its own without the connection (1).
+        let rarity = 100.0 / (2.0 * means[12].max(1.0));
+        assert!(rarity > 10.0, "{rarity}");
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
+        for (k, &(a, l)) in on.weighing.scales.iter().enumerate() {
+            let (q, own) = counted(100.0, shares.combined(a, l), floor * rarity);
+            let r = &on.realized[12 * c + k];
+            assert!(close(on.q[12 * c + k], 1.0 + q) && close(r.own_moment, own), "candidate {k}");
+        }
+        // The plan in use samples it as densely as measured: unchanged. Path tracing, 1000
+        // times less densely, counts `v² / (floor · rarity)` instead of `v² / floor`.
+        let current = on.candidates.iter().position(|p| *p == plan).unwrap();
+        let path = on.candidates.iter().position(Plan::path_tracing).unwrap();
+        assert!(close(on.q[12 * c + current], 1.0 + 1e4));
+        assert!(close(on.q[12 * c + path], 1.0 + 1e4 / (floor * rarity)));
+        // Pixel 3's largest sample is its mean's size: nothing changes there, nor anywhere
+        // with the option off.
+        assert!(on.q[3 * c..4 * c].iter().all(|&q| q == 1.0));
+        let (off, _) = recount(false);
+        for (k, &(a, l)) in off.weighing.scales.iter().enumerate() {
+            assert!(close(off.q[12 * c + k], 1.0 + counted(100.0, shares.combined(a, l), floor).0));
+        }
+        // The largest offer is kept; what is not finite is ignored.
+        let mut top = Top::default();
+        for v in [1.0, 5.0, f32::NAN, 3.0, f32::INFINITY] {
+            top.offer(v, &shares);
+        }
+        assert_eq!(top.v, 5.0);
+        assert_eq!(top.rarity(1.0, 2.0), 2.5);
+        assert_eq!(top.rarity(10.0, 2.0), 1.0);
+        assert_eq!(Top::default().rarity(1.0, 2.0), 1.0);
     }
 
     #[test]
