@@ -16,7 +16,7 @@ import sys
 from collections import defaultdict
 
 SCENES = ["cornell-ply", "veach-mis", "veach-ajar", "living-room", "staircase2", "sunlit-room"]
-METHODS = ["path", "bdpt", "pcbpt", "spcbpt", "pcbpt-budget", "spcbpt-budget"]
+METHODS = ["path", "bdpt", "pcbpt", "spcbpt", "pcbpt-budget", "spcbpt-budget", "spcbpt-after-training"]
 
 
 def read(folders):
@@ -71,6 +71,8 @@ def main():
         ("SPCBPT / best", "spcbpt", "best"),
         ("SPCBPT / PCBPT", "spcbpt", "pcbpt"),
         ("SPCBPT budget / PCBPT budget", "spcbpt-budget", "pcbpt-budget"),
+        ("SPCBPT / SPCBPT measured after training", "spcbpt", "spcbpt-after-training"),
+        ("SPCBPT measured after training / best", "spcbpt-after-training", "best"),
     ]
     have = set(methods) | ({"best"} if {"path", "bdpt"} <= set(methods) else set())
     ratios = [r for r in ratios if r[1] in have and r[2] in have]

@@ -136,6 +136,7 @@ pub struct MethodEntry {
     pub sp_training_iterations: Option<u32>,
     pub sp_uniform: Option<f32>,
     pub sp_mis: Option<String>,
+    pub sp_budget_in_training: Option<bool>,
 }
 
 fn default_backend() -> String {
@@ -337,6 +338,7 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     sp.light_subspaces = m.sp_light_subspaces.unwrap_or(sp.light_subspaces);
     sp.training_iterations = m.sp_training_iterations.unwrap_or(sp.training_iterations);
     sp.uniform = m.sp_uniform.unwrap_or(sp.uniform);
+    sp.budget_in_training = m.sp_budget_in_training.unwrap_or(sp.budget_in_training);
     if let Some(x) = &m.sp_mis {
         sp.mis = value_enum(file, "sp_mis", x)?;
     }

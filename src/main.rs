@@ -311,6 +311,10 @@ struct RenderArgs {
     /// SPCBPT: memory limit of the matrix and the training samples, in MiB.
     #[arg(long, default_value_t = SpOptions::default().max_mb)]
     sp_max_mb: usize,
+    /// SPCBPT: whether the budget measures the last training iterations (the choice comes
+    /// sooner) or the iterations after them.
+    #[arg(long, default_value_t = SpOptions::default().budget_in_training, action = clap::ArgAction::Set)]
+    sp_budget_in_training: bool,
     /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
     #[arg(long, value_name = "DIR")]
     strategy_images: Option<PathBuf>,
@@ -533,6 +537,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             uniform: a.sp_uniform,
             mis: a.sp_mis,
             max_mb: a.sp_max_mb,
+            budget_in_training: a.sp_budget_in_training,
         },
     };
     opts.mlt = MltOptions {

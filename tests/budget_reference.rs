@@ -2,7 +2,7 @@
 //! path-tracer references, with the verdict of the other bidirectional integrators
 //! (`tests/bidir_reference.rs`): two seeds averaged, the image mean within the case's
 //! tolerance, relMSE within 1.3× of what noise explains. The budget is measured in two
-//! iterations (PCBPT's 1 and 2, SPCBPT's after its training) and then changes the number of
+//! iterations (PCBPT's 1 and 2, SPCBPT's last two of training) and then changes the number of
 //! connections and light-traced paths: the iterations before and after the change are each
 //! unbiased, so the image converges whichever plan is chosen. The test prints the plan.
 //!
@@ -167,4 +167,38 @@ fn a_gain_within_the_margin_keeps_the_measured_plan_and_its_image() {
     let bits =
         |o: &integrator::RenderOutput| o.image.iter().flat_map(|c| c.to_array()).map(f32::to_bits).collect::<Vec<_>>();
     assert!(bits(&above) == bits(&off), "the kept plan's image differs from the render without a budget");
+}
+
+/// SPCBPT's budget measures its last two training iterations by default: the choice is
+/// made once `Γ` is trained (after four iterations, not six), the measurement changes no
+/// training sample (a kept plan renders the image of the render without a budget, measured
+/// during training or after it), and `--sp-budget-in-training false` measures after training.
+#[test]
+fn spcbpt_measures_its_last_training_iterations() {
+    let scene =
+        load_at(&root().join(VEACH_MIS.scene), VEACH_MIS.defines, Some((96, 54)), pcbpt::accel::Backend::Embree);
+    let run = |spp: u32, budget: BudgetMode, in_training: bool| {
+        let mut o = RenderOptions::new(IntegratorKind::Spcbpt, Budget::Spp(spp));
+        o.seed = 2;
+        o.bidir.pc.budget = budget;
+        // A margin no prediction reaches keeps the measured plan.
+        o.bidir.pc.budget_margin = 1e9;
+        o.bidir.sp.budget_in_training = in_training;
+        integrator::render(&scene, &o).unwrap()
+    };
+    let training = pcbpt::integrator::bidir::spcbpt::SpOptions::default().training_iterations;
+    assert_eq!(training, 4);
+    let chosen = |spp: u32, in_training: bool| run(spp, BudgetMode::Auto, in_training).stats.budget.is_some();
+    assert!(chosen(training, true), "no choice after the training iterations");
+    assert!(!chosen(training - 1, true), "a choice before the last training iteration");
+    assert!(!chosen(training, false) && chosen(training + 2, false));
+    let bits =
+        |o: &integrator::RenderOutput| o.image.iter().flat_map(|c| c.to_array()).map(f32::to_bits).collect::<Vec<_>>();
+    let off = bits(&run(8, BudgetMode::Off, true));
+    for in_training in [true, false] {
+        let kept = run(8, BudgetMode::Auto, in_training);
+        let b = kept.stats.budget.clone().expect("a budget's statistics");
+        assert_eq!(b.chosen, b.measured_with);
+        assert!(bits(&kept) == off, "measured in training: {in_training}; the kept plan's image differs");
+    }
 }

@@ -28,7 +28,8 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
-    Budget, BudgetMode, CameraSample, Operations, Plan, SPCBPT_PRICES, SplatShares, TracedPool, budget_tile,
+    Budget, BudgetMode, CameraSample, Operations, Plan, SPCBPT_PRICES, SplatShares, TileMoments, TracedPool,
+    budget_tile,
 };
 use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
@@ -43,10 +44,10 @@ use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSa
 use super::{Sink, Vertex};
 use crate::error::Error;
 use crate::film::Tile;
-use crate::integrator::RenderStats;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
+use crate::integrator::{Counters, RenderStats};
 use crate::math::{Rgb, luminance};
-use crate::sampling::Random;
+use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
 use serde::Serialize;
@@ -68,6 +69,10 @@ pub struct SpOptions {
     pub mis: PcMis,
     /// Memory limit of the matrix and the training samples, in MiB.
     pub max_mb: usize,
+    /// Whether the budget measures the last training iterations (`true`) or the iterations
+    /// after them: measured while `Γ` is still learning, the choice comes that many
+    /// iterations sooner, and the training samples are the same.
+    pub budget_in_training: bool,
 }
 
 impl Default for SpOptions {
@@ -79,6 +84,7 @@ impl Default for SpOptions {
             uniform: 0.2,
             mis: PcMis::Harmonic,
             max_mb: 1024,
+            budget_in_training: true,
         }
     }
 }
@@ -419,6 +425,63 @@ impl<S: Sink> Sink for TrainingSink<'_, S> {
     }
 }
 
+/// The camera samples of a training iteration: `inner`'s, with the pool connections of
+/// every `every`-th pixel of a film `width` wide kept as training samples.
+struct TrainingSampler<'a, S> {
+    inner: S,
+    scene: &'a Scene,
+    model: &'a Model,
+    width: usize,
+    every: usize,
+    samples: Vec<TrainingSample>,
+}
+
+impl<S: CameraSample> CameraSample for TrainingSampler<'_, S> {
+    fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl Sink, counters: &mut Counters) {
+        let pixel = pos.y as usize * self.width + pos.x as usize;
+        if !pixel.is_multiple_of(self.every) {
+            return self.inner.sample(pos, rng, sink, counters);
+        }
+        let (scene, model) = (self.scene, self.model);
+        let mut sink = TrainingSink { inner: sink, scene, model, samples: &mut self.samples, eye: None };
+        self.inner.sample(pos, rng, &mut sink, counters);
+    }
+
+    fn learned(&mut self) -> Option<Box<dyn std::any::Any + Send + Sync>> {
+        Some(Box::new(std::mem::take(&mut self.samples)))
+    }
+}
+
+/// The iterations the budget measures, `iterations` of them: the last training iterations
+/// (from the first when there are fewer) with `--sp-budget-in-training`, otherwise those
+/// after training.
+fn budget_window(o: &SpOptions, iterations: u32) -> Range<u32> {
+    let start =
+        if o.budget_in_training { o.training_iterations.saturating_sub(iterations) } else { o.training_iterations };
+    start..start + iterations
+}
+
+/// A tile of iteration `first` with `sampler`'s camera samples: the budget's when it measures
+/// the iteration or path traces, otherwise the sampler's with what it learned in `extra`.
+fn tile_of(
+    ctx: &Ctx,
+    tile: Tile,
+    first: u32,
+    count: u32,
+    budget: &Budget,
+    mut sampler: impl CameraSample,
+) -> TileResult {
+    if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
+        return result;
+    }
+    let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+        sampler.sample(pos, rng, sink, counters);
+        true
+    });
+    result.extra = sampler.learned();
+    result
+}
+
 /// Training watches every `k`-th pixel of a film of `pixels` pixels: all of them up to
 /// [`TRAINING_PIXELS`].
 fn training_stride(pixels: usize) -> usize {
@@ -490,7 +553,7 @@ impl SpcbptRender {
         let o = &self.sp.opts;
         match self.sp.pc.budget {
             BudgetMode::Off => o.training_iterations + 1,
-            BudgetMode::Auto => (o.training_iterations + 1).max(o.training_iterations + self.sp.pc.budget_iterations),
+            BudgetMode::Auto => (o.training_iterations + 1).max(self.budget().window.end),
         }
     }
 
@@ -541,9 +604,9 @@ impl Iterative for SpcbptRender {
             LightPool::trace::<Counts>(scene, limits, m * PILOT_POOLS, ctx.seed, PILOT_ITERATION - 1, None);
         self.model = Some(Model::new(scene, &records, &light_pilot, o.eye_subspaces, o.light_subspaces));
         self.light_paths = m;
-        // The budget is measured once `Γ` is trained.
+        // The budget measures the last training iterations, or those after `Γ` is trained.
         let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
-        let window = o.training_iterations..o.training_iterations + pc.budget_iterations;
+        let window = budget_window(o, pc.budget_iterations);
         self.budget = Some(Budget::new(pc, SPCBPT_PRICES, window, plan, w, h, ctx.planned_spp));
         let subspaces = self.model().sort_pool(scene, &pilot);
         self.measured =
@@ -594,31 +657,15 @@ impl Iterative for SpcbptRender {
         let budget = self.budget();
         let connections = budget.plan().connections;
         let pool_pass = PoolPass { bdpt: &self.sp.bdpt, connections, conn: &conn, pool: &pass.pool };
-        let mut sampler = PoolSampler { pass: pool_pass, select: &select, scratch: Scratch::default() };
-        if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
-            return result;
+        let sampler = PoolSampler { pass: pool_pass, select: &select, scratch: Scratch::default() };
+        if self.training(first) {
+            let width = scene.film.width as usize;
+            let every = training_stride(width * scene.film.height as usize);
+            let sampler = TrainingSampler { inner: sampler, scene, model, width, every, samples: Vec::new() };
+            tile_of(ctx, tile, first, count, budget, sampler)
+        } else {
+            tile_of(ctx, tile, first, count, budget, sampler)
         }
-        if !self.training(first) {
-            return sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-                sampler.sample(pos, rng, sink, counters);
-                true
-            });
-        }
-        let mut samples = Vec::new();
-        let width = scene.film.width as usize;
-        let every = training_stride(width * scene.film.height as usize);
-        let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-            let pixel = pos.y as usize * width + pos.x as usize;
-            if !pixel.is_multiple_of(every) {
-                sampler.sample(pos, rng, sink, counters);
-            } else {
-                let mut sink = TrainingSink { inner: sink, scene, model, samples: &mut samples, eye: None };
-                sampler.sample(pos, rng, &mut sink, counters);
-            }
-            true
-        });
-        result.extra = Some(Box::new(samples));
-        result
     }
 
     /// Until the state is fixed: keeps the pool's subspace totals and the concentration of
@@ -642,7 +689,10 @@ impl Iterative for SpcbptRender {
         }
         let t = Instant::now();
         for r in results {
-            if let Some(s) = r.extra.as_ref().and_then(|e| e.downcast_ref::<Vec<TrainingSample>>()) {
+            // A measured tile carries its training samples in its moments.
+            let extra = r.extra.as_ref();
+            let learned = extra.and_then(|e| e.downcast_ref::<TileMoments>()).map_or(extra, |m| m.learned.as_ref());
+            if let Some(s) = learned.and_then(|e| e.downcast_ref::<Vec<TrainingSample>>()) {
                 self.samples.extend_from_slice(s);
             }
         }

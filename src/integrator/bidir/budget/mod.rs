@@ -225,6 +225,13 @@ pub(crate) fn normalise_splats(splats: &mut [Splat], plan: &Plan, reference: usi
 /// One camera sample of a pool integrator, into any sink.
 pub(crate) trait CameraSample {
     fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl super::Sink, counters: &mut Counters);
+
+    /// What the integrator learned from the tile's samples for later iterations (SPCBPT's
+    /// training samples), taken once the tile is done: a measured tile carries it in its
+    /// moments ([`TileMoments::learned`]).
+    fn learned(&mut self) -> Option<Box<dyn std::any::Any + Send + Sync>> {
+        None
+    }
 }
 
 /// A tile of iteration `first` as the budget has it: the path tracer's when the plan
@@ -254,6 +261,7 @@ pub(crate) fn budget_tile(
         true
     });
     moments.end_vertex();
+    moments.learned = sample.learned();
     result.extra = Some(Box::new(moments));
     Some(result)
 }
