@@ -18,6 +18,11 @@
 //!    uniform distribution. From then on the state is fixed: `Γ`, and what the MIS counts take
 //!    from the last training iteration, so a chunk of a distributed render re-runs at most
 //!    the training iterations and the one after them.
+//! 4. **Budget** (`--pc-budget auto`, [`super::budget`]). It measures the last two training
+//!    iterations (`--sp-budget-in-training`; `false`: the two after training), their
+//!    training samples kept as in any other ([`TrainingSampler`], carried in the tile's
+//!    moments), and chooses once `Γ` is trained: on `staircase2`, where it takes path
+//!    tracing, the four iterations with connections before the choice instead of six.
 //!
 //! MIS counts (`--sp-mis`, as PCBPT's `--pc-mis`): `N / V̄` (uniform), `N κ_t / V̄`
 //! (harmonic, `κ_t` measured on the previous iteration's unoccluded draws), `N M P(y | z)`
