@@ -32,8 +32,7 @@
 use super::Vertex;
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
-    Budget, BudgetMode, BudgetModel, CameraSample, Independence, Operations, PRICES, Plan, SplatShares, TracedPool,
-    budget_tile,
+    Budget, BudgetMode, BudgetModel, Independence, Operations, PRICES, Plan, SplatShares, TracedPool, pool_tile,
 };
 use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
@@ -44,7 +43,7 @@ use super::pool::{
 use crate::bsdf::TransportMode;
 use crate::error::Error;
 use crate::film::Tile;
-use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::{CacheStats, Counters, RenderStats};
 use crate::math::Rgb;
 use crate::sampling::Random;
@@ -609,14 +608,8 @@ impl Iterative for PcbptRender {
         let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.pc.opts.sampling };
         let connections = budget.plan().connections;
         let pass = PoolPass { bdpt: &self.pc.bdpt, connections, conn: &conn, pool };
-        let mut sampler = PoolSampler { pass, select: &select, scratch: Scratch::default() };
-        if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
-            return result;
-        }
-        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-            sampler.sample(pos, rng, sink, counters);
-            true
-        })
+        let sampler = PoolSampler { pass, select: &select, scratch: Scratch::default() };
+        pool_tile(ctx, tile, first, count, budget, sampler)
     }
 
     /// Keeps `V̄`, the cache and the concentration of the camera pass's draws (summed in

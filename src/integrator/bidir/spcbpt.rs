@@ -33,8 +33,7 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
-    Budget, BudgetMode, CameraSample, Operations, Plan, SPCBPT_PRICES, SplatShares, TileMoments, TracedPool,
-    budget_tile,
+    Budget, BudgetMode, CameraSample, Operations, Plan, SPCBPT_PRICES, SplatShares, TileMoments, TracedPool, pool_tile,
 };
 use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
@@ -49,7 +48,7 @@ use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSa
 use super::{Sink, Vertex};
 use crate::error::Error;
 use crate::film::Tile;
-use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::{Counters, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Random, Sampler};
@@ -466,27 +465,6 @@ fn budget_window(o: &SpOptions, iterations: u32) -> Range<u32> {
     start..start + iterations
 }
 
-/// A tile of iteration `first` with `sampler`'s camera samples: the budget's when it measures
-/// the iteration or path traces, otherwise the sampler's with what it learned in `extra`.
-fn tile_of(
-    ctx: &Ctx,
-    tile: Tile,
-    first: u32,
-    count: u32,
-    budget: &Budget,
-    mut sampler: impl CameraSample,
-) -> TileResult {
-    if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
-        return result;
-    }
-    let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-        sampler.sample(pos, rng, sink, counters);
-        true
-    });
-    result.extra = sampler.learned();
-    result
-}
-
 /// Training watches every `k`-th pixel of a film of `pixels` pixels: all of them up to
 /// [`TRAINING_PIXELS`].
 fn training_stride(pixels: usize) -> usize {
@@ -667,9 +645,9 @@ impl Iterative for SpcbptRender {
             let width = scene.film.width as usize;
             let every = training_stride(width * scene.film.height as usize);
             let sampler = TrainingSampler { inner: sampler, scene, model, width, every, samples: Vec::new() };
-            tile_of(ctx, tile, first, count, budget, sampler)
+            pool_tile(ctx, tile, first, count, budget, sampler)
         } else {
-            tile_of(ctx, tile, first, count, budget, sampler)
+            pool_tile(ctx, tile, first, count, budget, sampler)
         }
     }
 

@@ -237,7 +237,7 @@ pub(crate) trait CameraSample {
 /// A tile of iteration `first` as the budget has it: the path tracer's when the plan
 /// [`Plan::path_tracing`], or `sample`'s with the measured pixels' contributions recorded in
 /// a measured iteration; `None` otherwise (the integrator renders it its own way).
-pub(crate) fn budget_tile(
+fn budget_tile(
     ctx: &Ctx,
     tile: Tile,
     first: u32,
@@ -264,6 +264,28 @@ pub(crate) fn budget_tile(
     moments.learned = sample.learned();
     result.extra = Some(Box::new(moments));
     Some(result)
+}
+
+/// A tile of iteration `first` of a pool integrator with `sampler`'s camera samples: the
+/// budget's ([`budget_tile`]) when it measures the iteration or path traces, otherwise the
+/// sampler's, with what it learned ([`CameraSample::learned`]) in `extra`.
+pub(crate) fn pool_tile(
+    ctx: &Ctx,
+    tile: Tile,
+    first: u32,
+    count: u32,
+    budget: &Budget,
+    mut sampler: impl CameraSample,
+) -> TileResult {
+    if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
+        return result;
+    }
+    let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+        sampler.sample(pos, rng, sink, counters);
+        true
+    });
+    result.extra = sampler.learned();
+    result
 }
 
 /// A tile of a plan that [`Plan::path_tracing`]: the path tracer's samples (next-event
@@ -741,9 +763,9 @@ impl Budget {
                 if d <= 0.0 || self.q[at + k].is_infinite() {
                     continue;
                 }
-                let less = v * v * (1.0 / typical(d, floor) - 1.0 / typical(d, rare_floor));
-                self.q[at + k] -= less;
-                self.realized[at + k].own_moment -= less * top.shares.unidirectional as f64 / d;
+                self.q[at + k] -= v * v * (1.0 / typical(d, floor) - 1.0 / typical(d, rare_floor));
+                self.realized[at + k].own_moment -=
+                    own_moment(top.v, &top.shares, d, floor) - own_moment(top.v, &top.shares, d, rare_floor);
             }
         }
     }
