@@ -367,7 +367,7 @@ impl PoolSelection for SubspaceSelection<'_> {
     fn draw<R: Random>(&self, &i: &usize, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)> {
         let u = ((k as f32 + rng.next_1d()) / n as f32).min(1.0 - f32::EPSILON / 2.0);
         let (j, gamma) = self.model.matrix.draw(i, u);
-        let (y, within) = self.subspaces.draw(j, rng.next_1d())?;
+        let (y, within) = self.subspaces.draw(j, rng.next_2d())?;
         let p = gamma as f64 * within;
         (p > 0.0).then(|| (1.0 / (n as f64 * self.paths * p)) as f32).map(|f| (y, f))
     }
