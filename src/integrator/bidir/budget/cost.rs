@@ -14,12 +14,14 @@ use serde::Serialize;
 /// extension rays and 3.14 M next-event rays priced like connections, leaves 0.187 µs per
 /// extension ray; a cache entry (its target and shadow ray) took 0.188 µs (1.0 M in 0.19 s).
 ///
-/// SPCBPT's connection costs more (its draw samples a light subspace from `Γ` and a vertex
-/// within it, each by a guide table into a running sum): on `staircase2` (24 spp, 2 threads,
-/// one connection and eight alternated with PCBPT's, three pairs) its camera pass gained
-/// 0.276–0.305 µs per added connection against PCBPT's 0.232–0.275 µs, 1.18 times as much
-/// on the means, so [`SPCBPT_PRICES`] prices its connections 1.18 times PCBPT's. (With a
-/// binary search in each draw it was 1.31–1.34 times.)
+/// SPCBPT's connection costs more (its draw samples a light subspace from `Γ` by a guide
+/// table into the row's running sum, and a vertex within it from the subspace's alias
+/// table): on `staircase2` (24 spp, 2 threads, `--pc-budget off`, one connection and eight
+/// alternated with PCBPT's, seeds 1–3) its camera pass gained 0.244–0.266 µs per added
+/// connection against PCBPT's 0.224–0.233 µs, 1.12 times as much on the means, so
+/// [`SPCBPT_PRICES`] prices its connections 1.12 times PCBPT's. (With a guide table for the
+/// draw within a subspace too it was 1.18 times; with a binary search in each draw
+/// 1.31–1.34 times.)
 #[derive(Clone, Copy, Debug)]
 pub struct Prices {
     /// A shadow ray of next-event estimation or light tracing.
@@ -37,7 +39,7 @@ pub struct Prices {
 pub const PRICES: Prices = Prices { shadow: 1.15, connection: 1.15, lookup: 0.58, cache_entry: 1.0, path_tracer: 0.82 };
 
 /// SPCBPT's prices: PCBPT's, with its dearer connections.
-pub const SPCBPT_PRICES: Prices = Prices { connection: 1.36, ..PRICES };
+pub const SPCBPT_PRICES: Prices = Prices { connection: 1.29, ..PRICES };
 
 /// Operations one iteration performed, summed over the measured iterations.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
