@@ -305,7 +305,8 @@ struct RenderArgs {
     #[arg(long, default_value_t = SpOptions::default().uniform)]
     sp_uniform: f32,
     /// SPCBPT: MIS strategy counts of the connections (as --pc-mis; resampling is the
-    /// selection density itself).
+    /// selection density itself, subspace the same with the draw within a light subspace
+    /// taken as uniform).
     #[arg(long, value_enum, default_value_t = SpOptions::default().mis)]
     sp_mis: PcMis,
     /// SPCBPT: memory limit of the matrix and the training samples, in MiB.

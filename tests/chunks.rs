@@ -68,7 +68,12 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
         o.bidir.sp.eye_subspaces = 16;
         o.bidir.sp.light_subspaces = 32;
         o.bidir.pc.light_paths = 300;
-        cases.push((format!("Spcbpt {mis:?}"), o));
+        cases.push((format!("Spcbpt {mis:?}"), o.clone()));
+        // SPCBPT's own count option, whose vertices are labelled with their subspaces.
+        if mis == PcMis::Resampling {
+            o.bidir.sp.mis = PcMis::Subspace;
+            cases.push(("Spcbpt Subspace".into(), o));
+        }
     }
     // Budgets measured in iterations 1 and 2 (PCBPT) and 2 and 3 (SPCBPT, after training):
     // the cuts fall inside the measurement, at its end, and beyond.

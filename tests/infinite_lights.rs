@@ -36,7 +36,12 @@ fn methods() -> Vec<(String, RenderOptions)> {
         o.bidir.sp.eye_subspaces = 32;
         o.bidir.sp.light_subspaces = 64;
         o.bidir.pc.budget = BudgetMode::Off;
-        out.push((format!("Spcbpt {mis:?}"), o));
+        out.push((format!("Spcbpt {mis:?}"), o.clone()));
+        // SPCBPT's own count option.
+        if mis == PcMis::Resampling {
+            o.bidir.sp.mis = PcMis::Subspace;
+            out.push(("Spcbpt Subspace".into(), o));
+        }
     }
     out.push(("Pcbpt, defaults".into(), options(Pcbpt)));
     out.push(("Spcbpt, defaults".into(), options(Spcbpt)));

@@ -1,7 +1,7 @@
 //! SPCBPT against the Mitsuba 3 path-tracer references with the verdict of the other
 //! bidirectional integrators (`tests/bidir_reference.rs`): two seeds averaged, the image mean
 //! within the case's tolerance, relMSE within 1.3× of what noise explains. Every `--sp-mis`
-//! option on `cornell-ply` and `veach-mis`; the default (`harmonic`) and the selection
+//! option on `cornell-ply` and `veach-mis`; the default (`subspace`), `harmonic` and the selection
 //! density (`resampling`) on `living-room`, `staircase2` and the sun-lit room.
 //!
 //! On `veach-ajar` every pixel connects to the same pool, whose error is common to the whole
@@ -56,17 +56,22 @@ cases! {
     cornell_ply_uniform: CORNELL_PLY, 24, Uniform;
     cornell_ply_resampling: CORNELL_PLY, 24, Resampling;
     cornell_ply_correlated: CORNELL_PLY, 24, Correlated;
+    cornell_ply_subspace: CORNELL_PLY, 24, Subspace;
     veach_mis_harmonic: VEACH_MIS, 32, Harmonic;
     veach_mis_uniform: VEACH_MIS, 32, Uniform;
     veach_mis_resampling: VEACH_MIS, 32, Resampling;
     veach_mis_correlated: VEACH_MIS, 32, Correlated;
+    veach_mis_subspace: VEACH_MIS, 32, Subspace;
     veach_ajar_uniform: VEACH_AJAR, 512, Uniform;
     living_room_harmonic: LIVING_ROOM, 32, Harmonic;
     living_room_resampling: LIVING_ROOM, 32, Resampling;
+    living_room_subspace: LIVING_ROOM, 32, Subspace;
     staircase2_harmonic: STAIRCASE2, 32, Harmonic;
     staircase2_resampling: STAIRCASE2, 32, Resampling;
+    staircase2_subspace: STAIRCASE2, 32, Subspace;
     sunlit_room_harmonic: SUNLIT_ROOM, 16, Harmonic;
     sunlit_room_resampling: SUNLIT_ROOM, 16, Resampling;
+    sunlit_room_subspace: SUNLIT_ROOM, 16, Subspace;
 }
 
 /// `mis` against `uniform` on 30 same-seed pairs of `veach-ajar` renders (80×45, unlimited
@@ -102,4 +107,9 @@ fn harmonic_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
 #[test]
 fn resampling_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
     check_pairs(PcMis::Resampling);
+}
+
+#[test]
+fn subspace_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
+    check_pairs(PcMis::Subspace);
 }

@@ -86,6 +86,10 @@ pub struct Vertex {
     pub flat: bool,
     /// The vertex lies at infinity (see above).
     pub infinite: bool,
+    /// Classes a pool selection gave the vertex, to look up rather than recompute (SPCBPT's
+    /// eye and light subspaces, [`spcbpt::Model::label`]): a cache of a function of the
+    /// vertex's position and shading normal, `None` where none were given.
+    pub classes: Option<[u16; 4]>,
 }
 
 impl Vertex {
@@ -108,6 +112,7 @@ impl Vertex {
             connectible: true,
             flat: true,
             infinite: false,
+            classes: None,
         }
     }
 
@@ -130,6 +135,7 @@ impl Vertex {
             connectible: true,
             flat: true,
             infinite: false,
+            classes: None,
         }
     }
 
@@ -188,6 +194,7 @@ impl Vertex {
             connectible,
             flat: si.shading.n == si.ng,
             infinite: false,
+            classes: None,
         }
     }
 

@@ -79,6 +79,9 @@ pub enum PcMis {
     /// `harmonic`'s counts corrected for the correlation of the `N` connections that share
     /// one camera vertex's prefix ([`super::mis::Correlation`]).
     Correlated,
+    /// SPCBPT only: `n = N M Γ_ij / V_j`, the selection density with the draw within the
+    /// light subspace taken as uniform over its `V_j` vertices (no light throughputs).
+    Subspace,
 }
 
 /// How a draw inverts the blended PMF of a lookup. Both draw from exactly the same
@@ -186,6 +189,9 @@ impl Default for PcOptions {
 impl PcOptions {
     /// Checks the options, naming the one at fault.
     pub fn validate(&self) -> Result<(), String> {
+        if self.mis == PcMis::Subspace {
+            return Err("--pc-mis subspace counts SPCBPT's subspaces: it is an option of --sp-mis".into());
+        }
         if self.light_paths == 0 {
             return Err("--pc-light-paths must be at least 1".into());
         }
@@ -434,7 +440,7 @@ pub(super) fn connection_counts(
     std::array::from_fn(|k| match mis {
         _ if vbar <= 0.0 => 0.0,
         PcMis::Harmonic | PcMis::Correlated => n * concentration[k] / vbar,
-        PcMis::Uniform | PcMis::Resampling => n / vbar,
+        PcMis::Uniform | PcMis::Resampling | PcMis::Subspace => n / vbar,
     })
 }
 

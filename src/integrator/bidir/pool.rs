@@ -233,6 +233,9 @@ pub trait PoolSelection {
     /// What the draws of one camera vertex share.
     type Lookup;
     fn lookup(&self, z: &Vertex) -> Self::Lookup;
+    /// Labels the camera subpath's vertices before their strategies are weighed
+    /// ([`Vertex::classes`]); nothing by default.
+    fn label(&self, _camera: &mut [Vertex]) {}
     /// Draw `k` of `n` for a camera vertex: a connectible pool index and the factor
     /// `1 / (N M P)` of its contribution, or `None` when the draw is wasted.
     fn draw<R: Random>(&self, lookup: &Self::Lookup, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)>;
@@ -310,6 +313,7 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
     ) {
         let (conn, bdpt) = (self.conn, self.bdpt);
         camera_subpath(conn.scene, pos, &bdpt.limits, rng, &mut scratch.camera, counters);
+        select.label(&mut scratch.camera);
         let camera = &scratch.camera;
         // A draw's factor is `1 / (N M P)`; `1 / (V P)` is its factor over this one's.
         let uniform_scale =

@@ -29,7 +29,11 @@
 //! (resampling: the selection density itself, evaluated on the path with the frozen `Γ` and
 //! the previous pool's per-path subspace totals, so that it is a function of the path alone;
 //! the current pool's totals would make a connection's weight depend on the pool that holds
-//! its own light vertex), or harmonic corrected for correlation.
+//! its own light vertex), `N M Γ_ij / V_j` (subspace: the same with the draw within the light
+//! subspace taken as uniform, which needs no light throughputs), or harmonic corrected for
+//! correlation. The two counts that follow the path's subspaces classify two vertices for
+//! every strategy of every weighed path; the camera subpath's and the pool's vertices are
+//! labelled with their subspaces once instead ([`Model::label`]).
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
@@ -45,7 +49,7 @@ use super::pool::{
     concentration_depth, pass_concentration,
 };
 use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability};
-use super::{Sink, Vertex};
+use super::{Sink, Vertex, VertexKind};
 use crate::error::Error;
 use crate::film::Tile;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
@@ -53,7 +57,7 @@ use crate::integrator::{Counters, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use serde::Serialize;
 use std::ops::Range;
 use std::time::Instant;
@@ -86,7 +90,7 @@ impl Default for SpOptions {
             light_subspaces: 64,
             training_iterations: 4,
             uniform: 0.2,
-            mis: PcMis::Harmonic,
+            mis: PcMis::Subspace,
             max_mb: 1024,
             budget_in_training: true,
         }
@@ -161,7 +165,8 @@ impl Model {
         let light_points: Vec<_> = (0..pool.connectible.len())
             .map(|k| {
                 let prefix = pool.prefix(k);
-                light_features(scene, &prefix[prefix.len() - 1], &prefix[prefix.len() - 2])
+                let y = &prefix[prefix.len() - 1];
+                features(scene, y, light_towards(y, &prefix[prefix.len() - 2]))
             })
             .collect();
         let eye = SubspaceTree::build(eye_points, eye);
@@ -196,18 +201,51 @@ impl Model {
         LightSubspaces::new(self.light.len(), &subspace, flux)
     }
 
+    /// Labels `v` with its eye and light subspaces for either side of its shading normal
+    /// ([`Vertex::classes`]), so that the path-dependent MIS counts, which classify every
+    /// vertex of a path for each of its strategies, read them instead.
+    pub fn label(&self, scene: &Scene, v: &mut Vertex) {
+        let n = v.frame.n;
+        let f = [features(scene, v, n), features(scene, v, -n)];
+        let class = |tree: &SubspaceTree, f: &[f32; FEATURES]| tree.classify(f) as u16;
+        v.classes =
+            Some([class(&self.eye, &f[0]), class(&self.eye, &f[1]), class(&self.light, &f[0]), class(&self.light, &f[1])]);
+    }
+
+    /// The subspace in `tree` (0: eye, 1: light) of `v` with its normal turned towards
+    /// `towards`: the label where `v` has one, else the tree's descent.
+    #[inline]
+    fn class(&self, scene: &Scene, tree: usize, v: &Vertex, towards: Vec3) -> usize {
+        match v.classes {
+            Some(c) => c[2 * tree + usize::from(v.frame.n.dot(towards) < 0.0)] as usize,
+            None => [&self.eye, &self.light][tree].classify(&features(scene, v, towards)),
+        }
+    }
+
     /// The eye subspace of camera vertex `z`, its normal turned towards its walk's
     /// previous vertex.
     #[inline]
     pub fn eye_subspace(&self, scene: &Scene, z: &Vertex) -> usize {
-        self.eye.classify(&features(scene, z, z.wo))
+        self.class(scene, 0, z, z.wo)
     }
 
     /// The light subspace of the last vertex of a light subpath `y_0..y_{s-1}` (`s >= 2`).
     #[inline]
     pub fn light_subspace(&self, scene: &Scene, light: &[Vertex]) -> usize {
         let s = light.len();
-        self.light.classify(&light_features(scene, &light[s - 1], &light[s - 2]))
+        self.light_class(scene, &light[s - 1], &light[s - 2])
+    }
+
+    /// The light subspace of light vertex `y` whose predecessor is `prev`.
+    #[inline]
+    fn light_class(&self, scene: &Scene, y: &Vertex, prev: &Vertex) -> usize {
+        self.class(scene, 1, y, light_towards(y, prev))
+    }
+
+    /// The eye subspace of eye vertex `z` whose successor towards the camera is `next`.
+    #[inline]
+    fn eye_class(&self, scene: &Scene, z: &Vertex, next: &Vertex) -> usize {
+        self.class(scene, 0, z, next.p - z.p)
     }
 
     fn megabytes(&self) -> f64 {
@@ -215,16 +253,12 @@ impl Model {
     }
 }
 
-/// Features of light vertex `y` whose predecessor is `prev`: the normal is turned towards
-/// `prev` from their positions (or towards a light at infinity's direction), so that a
-/// path's strategies classify the vertex the same way whichever walk made it.
-fn light_features(scene: &Scene, y: &Vertex, prev: &Vertex) -> [f32; FEATURES] {
-    features(scene, y, if prev.at_infinity() { prev.ng } else { prev.p - y.p })
-}
-
-/// Features of eye vertex `z` whose successor towards the camera is `next`.
-fn eye_features(scene: &Scene, z: &Vertex, next: &Vertex) -> [f32; FEATURES] {
-    features(scene, z, next.p - z.p)
+/// Where light vertex `y` whose predecessor is `prev` turns its normal for its features:
+/// towards `prev` from their positions (or towards a light at infinity's direction), so
+/// that a path's strategies classify the vertex the same way whichever walk made it.
+#[inline]
+fn light_towards(y: &Vertex, prev: &Vertex) -> Vec3 {
+    if prev.at_infinity() { prev.ng } else { prev.p - y.p }
 }
 
 /// What the MIS counts of an iteration take from the one before (and, after training, from
@@ -261,16 +295,26 @@ impl Measured {
 }
 
 /// SPCBPT's strategy counts, relative to one camera sample per pixel: `M/(W·H)` for light
-/// tracing, 1 for `s = 0` and NEE, and for pool connections `N / V̄`, `N κ_t / V̄` or
-/// `N M P(y | z)` (see the module documentation).
+/// tracing, 1 for `s = 0` and NEE, and for pool connections `N / V̄`, `N κ_t / V̄`,
+/// `N M P(y | z)` or `N M Γ_ij / V_j` (see the module documentation).
 pub struct SpCounts<'a> {
     scene: &'a Scene,
     light_trace: f32,
     connect: [f32; CONCENTRATION_DEPTHS],
     connections: f32,
-    /// The model and the per-path subspace totals, for resampling counts.
-    resampling: Option<(&'a Model, &'a Measured)>,
+    /// The model and the per-path subspace totals, for the counts that follow the path's
+    /// subspaces (resampling and subspace), and which of the two.
+    resampling: Option<(&'a Model, &'a Measured, Within)>,
     correlation: Option<Correlation>,
+}
+
+/// What the path-dependent counts take for the draw within the light subspace `j`: the
+/// draw's own `P(y | j)` (resampling), or `1 / V_j`, as if it were uniform over the
+/// subspace's vertices (subspace), which needs no light throughput.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Within {
+    Flux,
+    Uniform,
 }
 
 impl<'a> SpCounts<'a> {
@@ -292,20 +336,37 @@ impl<'a> SpCounts<'a> {
             light_trace: m as f32 / pixels,
             connect,
             connections: n,
-            resampling: (mis == PcMis::Resampling).then_some((model, measured)),
+            // Without connections their counts are all zero, whatever the path.
+            resampling: match mis {
+                _ if n == 0.0 => None,
+                PcMis::Resampling => Some((model, measured, Within::Flux)),
+                PcMis::Subspace => Some((model, measured, Within::Uniform)),
+                _ => None,
+            },
             correlation: (mis == PcMis::Correlated).then_some(Correlation { pixels, connections: n }),
         }
     }
 
-    /// `N M P(y | z)` of the pool connection `s` of `path`, `alpha` the light throughput at
-    /// `y_{s-1}`.
-    fn selection(&self, model: &Model, measured: &Measured, path: &FullPath, s: usize, alpha: Rgb) -> f32 {
+    /// `N M P(y | z)` (or `N M Γ_ij / V_j`) of the pool connection `s` of `path`, `alpha`
+    /// the light throughput at `y_{s-1}` (asked only for `P(y | z)`).
+    #[inline]
+    fn selection(
+        &self,
+        (model, measured, within): (&Model, &Measured, Within),
+        path: &FullPath,
+        s: usize,
+        alpha: impl FnOnce() -> Rgb,
+    ) -> f32 {
         let scene = self.scene;
         let (y, z) = (path.get(s - 1), path.get(s));
-        let i = model.eye.classify(&eye_features(scene, z, path.get(s + 1)));
-        let j = model.light.classify(&light_features(scene, y, path.get(s - 2)));
-        let q = luminance(alpha).max(0.0) as f64;
-        let within = within_probability(q, measured.flux[j], measured.vertices[j]);
+        let i = model.eye_class(scene, z, path.get(s + 1));
+        let j = model.light_class(scene, y, path.get(s - 2));
+        // `M P(y | j)` or `M / V_j`.
+        let within = match within {
+            Within::Flux => within_probability(luminance(alpha()).max(0.0) as f64, measured.flux[j], measured.vertices[j]),
+            Within::Uniform if measured.vertices[j] > 0.0 => 1.0 / measured.vertices[j],
+            Within::Uniform => 0.0,
+        };
         (self.connections as f64 * model.matrix.gamma(i, j) as f64 * within) as f32
     }
 }
@@ -319,9 +380,15 @@ impl SpCounts<'_> {
             (0 | 1, _) => 1.0,
             _ => match self.resampling {
                 None => self.connect[concentration_depth(t)],
-                Some((model, measured)) => self.selection(model, measured, path, s, alpha()),
+                Some(r) => self.selection(r, path, s, alpha),
             },
         }
+    }
+
+    /// Whether the counts follow the path's subspaces, so that its vertices are best
+    /// labelled with them ([`Model::label`]).
+    pub fn labels(&self) -> bool {
+        self.resampling.is_some()
     }
 }
 
@@ -340,7 +407,7 @@ impl StrategyCounts for SpCounts<'_> {
 
     /// Counts of a whole path with one pass for the light throughputs.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
-        let throughputs = self.resampling.is_some();
+        let throughputs = matches!(self.resampling, Some((_, _, Within::Flux)));
         fill_counts(self.scene, path, needed, out, throughputs, |s, t, alpha| {
             self.count_with(path, s, t, || alpha[s - 1])
         });
@@ -354,6 +421,9 @@ struct SubspaceSelection<'a> {
     model: &'a Model,
     subspaces: &'a LightSubspaces,
     paths: f64,
+    /// Whether camera vertices are labelled with their subspaces (for counts that follow
+    /// them).
+    label: bool,
 }
 
 impl PoolSelection for SubspaceSelection<'_> {
@@ -361,6 +431,15 @@ impl PoolSelection for SubspaceSelection<'_> {
 
     fn lookup(&self, z: &Vertex) -> usize {
         self.model.eye_subspace(self.scene, z)
+    }
+
+    /// Every vertex but the camera's, whose subspaces no strategy asks for.
+    fn label(&self, camera: &mut [Vertex]) {
+        if self.label {
+            for z in camera.iter_mut().skip(1) {
+                self.model.label(self.scene, z);
+            }
+        }
     }
 
     #[inline]
@@ -620,10 +699,15 @@ impl Iterative for SpcbptRender {
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
         let traced = self.budget().trace_pool(ctx, &conn, &self.sp.bdpt, first, keep, self.light_paths);
-        let TracedPool { pool, splats, counters, splat_shares, operations, splat_paths } = traced;
+        let TracedPool { mut pool, splats, counters, splat_shares, operations, splat_paths } = traced;
         work.phases.light_pool += t.elapsed().as_secs_f64();
         work.shadow.light_pool += counters.shadow_rays;
         let t = Instant::now();
+        if counts.labels() {
+            for y in pool.vertices.iter_mut().filter(|y| y.kind == VertexKind::Surface) {
+                self.model().label(ctx.scene, y);
+            }
+        }
         let subspaces = self.model().sort_pool(ctx.scene, &pool);
         work.phases.cache += t.elapsed().as_secs_f64();
         let pass = SpPass { pool, subspaces, splat_shares, operations };
@@ -635,8 +719,8 @@ impl Iterative for SpcbptRender {
         let counts = self.counts(scene);
         let conn = Connector { scene, heuristic: self.heuristic, counts: &counts, roulette: None };
         let model = self.model();
-        let select =
-            SubspaceSelection { scene, model, subspaces: &pass.subspaces, paths: pass.pool.paths.max(1) as f64 };
+        let (subspaces, paths) = (&pass.subspaces, pass.pool.paths.max(1) as f64);
+        let select = SubspaceSelection { scene, model, subspaces, paths, label: counts.labels() };
         let budget = self.budget();
         let connections = budget.plan().connections;
         let pool_pass = PoolPass { bdpt: &self.sp.bdpt, connections, conn: &conn, pool: &pass.pool };
@@ -770,7 +854,7 @@ mod tests {
         let scene = scene();
         let (model, pool, subspaces, _) = setup(&scene);
         let select =
-            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64 };
+            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64, label: false };
         let v = pool.connectible.len();
         let mut rng = Sampler::new(&[5]);
         let mut tested = 0;
@@ -818,9 +902,11 @@ mod tests {
         let scene = scene();
         let (model, pool, subspaces, measured) = setup(&scene);
         let select =
-            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64 };
+            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64, label: false };
         let n = 4u32;
         let counts = SpCounts::for_iteration(&scene, PcMis::Resampling, n, pool.paths, &measured, &model);
+        // `subspace` is the same density with the draw within the subspace uniform.
+        let uniform = SpCounts::for_iteration(&scene, PcMis::Subspace, n, pool.paths, &measured, &model);
         let mut rng = Sampler::new(&[6]);
         let (mut checked, mut off) = (0, 0);
         for camera in camera_prefixes(&scene) {
@@ -835,8 +921,41 @@ mod tests {
                 let drawn = 1.0 / f as f64;
                 checked += 1;
                 off += ((count / drawn - 1.0).abs() > 1e-3) as usize;
+                let j = model.light_subspace(&scene, light);
+                let want = n as f64 * model.matrix.gamma(i, j) as f64 * pool.paths as f64 / subspaces.count(j) as f64;
+                let got = uniform.count(&path, light.len(), camera.len()) as f64;
+                off += ((got / want - 1.0).abs() > 1e-3) as usize;
             });
         }
         assert!(checked > 100 && off * 100 <= checked, "{off} of {checked} counts differ from the draws' densities");
+    }
+
+    #[test]
+    fn labels_give_the_subspaces_the_trees_give() {
+        let scene = scene();
+        let (model, pool, _, _) = setup(&scene);
+        let mut vertices: Vec<Vertex> = camera_prefixes(&scene).into_iter().flatten().collect();
+        vertices.extend(pool.vertices.iter().filter(|y| y.kind == VertexKind::Surface));
+        let mut rng = Sampler::new(&[11]);
+        let (mut checked, mut turned, mut swapped_differ) = (0, 0, 0);
+        for v in &vertices {
+            let mut labelled = *v;
+            model.label(&scene, &mut labelled);
+            // Negative control: a label with the normal's two sides swapped.
+            let mut swapped = labelled;
+            swapped.classes = labelled.classes.map(|[a, b, c, d]| [b, a, d, c]);
+            for _ in 0..8 {
+                let towards = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+                turned += (v.frame.n.dot(towards) < 0.0) as usize;
+                for tree in 0..2 {
+                    let want = model.class(&scene, tree, v, towards);
+                    assert_eq!(model.class(&scene, tree, &labelled, towards), want, "tree {tree} towards {towards}");
+                    swapped_differ += (model.class(&scene, tree, &swapped, towards) != want) as usize;
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 2000 && turned > checked / 8, "{checked} classes, {turned} with the normal turned");
+        assert!(swapped_differ > checked / 20, "swapped labels differ in only {swapped_differ} of {checked}");
     }
 }

@@ -359,6 +359,7 @@ fn check_variant(variant: Variant, seed: u64) {
         ("sp harmonic", sp(PcMis::Harmonic)),
         ("sp resampling", sp(PcMis::Resampling)),
         ("sp correlated", sp(PcMis::Correlated)),
+        ("sp subspace", sp(PcMis::Subspace)),
     ];
     assert!(pc_options[0].1.previous.is_none() && pc_options[1].1.previous.is_none());
     assert!((pc_options[1].1.connect[0] / pc_options[0].1.connect[0] - 7.3).abs() < 1e-5);
@@ -386,6 +387,7 @@ fn check_variant(variant: Variant, seed: u64) {
         check_shares(&scene, &x, &pc_options[2].1, "pc resampling");
         check_shares(&scene, &x, &pc_options[4].1, "pc correlated");
         check_shares(&scene, &x, &sp_options[2].1, "sp resampling");
+        check_shares(&scene, &x, &sp_options[4].1, "sp subspace");
         let n = x.len();
         let has_delta = x.iter().any(|v| is_delta_surface(&scene, v));
         with_delta += has_delta as usize;
