@@ -214,12 +214,19 @@ impl Model {
 
     /// The subspace in `tree` (0: eye, 1: light) of `v` with its normal turned towards
     /// `towards`: the label where `v` has one, else the tree's descent.
-    #[inline]
+    /// (Always inlined: called with `towards` through memory, the call waited for it.)
+    #[inline(always)]
     fn class(&self, scene: &Scene, tree: usize, v: &Vertex, towards: Vec3) -> usize {
         match v.classes {
             Some(c) => c[2 * tree + usize::from(v.frame.n.dot(towards) < 0.0)] as usize,
-            None => [&self.eye, &self.light][tree].classify(&features(scene, v, towards)),
+            None => self.classify(scene, tree, v, towards),
         }
+    }
+
+    /// The tree's descent for [`Model::class`], out of line.
+    #[inline(never)]
+    fn classify(&self, scene: &Scene, tree: usize, v: &Vertex, towards: Vec3) -> usize {
+        [&self.eye, &self.light][tree].classify(&features(scene, v, towards))
     }
 
     /// The eye subspace of camera vertex `z`, its normal turned towards its walk's
@@ -237,13 +244,13 @@ impl Model {
     }
 
     /// The light subspace of light vertex `y` whose predecessor is `prev`.
-    #[inline]
+    #[inline(always)]
     fn light_class(&self, scene: &Scene, y: &Vertex, prev: &Vertex) -> usize {
         self.class(scene, 1, y, light_towards(y, prev))
     }
 
     /// The eye subspace of eye vertex `z` whose successor towards the camera is `next`.
-    #[inline]
+    #[inline(always)]
     fn eye_class(&self, scene: &Scene, z: &Vertex, next: &Vertex) -> usize {
         self.class(scene, 0, z, next.p - z.p)
     }
@@ -273,6 +280,8 @@ pub struct Measured {
     flux: Vec<f64>,
     /// `V_j / M` of the pool.
     vertices: Vec<f64>,
+    /// `M / V_j` (zero for an empty subspace).
+    per_vertex: Vec<f64>,
 }
 
 impl Measured {
@@ -285,11 +294,13 @@ impl Measured {
         concentration: [f32; CONCENTRATION_DEPTHS],
     ) -> Measured {
         let m = paths.max(1) as f64;
+        let vertices: Vec<f64> = (0..subspaces.totals.len()).map(|j| subspaces.count(j) as f64 / m).collect();
         Measured {
             vbar,
             concentration,
             flux: subspaces.totals.iter().map(|q| q / m).collect(),
-            vertices: (0..subspaces.totals.len()).map(|j| subspaces.count(j) as f64 / m).collect(),
+            per_vertex: vertices.iter().map(|&v| if v > 0.0 { 1.0 / v } else { 0.0 }).collect(),
+            vertices,
         }
     }
 }
@@ -364,8 +375,7 @@ impl<'a> SpCounts<'a> {
         // `M P(y | j)` or `M / V_j`.
         let within = match within {
             Within::Flux => within_probability(luminance(alpha()).max(0.0) as f64, measured.flux[j], measured.vertices[j]),
-            Within::Uniform if measured.vertices[j] > 0.0 => 1.0 / measured.vertices[j],
-            Within::Uniform => 0.0,
+            Within::Uniform => measured.per_vertex[j],
         };
         (self.connections as f64 * model.matrix.gamma(i, j) as f64 * within) as f32
     }
@@ -433,10 +443,11 @@ impl PoolSelection for SubspaceSelection<'_> {
         self.model.eye_subspace(self.scene, z)
     }
 
-    /// Every vertex but the camera's, whose subspaces no strategy asks for.
+    /// The connectible vertices: no count asks for another's subspaces (the camera's,
+    /// purely specular ones), and one that did would classify it itself.
     fn label(&self, camera: &mut [Vertex]) {
         if self.label {
-            for z in camera.iter_mut().skip(1) {
+            for z in camera.iter_mut().filter(|z| z.kind == VertexKind::Surface && z.is_connectible()) {
                 self.model.label(self.scene, z);
             }
         }
@@ -704,7 +715,7 @@ impl Iterative for SpcbptRender {
         work.shadow.light_pool += counters.shadow_rays;
         let t = Instant::now();
         if counts.labels() {
-            for y in pool.vertices.iter_mut().filter(|y| y.kind == VertexKind::Surface) {
+            for y in pool.vertices.iter_mut().filter(|y| y.kind == VertexKind::Surface && y.is_connectible()) {
                 self.model().label(ctx.scene, y);
             }
         }
