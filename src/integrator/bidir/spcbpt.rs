@@ -37,7 +37,8 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
-    Budget, BudgetMode, CameraSample, Operations, Plan, SPCBPT_PRICES, SplatShares, TileMoments, TracedPool, pool_tile,
+    Budget, BudgetMode, CameraSample, Operations, Plan, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES,
+    SPCBPT_SUBSPACE_PRICES, SplatShares, TileMoments, TracedPool, pool_tile,
 };
 use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
@@ -128,6 +129,16 @@ impl SpOptions {
     }
 
     /// MiB of the matrix (probabilities and running sums).
+    /// The budget's prices: a connection's weight costs more with the counts that follow
+    /// the path's subspaces ([`super::budget::cost`]).
+    fn prices(&self) -> Prices {
+        match self.mis {
+            PcMis::Subspace => SPCBPT_SUBSPACE_PRICES,
+            PcMis::Resampling => SPCBPT_RESAMPLING_PRICES,
+            PcMis::Uniform | PcMis::Harmonic | PcMis::Correlated => SPCBPT_PRICES,
+        }
+    }
+
     fn matrix_mb(&self) -> f64 {
         (self.eye_subspaces * self.light_subspaces * 8) as f64 / (1024.0 * 1024.0)
     }
@@ -208,8 +219,12 @@ impl Model {
         let n = v.frame.n;
         let f = [features(scene, v, n), features(scene, v, -n)];
         let class = |tree: &SubspaceTree, f: &[f32; FEATURES]| tree.classify(f) as u16;
-        v.classes =
-            Some([class(&self.eye, &f[0]), class(&self.eye, &f[1]), class(&self.light, &f[0]), class(&self.light, &f[1])]);
+        v.classes = Some([
+            class(&self.eye, &f[0]),
+            class(&self.eye, &f[1]),
+            class(&self.light, &f[0]),
+            class(&self.light, &f[1]),
+        ]);
     }
 
     /// The subspace in `tree` (0: eye, 1: light) of `v` with its normal turned towards
@@ -374,7 +389,9 @@ impl<'a> SpCounts<'a> {
         let j = model.light_class(scene, y, path.get(s - 2));
         // `M P(y | j)` or `M / V_j`.
         let within = match within {
-            Within::Flux => within_probability(luminance(alpha()).max(0.0) as f64, measured.flux[j], measured.vertices[j]),
+            Within::Flux => {
+                within_probability(luminance(alpha()).max(0.0) as f64, measured.flux[j], measured.vertices[j])
+            }
             Within::Uniform => measured.per_vertex[j],
         };
         (self.connections as f64 * model.matrix.gamma(i, j) as f64 * within) as f32
@@ -680,7 +697,7 @@ impl Iterative for SpcbptRender {
         // The budget measures the last training iterations, or those after `Γ` is trained.
         let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
         let window = budget_window(o, pc.budget_iterations);
-        self.budget = Some(Budget::new(pc, SPCBPT_PRICES, window, plan, w, h, ctx.planned_spp));
+        self.budget = Some(Budget::new(pc, o.prices(), window, plan, w, h, ctx.planned_spp));
         let subspaces = self.model().sort_pool(scene, &pilot);
         self.measured =
             Some(Measured::of_pool(&subspaces, pilot.paths, pilot.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]));
@@ -864,8 +881,13 @@ mod tests {
     fn pool_draws_follow_the_matrix_and_the_flux_chi2() {
         let scene = scene();
         let (model, pool, subspaces, _) = setup(&scene);
-        let select =
-            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64, label: false };
+        let select = SubspaceSelection {
+            scene: &scene,
+            model: &model,
+            subspaces: &subspaces,
+            paths: pool.paths as f64,
+            label: false,
+        };
         let v = pool.connectible.len();
         let mut rng = Sampler::new(&[5]);
         let mut tested = 0;
@@ -912,8 +934,13 @@ mod tests {
         // grazing angle, whose normal may turn the other way when judged from positions).
         let scene = scene();
         let (model, pool, subspaces, measured) = setup(&scene);
-        let select =
-            SubspaceSelection { scene: &scene, model: &model, subspaces: &subspaces, paths: pool.paths as f64, label: false };
+        let select = SubspaceSelection {
+            scene: &scene,
+            model: &model,
+            subspaces: &subspaces,
+            paths: pool.paths as f64,
+            label: false,
+        };
         let n = 4u32;
         let counts = SpCounts::for_iteration(&scene, PcMis::Resampling, n, pool.paths, &measured, &model);
         // `subspace` is the same density with the draw within the subspace uniform.

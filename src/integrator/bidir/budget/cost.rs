@@ -21,7 +21,11 @@ use serde::Serialize;
 /// connection against PCBPT's 0.224–0.233 µs, 1.12 times as much on the means, so
 /// [`SPCBPT_PRICES`] prices its connections 1.12 times PCBPT's. (With a guide table for the
 /// draw within a subspace too it was 1.18 times; with a binary search in each draw
-/// 1.31–1.34 times.)
+/// 1.31–1.34 times.) Its counts that follow the path's subspaces make every connection's
+/// weight dearer: measured so again (seeds 1–3, the camera pass's time per added lookup's
+/// connection, PCBPT twice), 1.42 times PCBPT's with `--sp-mis subspace` and 1.89 times
+/// with `resampling`, against 1.17 times with `harmonic`: [`SPCBPT_SUBSPACE_PRICES`] and
+/// [`SPCBPT_RESAMPLING_PRICES`].
 #[derive(Clone, Copy, Debug)]
 pub struct Prices {
     /// A shadow ray of next-event estimation or light tracing.
@@ -40,6 +44,12 @@ pub const PRICES: Prices = Prices { shadow: 1.15, connection: 1.15, lookup: 0.58
 
 /// SPCBPT's prices: PCBPT's, with its dearer connections.
 pub const SPCBPT_PRICES: Prices = Prices { connection: 1.29, ..PRICES };
+
+/// SPCBPT's prices with `--sp-mis subspace`.
+pub const SPCBPT_SUBSPACE_PRICES: Prices = Prices { connection: 1.63, ..PRICES };
+
+/// SPCBPT's prices with `--sp-mis resampling`.
+pub const SPCBPT_RESAMPLING_PRICES: Prices = Prices { connection: 2.17, ..PRICES };
 
 /// Operations one iteration performed, summed over the measured iterations.
 #[derive(Clone, Copy, Debug, Default, Serialize)]

@@ -77,7 +77,7 @@
 pub mod cost;
 pub mod measure;
 
-pub use cost::{Operations, PRICES, Prices, SPCBPT_PRICES};
+pub use cost::{Operations, PRICES, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES, SPCBPT_SUBSPACE_PRICES};
 pub use measure::{BudgetSink, Realized, SplatShares, Spread, TileMoments, Top};
 use measure::{RealizedSums, Weighing, accumulate, own_moment, typical};
 
