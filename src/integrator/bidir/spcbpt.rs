@@ -857,6 +857,16 @@ mod tests {
         (model, pool, subspaces, measured)
     }
 
+    /// The draws over `pool`, its camera vertices unlabelled.
+    fn selection<'a>(
+        scene: &'a Scene,
+        model: &'a Model,
+        subspaces: &'a LightSubspaces,
+        pool: &LightPool,
+    ) -> SubspaceSelection<'a> {
+        SubspaceSelection { scene, model, subspaces, paths: pool.paths as f64, label: false }
+    }
+
     /// Camera vertices `z_1, z_2` of a few camera subpaths, with their prefixes.
     fn camera_prefixes(scene: &Scene) -> Vec<Vec<Vertex>> {
         let limits = WalkLimits::new(8, 3);
@@ -881,13 +891,7 @@ mod tests {
     fn pool_draws_follow_the_matrix_and_the_flux_chi2() {
         let scene = scene();
         let (model, pool, subspaces, _) = setup(&scene);
-        let select = SubspaceSelection {
-            scene: &scene,
-            model: &model,
-            subspaces: &subspaces,
-            paths: pool.paths as f64,
-            label: false,
-        };
+        let select = selection(&scene, &model, &subspaces, &pool);
         let v = pool.connectible.len();
         let mut rng = Sampler::new(&[5]);
         let mut tested = 0;
@@ -934,13 +938,7 @@ mod tests {
         // grazing angle, whose normal may turn the other way when judged from positions).
         let scene = scene();
         let (model, pool, subspaces, measured) = setup(&scene);
-        let select = SubspaceSelection {
-            scene: &scene,
-            model: &model,
-            subspaces: &subspaces,
-            paths: pool.paths as f64,
-            label: false,
-        };
+        let select = selection(&scene, &model, &subspaces, &pool);
         let n = 4u32;
         let counts = SpCounts::for_iteration(&scene, PcMis::Resampling, n, pool.paths, &measured, &model);
         // `subspace` is the same density with the draw within the subspace uniform.
