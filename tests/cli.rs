@@ -440,6 +440,8 @@ fn pcbpt_cache_over_the_memory_limit_is_refused_and_bad_options_are_named() {
         ("--pc-budget-iterations", "1"),
         ("--pc-budget-smoothing", "65"),
         ("--pc-neighbours", "40"),
+        // SPCBPT's own counts.
+        ("--pc-mis", "subspace"),
     ] {
         let o = run(&[flag, value]);
         let err = String::from_utf8_lossy(&o.stderr);
