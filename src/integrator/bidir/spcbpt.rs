@@ -128,7 +128,6 @@ impl SpOptions {
         Ok(())
     }
 
-    /// MiB of the matrix (probabilities and running sums).
     /// The budget's prices: a connection's weight costs more with the counts that follow
     /// the path's subspaces ([`super::budget::cost`]).
     fn prices(&self) -> Prices {
@@ -139,6 +138,7 @@ impl SpOptions {
         }
     }
 
+    /// MiB of the matrix (probabilities and running sums).
     fn matrix_mb(&self) -> f64 {
         (self.eye_subspaces * self.light_subspaces * 8) as f64 / (1024.0 * 1024.0)
     }
@@ -225,6 +225,15 @@ impl Model {
             class(&self.light, &f[0]),
             class(&self.light, &f[1]),
         ]);
+    }
+
+    /// Labels the connectible surface vertices of `vertices` ([`Model::label`]): no count
+    /// asks for another's subspaces (an endpoint's, a purely specular vertex's), and one
+    /// that did would classify it itself.
+    pub fn label_connectible(&self, scene: &Scene, vertices: &mut [Vertex]) {
+        for v in vertices.iter_mut().filter(|v| v.kind == VertexKind::Surface && v.is_connectible()) {
+            self.label(scene, v);
+        }
     }
 
     /// The subspace in `tree` (0: eye, 1: light) of `v` with its normal turned towards
@@ -460,13 +469,9 @@ impl PoolSelection for SubspaceSelection<'_> {
         self.model.eye_subspace(self.scene, z)
     }
 
-    /// The connectible vertices: no count asks for another's subspaces (the camera's,
-    /// purely specular ones), and one that did would classify it itself.
     fn label(&self, camera: &mut [Vertex]) {
         if self.label {
-            for z in camera.iter_mut().filter(|z| z.kind == VertexKind::Surface && z.is_connectible()) {
-                self.model.label(self.scene, z);
-            }
+            self.model.label_connectible(self.scene, camera);
         }
     }
 
@@ -732,9 +737,7 @@ impl Iterative for SpcbptRender {
         work.shadow.light_pool += counters.shadow_rays;
         let t = Instant::now();
         if counts.labels() {
-            for y in pool.vertices.iter_mut().filter(|y| y.kind == VertexKind::Surface && y.is_connectible()) {
-                self.model().label(ctx.scene, y);
-            }
+            self.model().label_connectible(ctx.scene, &mut pool.vertices);
         }
         let subspaces = self.model().sort_pool(ctx.scene, &pool);
         work.phases.cache += t.elapsed().as_secs_f64();
