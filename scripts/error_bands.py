@@ -13,6 +13,11 @@ With `--region NAME=X0:X1,Y0:Y1` (pixel ranges, end excluded; repeatable) it als
 each region's share of the relMSE: the sum of its pixels' terms over the whole image's pixel
 count, so that the shares and the rest add up to the relMSE.
 
+With `--blocks N` it also prints, per block of N x N pixels, the ratio of the test image's
+luminance to the reference's (where a Metropolis image lacks light in a region, the rest of
+the image is brighter by as much: its total is fixed), and the relMSE over the image
+downsampled to 8x8 and 16x16 blocks.
+
     pip install mitsuba numpy
     python3 scripts/error_bands.py REFERENCE.exr TEST.exr [TEST.exr ...] [--region NAME=X0:X1,Y0:Y1 ...]
 """
@@ -55,6 +60,7 @@ def main():
     ap.add_argument("reference")
     ap.add_argument("tests", nargs="+")
     ap.add_argument("--region", type=parse_region, action="append", default=[], metavar="NAME=X0:X1,Y0:Y1")
+    ap.add_argument("--blocks", type=int, default=0, metavar="N")
     a = ap.parse_args()
     ref = load(a.reference)
     lum = ref @ np.array([0.2126, 0.7152, 0.0722])
@@ -75,6 +81,13 @@ def main():
             shares = [(name, per_pixel[r].sum() / per_pixel.size) for name, r in a.region]
             rest = per_pixel.mean() - sum(v for _, v in shares)
             print("  " + ", ".join(f"{name} {v:.5f}" for name, v in shares) + f", rest {rest:.5f}")
+        if a.blocks > 0:
+            weights = np.array([0.2126, 0.7152, 0.0722])
+            ratio = (boxed(t, a.blocks) @ weights) / (boxed(ref, a.blocks) @ weights)
+            print(f"  8x8 {relmse(boxed(t, 8), boxed(ref, 8)):.5f}, 16x16 {relmse(boxed(t, 16), boxed(ref, 16)):.5f}")
+            print(f"  luminance against the reference per {a.blocks}x{a.blocks} block:")
+            for row in ratio:
+                print("   " + " ".join(f"{v:.2f}" for v in row))
 
 
 if __name__ == "__main__":

@@ -106,6 +106,8 @@ pub struct MethodEntry {
     pub caustic_perturbation: Option<bool>,
     pub multichain_perturbation: Option<bool>,
     pub independent_mutation: Option<bool>,
+    pub independent_defensive: Option<f64>,
+    pub learned_starts: Option<bool>,
     pub lambda: Option<f64>,
     pub theta_diff: Option<f64>,
     pub chains: Option<usize>,
@@ -282,6 +284,12 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.independent_mutation {
         o.mlt.independent_mutation = x;
+    }
+    if let Some(x) = m.independent_defensive {
+        o.mlt.independent_defensive = x;
+    }
+    if let Some(x) = m.learned_starts {
+        o.mlt.learned_starts = x;
     }
     if let Some(x) = m.lambda {
         o.mlt.lambda = x;

@@ -184,6 +184,16 @@ struct RenderArgs {
     /// bidirectional generator, Kelemen's large step in path space; not Mitsuba 0.6's).
     #[arg(long, default_value_t = MltOptions::default().independent_mutation, action = clap::ArgAction::Set)]
     independent_mutation: bool,
+    /// MEMLT: the share of the independent mutation's path lengths and splits drawn as the
+    /// start paths' generator draws them (length ∝ 2^-k, split uniform); the rest follow
+    /// what each length and split found among the start-path candidates. 1: all uniform.
+    #[arg(long, default_value_t = MltOptions::default().independent_defensive)]
+    independent_defensive: f64,
+    /// MEMLT: draw the chains' start paths from a second set of candidates made by the
+    /// learned generator of the independent mutation (their weights spread less), instead of
+    /// the first set (lengths ∝ 2^-k, uniform splits).
+    #[arg(long, default_value_t = MltOptions::default().learned_starts, action = clap::ArgAction::Set)]
+    learned_starts: bool,
     /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's peak
     /// density is the current direction's scattering density times λ²).
     #[arg(long, default_value_t = MltOptions::default().lambda)]
@@ -552,6 +562,8 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         caustic_perturbation: a.caustic_perturbation,
         multichain_perturbation: a.multichain_perturbation,
         independent_mutation: a.independent_mutation,
+        independent_defensive: a.independent_defensive,
+        learned_starts: a.learned_starts,
         manifold_perturbation: a.manifold_perturbation,
         lambda: a.lambda,
         theta_diff: a.theta_diff,
@@ -656,10 +668,12 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
             .collect();
         eprintln!(
-            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors, {} moved the light point, {} the line light from infinity arrives along; bootstrap {:.2} s",
+            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}, effective {:.0} of {}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors, {} moved the light point, {} the line light from infinity arrives along; bootstrap {:.2} s",
             m.normalisation,
             m.normalisation_error,
             m.seed_normalisation,
+            m.start_ess,
+            m.start_candidates,
             m.chains,
             m.mutations,
             m.mutations_per_second / 1e6,

@@ -67,6 +67,14 @@ pub struct MltOptions {
     pub multichain_perturbation: bool,
     pub manifold_perturbation: bool,
     pub independent_mutation: bool,
+    /// MEMLT: the share of the independent mutation's lengths and splits drawn as the start
+    /// paths' generator draws them (the rest in proportion to what each found among the
+    /// start-path candidates; 1: all as the start paths').
+    pub independent_defensive: f64,
+    /// MEMLT: the chains' start paths are drawn from a second set of candidates, made by the
+    /// independent mutation's learned generator (whose weights spread less), instead of the
+    /// first set, made by lengths `∝ 2^-k` and uniform splits.
+    pub learned_starts: bool,
     /// MEMLT: how much sharper than the current direction's scattering density the manifold
     /// perturbation's von Mises–Fisher lobe is (its peak density is that density times
     /// `λ²`; an area light's point moved by the perturbation gets a Gaussian whose peak is
@@ -125,6 +133,8 @@ impl Default for MltOptions {
             caustic_perturbation: true,
             multichain_perturbation: true,
             independent_mutation: false,
+            independent_defensive: 0.2,
+            learned_starts: false,
             manifold_perturbation: true,
             lambda: 50.0,
             theta_diff: 5.0,

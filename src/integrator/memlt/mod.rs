@@ -6,7 +6,9 @@
 //! many independent paths of the bidirectional generator (a length, then every vertex
 //! regenerated: [`bidirectional`]'s whole-path move), each chain's drawn in proportion to
 //! `f / p`; their mean is a second, independent estimate of `b` (`seed_normalisation` in the
-//! statistics). Each step proposes a mutation chosen uniformly among the mutators that suit
+//! statistics). What each length and split of the generator found among them teaches the
+//! independent mutation's generator ([`independent::Strategies`]); with `--learned-starts`
+//! a second set of candidates from that generator gives the starts. Each step proposes a mutation chosen uniformly among the mutators that suit
 //! the current path, accepts it with probability `min(1, f(y) T(y→x) / f(x) T(x→y))` on
 //! luminances, and splats both paths with their expected weights. `--chains` chains (64),
 //! each with its own seed, run the same number of mutations; the worker threads splat them
@@ -37,6 +39,7 @@ use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
 use crate::scene::Scene;
 use bidirectional::Lengths;
+use independent::Strategies;
 use path::Measured;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -117,6 +120,11 @@ pub struct MemltStats {
     pub normalisation_error: f64,
     /// `b` from the start-path candidates (an independent check of the path densities).
     pub seed_normalisation: f64,
+    /// The effective sample size `(Σw)² / Σw²` of the start-path candidates' weights `f / p`
+    /// (of `--bootstrap` candidates): how many distinct paths the chains' starts are drawn
+    /// from, in effect.
+    pub start_ess: f64,
+    pub start_candidates: usize,
     pub bootstrap_samples: u64,
     pub chains: usize,
     pub mutations: u64,
@@ -155,40 +163,47 @@ fn seed_length_pmf(lengths: Lengths, k: usize) -> f64 {
     0.5f64.powi((k - lengths.min) as i32) / norm
 }
 
-/// An independent path: a length, a split, every vertex regenerated from the light and the
-/// pinhole. The path, its contribution and its density.
+/// An independent path: a length and a split from `strategies`, every vertex regenerated
+/// from the light and the pinhole. The path, its contribution and its density.
 pub fn independent_path<R: Random>(
     scene: &Scene,
     lengths: Lengths,
+    strategies: &Strategies,
     rng: &mut R,
     counters: &mut Counters,
 ) -> Option<(Vec<Vertex>, Measured, f64)> {
+    generated_path(scene, lengths, strategies, rng, counters).map(|(y, m, p, _)| (y, m, p))
+}
+
+/// [`independent_path`], with the length and split it drew.
+fn generated_path<R: Random>(
+    scene: &Scene,
+    lengths: Lengths,
+    strategies: &Strategies,
+    rng: &mut R,
+    counters: &mut Counters,
+) -> Option<(Vec<Vertex>, Measured, f64, (usize, usize))> {
     let u = rng.next_1d() as f64;
-    let mut acc = 0.0;
-    let mut k = lengths.min;
-    for n in lengths.min..=lengths.max {
-        acc += seed_length_pmf(lengths, n);
-        k = n;
-        if u < acc {
-            break;
-        }
-    }
-    let s = ((rng.next_1d() * (k + 1) as f32) as usize).min(k);
+    let (k, s) = strategies.sample(u, rng.next_1d());
     let camera = Vertex::camera(scene.camera.position);
     let y = path::regenerate(scene, &[], std::slice::from_ref(&camera), s, k - s, rng, counters)?;
     if !lengths.covers(&y) {
         return None;
     }
     let m = path::contribution(scene, &y)?;
-    let p = whole_path_density(scene, lengths, &y);
-    (p > 0.0).then_some((y, m, p))
+    let p = whole_path_density(scene, strategies, &y);
+    (p > 0.0).then_some((y, m, p, (k, s)))
 }
 
-/// The density with which [`independent_path`] generates path `x` (0 for a length it never
-/// draws).
-pub fn whole_path_density(scene: &Scene, lengths: Lengths, x: &[Vertex]) -> f64 {
+/// The density with which [`independent_path`] generates path `x` from `strategies` (0 for a
+/// length it never draws).
+pub fn whole_path_density(scene: &Scene, strategies: &Strategies, x: &[Vertex]) -> f64 {
     let k = x.len() - 1;
-    seed_length_pmf(lengths, k) * path::stretch_density(scene, x, 0, k)
+    let l = strategies.length(k);
+    if l <= 0.0 {
+        return 0.0;
+    }
+    l * strategies.over_splits(k, &path::split_densities(scene, x, 0, k))
 }
 
 /// Scalar contribution of a path: its luminance (zero when not positive and finite).
@@ -236,6 +251,8 @@ struct StepSettings<'a> {
     theta_diff: f64,
     /// Two-stage Metropolis: the first stage's map.
     importance: Option<&'a Importance>,
+    /// The independent mutation's generator.
+    strategies: &'a Strategies,
 }
 
 impl Chain {
@@ -272,7 +289,7 @@ impl Chain {
             Mutator::Manifold => {
                 manifold_perturbation::propose(scene, x, (set.lambda, set.theta_diff), rng, c, &mut self.walks)
             }
-            Mutator::Independent => independent::propose(scene, x, lengths, rng, c),
+            Mutator::Independent => independent::propose(scene, x, lengths, set.strategies, rng, c),
         };
         self.proposed[m as usize] += 1;
         let (a, proposal) = match proposal {
@@ -318,6 +335,44 @@ impl Chain {
             self.accepted[m as usize] += 1;
         }
     }
+}
+
+/// `n` start-path candidates from `strategies` (streams `key(i)`): each one's weight `f / p`
+/// (0 where the generator failed) with the length and split it drew.
+fn candidates(
+    scene: &Scene,
+    pool: &rayon::ThreadPool,
+    lengths: Lengths,
+    strategies: &Strategies,
+    importance: Option<&Importance>,
+    n: usize,
+    key: &(dyn Fn(u64) -> Vec<u64> + Sync),
+) -> (Vec<(f32, (usize, usize))>, Counters) {
+    let chunk = 1024usize;
+    let parts: Vec<(Vec<(f32, (usize, usize))>, Counters)> = pool.install(|| {
+        (0..n.div_ceil(chunk))
+            .into_par_iter()
+            .map(|c| {
+                crate::accel::embree::set_flush_denormals();
+                let mut counters = Counters::default();
+                let ws = (c * chunk..((c + 1) * chunk).min(n))
+                    .map(|i| {
+                        let mut rng = Sampler::new(&key(i as u64));
+                        generated_path(scene, lengths, strategies, &mut rng, &mut counters)
+                            .map_or((0.0, (0, 0)), |(_, m, p, ks)| ((target(&m, importance) / p) as f32, ks))
+                    })
+                    .collect();
+                (ws, counters)
+            })
+            .collect()
+    });
+    let mut all = Vec::with_capacity(n);
+    let mut counters = Counters::default();
+    for (ws, c) in parts {
+        all.extend(ws);
+        counters += c;
+    }
+    (all, counters)
 }
 
 const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
@@ -406,6 +461,10 @@ pub fn render(
     if !(lambda.is_finite() && lambda > 0.0) {
         return Err(Error::Usage(format!("--lambda must be a positive number, got {lambda}")));
     }
+    let defensive = opts.mlt.independent_defensive;
+    if !(0.0..=1.0).contains(&defensive) {
+        return Err(Error::Usage(format!("--independent-defensive must be a share from 0 to 1, got {defensive}")));
+    }
     let theta_diff = opts.mlt.theta_diff;
     if !(0.0..=180.0).contains(&theta_diff) {
         return Err(Error::Usage(format!("--theta-diff must be an angle from 0 to 180 degrees, got {theta_diff}")));
@@ -491,36 +550,45 @@ pub fn render(
     counters += c;
     // The direct light's image, beside which two-stage Metropolis scales the chains' part.
     let rescale = importance.map(|_| (base.develop(), mean_luminance.0));
-    // Start-path candidates and their weights f / p.
-    let chunk = 1024usize;
-    let parts: Vec<(Vec<f32>, Counters)> = pool.install(|| {
-        (0..n_boot.div_ceil(chunk))
-            .into_par_iter()
-            .map(|c| {
-                crate::accel::embree::set_flush_denormals();
-                let mut counters = Counters::default();
-                let ws = (c * chunk..((c + 1) * chunk).min(n_boot))
-                    .map(|i| {
-                        let mut rng = Sampler::new(&key(SEED_STREAM, i as u64));
-                        independent_path(scene, lengths, &mut rng, &mut counters)
-                            .map_or(0.0, |(_, m, p)| (target(&m, importance) / p) as f32)
-                    })
-                    .collect();
-                (ws, counters)
-            })
-            .collect()
-    });
-    let mut weights = Vec::with_capacity(n_boot);
-    for (ws, c) in parts {
-        weights.extend(ws);
-        counters += c;
+    // Start-path candidates and their weights f / p: a first set from the start paths'
+    // generator teaches the independent generator's lengths and splits, a second set from
+    // that one gives the starts (their weights spread less).
+    let uniform = Strategies::uniform(lengths);
+    let (first, c) = candidates(scene, &pool, lengths, &uniform, importance, n_boot, &|i| key(SEED_STREAM, i));
+    counters += c;
+    let mut found = vec![Vec::new(); lengths.max + 1 - lengths.min];
+    for &(w, (k, s)) in &first {
+        if w > 0.0 {
+            let row: &mut Vec<f64> = &mut found[k - lengths.min];
+            row.resize(row.len().max(k + 1), 0.0);
+            row[s] += w as f64;
+        }
     }
+    let strategies = Strategies::learned(lengths, &found, defensive);
+    let second = opts.mlt.learned_starts;
+    let (starts, start_key): (&Strategies, Box<dyn Fn(u64) -> Vec<u64> + Sync>) = if second {
+        (&strategies, Box::new(|i| key(SEED_STREAM ^ 2, i)))
+    } else {
+        (&uniform, Box::new(|i| key(SEED_STREAM, i)))
+    };
+    let weights: Vec<f32> = if second {
+        let (second, c) = candidates(scene, &pool, lengths, starts, importance, n_boot, &*start_key);
+        counters += c;
+        second.into_iter().map(|(w, _)| w).collect()
+    } else {
+        first.into_iter().map(|(w, _)| w).collect()
+    };
+    // The candidates' effective sample size `(Σw)² / Σw²`.
+    let (sum, squares) = weights.iter().fold((0.0f64, 0.0f64), |(a, b), &w| (a + w as f64, b + w as f64 * w as f64));
+    let start_ess = if squares > 0.0 { sum * sum / squares } else { 0.0 };
     let seed_b = weights.iter().map(|&x| x as f64).sum::<f64>() / n_boot as f64;
     let bootstrap_seconds = start.elapsed().as_secs_f64();
     let mut stats = MemltStats {
         normalisation: b,
         normalisation_error: b_error,
         seed_normalisation: seed_b,
+        start_ess,
+        start_candidates: n_boot,
         bootstrap_samples: (n_boot * boot_batches) as u64,
         chains: opts.mlt.chains,
         bootstrap_seconds,
@@ -541,9 +609,9 @@ pub fn render(
         for i in 0..opts.mlt.chains as u64 {
             let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
             let (j, _) = dist.sample(pick.next_1d());
-            let mut rng = Sampler::new(&key(SEED_STREAM, j as u64));
+            let mut rng = Sampler::new(&start_key(j as u64));
             let mut c = Counters::default();
-            let (path, current, _) = independent_path(scene, lengths, &mut rng, &mut c)
+            let (path, current, _) = independent_path(scene, lengths, starts, &mut rng, &mut c)
                 .ok_or_else(|| Error::Usage("a start path could not be regenerated".into()))?;
             chains.push(Chain {
                 rng: Sampler::new(&key(CHAIN_STREAM ^ 1, i)),
@@ -571,6 +639,7 @@ pub fn render(
             lambda: opts.mlt.lambda,
             theta_diff: opts.mlt.theta_diff.to_radians(),
             importance,
+            strategies: &strategies,
         };
         (done, interrupted) = super::run_chains(
             &pool,
