@@ -73,7 +73,8 @@ pub struct MltOptions {
     pub independent_defensive: f64,
     /// MEMLT: the chains' start paths are drawn from a second set of candidates, made by the
     /// independent mutation's learned generator (whose weights spread less), instead of the
-    /// first set, made by lengths `∝ 2^-k` and uniform splits.
+    /// first set, made by lengths `∝ 2^-k` and uniform splits (on by default: less relMSE on
+    /// `glass-caustic` and `veach-ajar`, BENCHMARKS.md).
     pub learned_starts: bool,
     /// MEMLT: how much sharper than the current direction's scattering density the manifold
     /// perturbation's von Mises–Fisher lobe is (its peak density is that density times
@@ -134,7 +135,7 @@ impl Default for MltOptions {
             multichain_perturbation: true,
             independent_mutation: false,
             independent_defensive: 0.2,
-            learned_starts: false,
+            learned_starts: true,
             manifold_perturbation: true,
             lambda: 50.0,
             theta_diff: 5.0,

@@ -175,6 +175,9 @@ pub fn independent_path<R: Random>(
     generated_path(scene, lengths, strategies, rng, counters).map(|(y, m, p, _)| (y, m, p))
 }
 
+/// A path's length in edges and its split (the vertices walked from the light).
+type Split = (usize, usize);
+
 /// [`independent_path`], with the length and split it drew.
 fn generated_path<R: Random>(
     scene: &Scene,
@@ -182,7 +185,7 @@ fn generated_path<R: Random>(
     strategies: &Strategies,
     rng: &mut R,
     counters: &mut Counters,
-) -> Option<(Vec<Vertex>, Measured, f64, (usize, usize))> {
+) -> Option<(Vec<Vertex>, Measured, f64, Split)> {
     let u = rng.next_1d() as f64;
     let (k, s) = strategies.sample(u, rng.next_1d());
     let camera = Vertex::camera(scene.camera.position);
@@ -347,9 +350,9 @@ fn candidates(
     importance: Option<&Importance>,
     n: usize,
     key: &(dyn Fn(u64) -> Vec<u64> + Sync),
-) -> (Vec<(f32, (usize, usize))>, Counters) {
+) -> (Vec<(f32, Split)>, Counters) {
     let chunk = 1024usize;
-    let parts: Vec<(Vec<(f32, (usize, usize))>, Counters)> = pool.install(|| {
+    let parts: Vec<(Vec<(f32, Split)>, Counters)> = pool.install(|| {
         (0..n.div_ceil(chunk))
             .into_par_iter()
             .map(|c| {
@@ -429,6 +432,7 @@ fn rescaled(image: Vec<Rgb>, direct: &[Rgb], luminance: f64) -> (Vec<Rgb>, f64) 
     (image, s)
 }
 const SEED_STREAM: u64 = 0x7365_6564;
+const LEARNED_SEED_STREAM: u64 = SEED_STREAM ^ 2;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 const DIRECT_STREAM: u64 = 0x6469_7265;
 
@@ -566,13 +570,10 @@ pub fn render(
     }
     let strategies = Strategies::learned(lengths, &found, defensive);
     let second = opts.mlt.learned_starts;
-    let (starts, start_key): (&Strategies, Box<dyn Fn(u64) -> Vec<u64> + Sync>) = if second {
-        (&strategies, Box::new(|i| key(SEED_STREAM ^ 2, i)))
-    } else {
-        (&uniform, Box::new(|i| key(SEED_STREAM, i)))
-    };
+    let (starts, start_stream) = if second { (&strategies, LEARNED_SEED_STREAM) } else { (&uniform, SEED_STREAM) };
+    let start_key = |i: u64| key(start_stream, i);
     let weights: Vec<f32> = if second {
-        let (second, c) = candidates(scene, &pool, lengths, starts, importance, n_boot, &*start_key);
+        let (second, c) = candidates(scene, &pool, lengths, starts, importance, n_boot, &start_key);
         counters += c;
         second.into_iter().map(|(w, _)| w).collect()
     } else {
