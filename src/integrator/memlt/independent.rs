@@ -23,6 +23,9 @@ use crate::integrator::bidir::Vertex;
 use crate::sampling::Random;
 use crate::scene::Scene;
 
+/// A path's length `k` in edges and its split `s` (the vertices walked from the light).
+pub type Split = (usize, usize);
+
 /// The generator's probabilities of a length `k` (in edges) and a split `s` (light-side
 /// vertices walked, `0..=k`).
 #[derive(Clone, Debug)]
@@ -72,6 +75,20 @@ impl Strategies {
         Strategies { min: lengths.min, length, split: Some(split) }
     }
 
+    /// [`Strategies::learned`] from candidates of the start paths' generator: each one's
+    /// weight `f / p` (0 where it found nothing) with the length and split it drew.
+    pub fn from_candidates(lengths: Lengths, candidates: &[(f32, Split)], defensive: f64) -> Self {
+        let mut found = vec![Vec::new(); lengths.max + 1 - lengths.min];
+        for &(w, (k, s)) in candidates {
+            if w > 0.0 {
+                let row: &mut Vec<f64> = &mut found[k - lengths.min];
+                row.resize(row.len().max(k + 1), 0.0);
+                row[s] += w as f64;
+            }
+        }
+        Self::learned(lengths, &found, defensive)
+    }
+
     /// The probability of length `k` (0 outside the generator's lengths).
     pub fn length(&self, k: usize) -> f64 {
         k.checked_sub(self.min).and_then(|i| self.length.get(i)).copied().unwrap_or(0.0)
@@ -103,7 +120,7 @@ impl Strategies {
     }
 
     /// A length and a split from two uniform numbers.
-    pub fn sample(&self, u: f64, v: f32) -> (usize, usize) {
+    pub fn sample(&self, u: f64, v: f32) -> Split {
         let mut acc = 0.0;
         let mut k = self.min;
         for (i, p) in self.length.iter().enumerate() {

@@ -39,7 +39,7 @@ use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
 use crate::scene::Scene;
 use bidirectional::Lengths;
-use independent::Strategies;
+use independent::{Split, Strategies};
 use path::Measured;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -174,9 +174,6 @@ pub fn independent_path<R: Random>(
 ) -> Option<(Vec<Vertex>, Measured, f64)> {
     generated_path(scene, lengths, strategies, rng, counters).map(|(y, m, p, _)| (y, m, p))
 }
-
-/// A path's length in edges and its split (the vertices walked from the light).
-type Split = (usize, usize);
 
 /// [`independent_path`], with the length and split it drew.
 fn generated_path<R: Random>(
@@ -560,15 +557,7 @@ pub fn render(
     let uniform = Strategies::uniform(lengths);
     let (first, c) = candidates(scene, &pool, lengths, &uniform, importance, n_boot, &|i| key(SEED_STREAM, i));
     counters += c;
-    let mut found = vec![Vec::new(); lengths.max + 1 - lengths.min];
-    for &(w, (k, s)) in &first {
-        if w > 0.0 {
-            let row: &mut Vec<f64> = &mut found[k - lengths.min];
-            row.resize(row.len().max(k + 1), 0.0);
-            row[s] += w as f64;
-        }
-    }
-    let strategies = Strategies::learned(lengths, &found, defensive);
+    let strategies = Strategies::from_candidates(lengths, &first, defensive);
     let second = opts.mlt.learned_starts;
     let (starts, start_stream) = if second { (&strategies, LEARNED_SEED_STREAM) } else { (&uniform, SEED_STREAM) };
     let start_key = |i: u64| key(start_stream, i);
