@@ -26,6 +26,9 @@ import sys
 
 import numpy as np
 
+# Rec. 709 luminance weights of linear RGB.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
 
 def load(path):
     import mitsuba as mi
@@ -63,7 +66,7 @@ def main():
     ap.add_argument("--blocks", type=int, default=0, metavar="N")
     a = ap.parse_args()
     ref = load(a.reference)
-    lum = ref @ np.array([0.2126, 0.7152, 0.0722])
+    lum = ref @ LUMINANCE
     band = np.digitize(lum, np.quantile(lum, [0.25, 0.5, 0.75]))
     print("image: relMSE, 2x2, 4x4, quarters by luminance (darkest first), mean ratio")
     for path in a.tests:
@@ -82,8 +85,7 @@ def main():
             rest = per_pixel.mean() - sum(v for _, v in shares)
             print("  " + ", ".join(f"{name} {v:.5f}" for name, v in shares) + f", rest {rest:.5f}")
         if a.blocks > 0:
-            weights = np.array([0.2126, 0.7152, 0.0722])
-            ratio = (boxed(t, a.blocks) @ weights) / (boxed(ref, a.blocks) @ weights)
+            ratio = (boxed(t, a.blocks) @ LUMINANCE) / (boxed(ref, a.blocks) @ LUMINANCE)
             print(f"  8x8 {relmse(boxed(t, 8), boxed(ref, 8)):.5f}, 16x16 {relmse(boxed(t, 16), boxed(ref, 16)):.5f}")
             print(f"  luminance against the reference per {a.blocks}x{a.blocks} block:")
             for row in ratio:

@@ -105,12 +105,12 @@ impl Strategies {
         }
     }
 
-    /// The mixture of a path's split densities `d` (of length `k`) by the splits'
-    /// probabilities.
-    pub fn over_splits(&self, k: usize, d: &[f64]) -> f64 {
+    /// The mixture of a path's split densities `d` (of length `k`, split 0 first) by the
+    /// splits' probabilities.
+    pub fn over_splits(&self, k: usize, d: impl Iterator<Item = f64>) -> f64 {
         match &self.split {
-            None => d.iter().sum::<f64>() / (k + 1) as f64,
-            Some(_) => d.iter().enumerate().map(|(s, p)| self.split(k, s) * p).sum(),
+            None => d.sum::<f64>() / (k + 1) as f64,
+            Some(_) => d.enumerate().map(|(s, p)| self.split(k, s) * p).sum(),
         }
     }
 

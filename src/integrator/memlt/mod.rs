@@ -8,9 +8,10 @@
 //! `f / p`; their mean is a second, independent estimate of `b` (`seed_normalisation` in the
 //! statistics). What each length and split of the generator found among them teaches the
 //! independent mutation's generator ([`independent::Strategies`]); with `--learned-starts`
-//! a second set of candidates from that generator gives the starts. Each step proposes a mutation chosen uniformly among the mutators that suit
-//! the current path, accepts it with probability `min(1, f(y) T(y→x) / f(x) T(x→y))` on
-//! luminances, and splats both paths with their expected weights. `--chains` chains (64),
+//! (the default) a second set of candidates from that generator gives the starts. Each step
+//! proposes a mutation chosen uniformly among the mutators that suit the current path,
+//! accepts it with probability `min(1, f(y) T(y→x) / f(x) T(x→y))` on luminances, and
+//! splats both paths with their expected weights. `--chains` chains (64),
 //! each with its own seed, run the same number of mutations; the worker threads splat them
 //! into films of their own, whose exact sums make the image independent of the thread count.
 //!
@@ -203,7 +204,7 @@ pub fn whole_path_density(scene: &Scene, strategies: &Strategies, x: &[Vertex]) 
     if l <= 0.0 {
         return 0.0;
     }
-    l * strategies.over_splits(k, &path::split_densities(scene, x, 0, k))
+    l * strategies.over_splits(k, path::split_densities(scene, x, 0, k))
 }
 
 /// Scalar contribution of a path: its luminance (zero when not positive and finite).
@@ -558,13 +559,13 @@ pub fn render(
     let (first, c) = candidates(scene, &pool, lengths, &uniform, importance, n_boot, &|i| key(SEED_STREAM, i));
     counters += c;
     let strategies = Strategies::from_candidates(lengths, &first, defensive);
-    let second = opts.mlt.learned_starts;
-    let (starts, start_stream) = if second { (&strategies, LEARNED_SEED_STREAM) } else { (&uniform, SEED_STREAM) };
+    let learned = opts.mlt.learned_starts;
+    let (starts, start_stream) = if learned { (&strategies, LEARNED_SEED_STREAM) } else { (&uniform, SEED_STREAM) };
     let start_key = |i: u64| key(start_stream, i);
-    let weights: Vec<f32> = if second {
-        let (second, c) = candidates(scene, &pool, lengths, starts, importance, n_boot, &start_key);
+    let weights: Vec<f32> = if learned {
+        let (set, c) = candidates(scene, &pool, lengths, starts, importance, n_boot, &start_key);
         counters += c;
-        second.into_iter().map(|(w, _)| w).collect()
+        set.into_iter().map(|(w, _)| w).collect()
     } else {
         first.into_iter().map(|(w, _)| w).collect()
     };

@@ -514,13 +514,13 @@ pub fn regenerate<R: Random>(
 /// join and camera-side walk, each split chosen with probability `1 / (n + 1)`: what
 /// [`regenerate`] with a uniformly chosen `s` produces `y` with.
 pub fn stretch_density(scene: &Scene, y: &[Vertex], a: usize, n: usize) -> f64 {
-    split_densities(scene, y, a, n).iter().sum::<f64>() / (n + 1) as f64
+    split_densities(scene, y, a, n).sum::<f64>() / (n + 1) as f64
 }
 
 /// The densities of the stretch of `n` vertices after `y[a - 1]` for each split: entry `s`
 /// is the density of walking `s` of them from the light side and `n - s` from the camera
-/// side, then joining them (0 where the join is not a shadow ray's).
-pub fn split_densities(scene: &Scene, y: &[Vertex], a: usize, n: usize) -> Vec<f64> {
+/// side, then joining them (0 where the join is not a shadow ray's), for `s` from 0 to `n`.
+pub fn split_densities(scene: &Scene, y: &[Vertex], a: usize, n: usize) -> impl Iterator<Item = f64> {
     // Light-side densities of the new vertices (prefix products), camera-side (suffix).
     let mut light = vec![1.0f64; n + 1];
     for i in 0..n {
@@ -530,12 +530,9 @@ pub fn split_densities(scene: &Scene, y: &[Vertex], a: usize, n: usize) -> Vec<f
     for i in (0..n).rev() {
         camera[i] = camera[i + 1] * pdf_from_camera(scene, y, a + i);
     }
-    (0..=n)
-        .map(|s| {
-            // The join: between `y[a+s-1]` and `y[a+s]`, or the camera walk reaching the light.
-            let joins =
-                if a + s == 0 { true } else { connectible(scene, &y[a + s - 1]) && connectible(scene, &y[a + s]) };
-            if joins { light[s] * camera[s] } else { 0.0 }
-        })
-        .collect()
+    (0..=n).map(move |s| {
+        // The join: between `y[a+s-1]` and `y[a+s]`, or the camera walk reaching the light.
+        let joins = if a + s == 0 { true } else { connectible(scene, &y[a + s - 1]) && connectible(scene, &y[a + s]) };
+        if joins { light[s] * camera[s] } else { 0.0 }
+    })
 }
