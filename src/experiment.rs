@@ -99,6 +99,7 @@ pub struct MethodEntry {
     pub bootstrap: Option<usize>,
     pub mlt_path_integrator: Option<String>,
     pub direct_samples: Option<i32>,
+    pub specular_samples: Option<u32>,
     pub bootstrap_fraction: Option<f64>,
     pub manifold_perturbation: Option<bool>,
     pub bidirectional_mutation: Option<bool>,
@@ -263,6 +264,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.direct_samples {
         o.mlt.direct_samples = x;
+    }
+    if let Some(x) = m.specular_samples {
+        o.mlt.specular_samples = x;
     }
     if let Some(x) = m.bootstrap_fraction {
         o.mlt.bootstrap_fraction = x;

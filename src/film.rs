@@ -433,6 +433,23 @@ impl Film {
         self.invalid_samples += other.invalid_samples;
     }
 
+    /// Adds `image` to what the camera samples' weighted mean develops to: each pixel's
+    /// weighted sums grow by the image's value times the pixel's weight sum (a pixel without
+    /// samples gets the value with weight one). Another pass's estimate of other paths, at
+    /// whatever sample count, then adds to this film's, and films merged later keep the sum.
+    pub fn add_to_mean(&mut self, image: &[Rgb]) {
+        assert_eq!(image.len(), self.data.len(), "one value per pixel");
+        for (d, v) in self.data.iter_mut().zip(image) {
+            let mut w = d[3].value();
+            if w <= 0.0 {
+                (d[3], w) = (ExactSum { hi: 1.0, lo: 0.0 }, 1.0);
+            }
+            for (c, x) in [v.x, v.y, v.z].into_iter().enumerate() {
+                d[c].add(x as f64 * w);
+            }
+        }
+    }
+
     /// The exact sums of every pixel: the camera samples' `(Σ w r, Σ w g, Σ w b, Σ w)`, then
     /// the splats' `(r, g, b)` (zero without splats). Strategy layers are not included.
     pub fn sums(&self) -> Vec<[ExactSum; 7]> {

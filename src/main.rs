@@ -161,6 +161,11 @@ struct RenderArgs {
     /// the chains'); -1 leaves every path to the Markov chains.
     #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
     direct_samples: i32,
+    /// MEMLT beside the direct-light pass: samples per pixel, in stratified cells, of a
+    /// specular pass that renders the paths through Dirac lobes alone (the light seen in
+    /// mirrors and through glass); 0 leaves them to the chains.
+    #[arg(long, default_value_t = MltOptions::default().specular_samples)]
+    specular_samples: u32,
     /// MEMLT with --time: the BDPT bootstrap goes on in batches of --bootstrap samples until
     /// this fraction of the time is spent (`b`, the image's brightness, is its estimate).
     #[arg(long, default_value_t = MltOptions::default().bootstrap_fraction)]
@@ -556,6 +561,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         bootstrap: a.bootstrap,
         base: a.mlt_path_integrator,
         direct_samples: a.direct_samples,
+        specular_samples: a.specular_samples,
         bootstrap_fraction: a.bootstrap_fraction,
         bidirectional_mutation: a.bidirectional_mutation,
         lens_perturbation: a.lens_perturbation,

@@ -54,6 +54,10 @@ pub struct MltOptions {
     /// (16 by default, as Mitsuba 0.6: paths of one edge, and of two through a rough
     /// vertex), the chains rendering the others; -1 leaves every path to the chains.
     pub direct_samples: i32,
+    /// MEMLT beside a direct-light pass: samples per pixel, in stratified cells, of a
+    /// specular pass that renders the paths through Dirac lobes alone (the light seen in
+    /// mirrors and through glass); 0 leaves them to the chains.
+    pub specular_samples: u32,
     /// MEMLT with a time budget: the bootstrap goes on in batches of `bootstrap` samples
     /// until this fraction of the time is spent (the image's brightness is its estimate).
     pub bootstrap_fraction: f64,
@@ -128,6 +132,7 @@ impl Default for MltOptions {
             bootstrap: 100_000,
             base: MltBase::Bdpt,
             direct_samples: 16,
+            specular_samples: 0,
             bootstrap_fraction: 0.1,
             bidirectional_mutation: true,
             lens_perturbation: true,
@@ -299,6 +304,31 @@ impl Random for PrimarySampler {
     }
 }
 
+/// The paths a Metropolis render's chains take (and its bootstrap counts) beside the passes
+/// that render the others (MEMLT's direct-light and specular passes).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ChainPaths {
+    /// Paths of fewer edges are left out ...
+    pub min_edges: usize,
+    /// ... but for two-edge paths whose middle vertex scatters through a Dirac lobe, when
+    /// this is set (MEMLT's chains beside a direct-light pass that leaves those out).
+    pub dirac_two_edges: bool,
+    /// Paths of two edges or more that scatter through Dirac lobes alone count (not beside a
+    /// specular pass).
+    pub dirac_only: bool,
+}
+
+impl ChainPaths {
+    /// Every path.
+    pub const ALL: ChainPaths = ChainPaths { min_edges: 0, dirac_two_edges: false, dirac_only: true };
+}
+
+impl Default for ChainPaths {
+    fn default() -> ChainPaths {
+        ChainPaths::ALL
+    }
+}
+
 /// What one state adds to the film, with its scalar contribution.
 #[derive(Default)]
 struct Contributions<'a> {
@@ -306,11 +336,8 @@ struct Contributions<'a> {
     /// Camera-side contributions of the current sample, summed at its film position.
     pixel: Rgb,
     pos: Vec2,
-    /// Strategies of paths with fewer edges are left out ...
-    min_edges: usize,
-    /// ... but for two-edge paths whose middle vertex scatters through a Dirac lobe, when
-    /// this is set (MEMLT's chains beside a direct-light pass that leaves those out).
-    dirac_two_edges: bool,
+    /// The paths whose strategies count.
+    paths: ChainPaths,
     /// Two-stage Metropolis: the first stage's map, which each splat's luminance is
     /// divided by in the scalar contribution.
     importance: Option<&'a Importance>,
@@ -321,21 +348,26 @@ struct Contributions<'a> {
 impl Sink for Contributions<'_> {
     #[inline]
     fn add(&mut self, s: usize, t: usize, value: Rgb) {
-        if s + t > self.min_edges {
+        if s + t > self.paths.min_edges {
             self.pixel += value;
         }
     }
 
     #[inline]
     fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
-        if s + t > self.min_edges {
+        if s + t > self.paths.min_edges {
             self.splats.push(Splat { pos, value, layer: 0 });
         }
     }
 
     #[inline]
     fn add_emission(&mut self, camera: &[Vertex], value: Rgb) {
-        if self.dirac_two_edges && camera.len() == 3 && camera[1].delta {
+        // Only the camera walk finds a path whose every scattering is through a Dirac lobe.
+        let dirac_only = camera.len() > 2 && camera[1..camera.len() - 1].iter().all(|v| v.delta);
+        if dirac_only && !self.paths.dirac_only {
+            return;
+        }
+        if self.paths.dirac_two_edges && camera.len() == 3 && camera[1].delta {
             self.pixel += value;
         } else {
             self.add(0, camera.len(), value);
@@ -562,7 +594,7 @@ fn bootstrap(
     ev: &Evaluator,
     n: usize,
     large_step_prob: f32,
-    (min_edges, dirac_two_edges): (usize, bool),
+    paths: ChainPaths,
     importance: Option<&Importance>,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
 ) -> (Vec<f32>, Vec<f32>, Counters) {
@@ -570,7 +602,7 @@ fn bootstrap(
         pool,
         ev,
         n,
-        &|| Contributions { min_edges, dirac_two_edges, importance, ..Default::default() },
+        &|| Contributions { paths, importance, ..Default::default() },
         &|i| PrimarySampler::new(&key(BOOTSTRAP_STREAM, i), large_step_prob),
         Vec::new,
         |fs: &mut Vec<(f32, f32)>, f, out| fs.push((f, out.luminance)),
@@ -594,9 +626,7 @@ fn mean_and_error(xs: &[f32]) -> (f64, f64) {
     (mean, ((square - mean * mean).max(0.0) / n).sqrt())
 }
 
-/// The mean luminance of the image's paths of at least `min_edges` edges, and with
-/// `dirac_two_edges` of the two-edge paths through a Dirac lobe too (Metropolis'
-/// normalisation `b`; with a first stage's map, the mean of luminance over the map)
+/// The mean luminance of the image's `paths` (Metropolis' normalisation `b`; with a first stage's map, the mean of luminance over the map)
 /// estimated from `n` independent BDPT samples, each through a uniformly random film
 /// position, with its standard error; the same samples' mean luminance with its standard
 /// error (the same as the first without a map); and the work the samples took.
@@ -605,7 +635,7 @@ pub(crate) fn bdpt_normalisation(
     opts: &RenderOptions,
     pool: &rayon::ThreadPool,
     n: usize,
-    paths: (usize, bool),
+    paths: ChainPaths,
     importance: Option<&Importance>,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
 ) -> ((f64, f64), (f64, f64), Counters) {
@@ -627,14 +657,13 @@ pub(crate) fn first_stage(
     opts: &RenderOptions,
     pool: &rayon::ThreadPool,
     n: usize,
-    paths: (usize, bool),
+    paths: ChainPaths,
     start: Instant,
     fraction: f64,
     key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
 ) -> (Option<Importance>, u64, Counters) {
     let grid = Grid::new(scene.film.width, scene.film.height, opts.mlt.first_stage_reduction);
     let ev = evaluator(scene, opts, MltBase::Bdpt);
-    let (min_edges, dirac_two_edges) = paths;
     let mut sums = vec![0.0f64; grid.len()];
     let mut counters = Counters::default();
     let batches = in_batches(opts, start, fraction, |batch| {
@@ -643,7 +672,7 @@ pub(crate) fn first_stage(
             pool,
             &ev,
             n,
-            &|| Contributions { min_edges, dirac_two_edges, ..Default::default() },
+            &|| Contributions { paths, ..Default::default() },
             &|i| PrimarySampler::new(&key(FIRST_STAGE_STREAM, i + offset), 1.0),
             || vec![0.0f64; grid.len()],
             |cells, f, out| {
@@ -748,7 +777,7 @@ pub fn render(
     let mut counters = Counters::default();
     let (importance, first_stage_samples) = if mo.two_stage {
         let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];
-        let (map, n, c) = first_stage(scene, opts, &pool, mo.bootstrap, (0, false), start, 0.0, &render_key);
+        let (map, n, c) = first_stage(scene, opts, &pool, mo.bootstrap, ChainPaths::ALL, start, 0.0, &render_key);
         counters += c;
         (map, n)
     } else {
@@ -757,7 +786,7 @@ pub fn render(
     let importance = importance.as_ref();
     // Bootstrap: independent samples estimate b and give the chains their start states.
     let (weights, luminances, c) =
-        bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, (0, false), importance, &key);
+        bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, ChainPaths::ALL, importance, &key);
     counters += c;
     // Two-stage Metropolis: the bootstrap's mean luminance, to which the image is scaled.
     let plain = importance.map(|_| mean_and_error(&luminances).0);
@@ -908,11 +937,11 @@ mod tests {
         let plain = image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / pixels;
         let pool = super::super::thread_pool(2).unwrap();
         let key = |s: u64, i: u64| vec![17, s, i];
-        let ((b, e), (l, le), _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, (0, false), Some(&map), &key);
+        let ((b, e), (l, le), _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, ChainPaths::ALL, Some(&map), &key);
         // The image's own noise (2 048 spp) is far below the bootstrap's.
         assert!((b - over_map).abs() < 4.0 * e + 0.005 * over_map, "b' {b} ± {e} against the image's {over_map}");
         assert!((plain - over_map).abs() > 10.0 * e, "the map must matter here: {plain} against {over_map} ± {e}");
-        let ((b0, e0), same, _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, (0, false), None, &key);
+        let ((b0, e0), same, _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, ChainPaths::ALL, None, &key);
         assert!((b0 - plain).abs() < 4.0 * e0 + 0.005 * plain, "b {b0} ± {e0} against the image's {plain}");
         assert_eq!(same, (b0, e0));
         // The same samples' plain mean luminance, beside b'.

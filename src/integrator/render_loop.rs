@@ -185,8 +185,24 @@ pub(crate) fn sample_tile(
     tile: Tile,
     first: u32,
     count: u32,
+    sample: impl FnMut(Vec2, &mut Sampler, &mut PixelSink, &mut Counters) -> bool,
+) -> TileResult {
+    sample_tile_in(ctx, tile, (first, count), None, sample)
+}
+
+/// [`sample_tile`] with iteration `s` of a render of `spp` samples per pixel jittered in
+/// cell `s` of the pixel's `n × n` cells (`n = ⌊√spp⌋`; iterations past `n²` uniform) when
+/// `strata` is `Some(spp)`: a pixel that a small, bright feature covers in part (a light
+/// seen in a mirror) gets its share of samples there with far less variance than
+/// independent positions give.
+pub(crate) fn sample_tile_in(
+    ctx: &Ctx,
+    tile: Tile,
+    (first, count): (u32, u32),
+    strata: Option<u32>,
     mut sample: impl FnMut(Vec2, &mut Sampler, &mut PixelSink, &mut Counters) -> bool,
 ) -> TileResult {
+    let n = strata.map_or(0, |spp| (spp as f64).sqrt() as u32);
     crate::accel::embree::set_flush_denormals();
     let layers = if ctx.layers { STRATEGY_LAYERS } else { 0 };
     let mut block = ImageBlock::with_layers(tile, ctx.scene.film.filter, layers);
@@ -199,7 +215,7 @@ pub(crate) fn sample_tile(
             let pixel = y as u64 * width + x as u64;
             for s in first..first + count {
                 let mut sampler = Sampler::new(&[ctx.seed, pixel, s as u64]);
-                let pos = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                let pos = Vec2::new(x as f32, y as f32) + offset_in_pixel(s, n, sampler.next_2d());
                 sink.l = Rgb::ZERO;
                 sink.parts.clear();
                 if sample(pos, &mut sampler, &mut sink, &mut counters) {
@@ -210,6 +226,20 @@ pub(crate) fn sample_tile(
         }
     }
     TileResult { block, splats, counters, extra: None }
+}
+
+/// Where sample `s` of a pixel lies in it for a `jitter` in the unit square: in cell `s` of
+/// an `n × n` grid (row by row) for `s < n²`, anywhere otherwise.
+#[inline]
+fn offset_in_pixel(s: u32, n: u32, jitter: Vec2) -> Vec2 {
+    if s < n * n {
+        // Clamped below the cell's far edge: a jitter of 1 - 2^-24 rounds onto it.
+        let cell = Vec2::new((s % n) as f32, (s / n) as f32);
+        let edge = (cell + 1.0) / n as f32;
+        ((cell + jitter) / n as f32).min(Vec2::new(edge.x.next_down(), edge.y.next_down()))
+    } else {
+        jitter
+    }
 }
 
 /// Adds a pass's preparation splats and its tiles to a film, in a fixed order (preparation
@@ -445,6 +475,26 @@ fn time_position(start: Instant, budget: f64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stratified_samples_fill_every_cell_of_the_pixel_once() {
+        // The first n² samples of a pixel: one in each cell of its n × n grid, inside the
+        // pixel even for a jitter at the top of its range; later ones anywhere.
+        let n = 4;
+        let mut sampler = Sampler::new(&[5]);
+        for s in 0..n * n {
+            use crate::sampling::ONE_BELOW;
+            for jitter in [sampler.next_2d(), Vec2::ZERO, Vec2::splat(ONE_BELOW)] {
+                let o = offset_in_pixel(s, n, jitter);
+                assert!(o.cmpge(Vec2::ZERO).all() && o.cmplt(Vec2::ONE).all(), "sample {s} at {o} leaves the pixel");
+                let cell = (o.y * n as f32) as u32 * n + (o.x * n as f32) as u32;
+                assert_eq!(cell, s, "sample {s} at {o} is not in its cell");
+            }
+        }
+        let j = Vec2::new(0.9, 0.3);
+        assert_eq!(offset_in_pixel(n * n, n, j), j, "past the grid a sample lies where its jitter says");
+        assert_eq!(offset_in_pixel(0, 0, j), j, "without a grid");
+    }
 
     struct Boundaries(Vec<u32>);
 

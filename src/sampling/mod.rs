@@ -86,6 +86,9 @@ impl Sampler {
     }
 }
 
+/// The largest `f32` below one: where a uniform number scaled into a cell is clamped.
+pub const ONE_BELOW: f32 = 1.0 - f32::EPSILON / 2.0;
+
 /// Uniform point on the unit disk (Shirley–Chiu concentric map).
 pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
     let a = 2.0 * u - Vec2::ONE;

@@ -477,7 +477,7 @@ impl PoolSelection for SubspaceSelection<'_> {
 
     #[inline]
     fn draw<R: Random>(&self, &i: &usize, k: u32, n: u32, rng: &mut R) -> Option<(usize, f32)> {
-        let u = ((k as f32 + rng.next_1d()) / n as f32).min(1.0 - f32::EPSILON / 2.0);
+        let u = ((k as f32 + rng.next_1d()) / n as f32).min(crate::sampling::ONE_BELOW);
         let (j, gamma) = self.model.matrix.draw(i, u);
         let (y, within) = self.subspaces.draw(j, rng.next_2d())?;
         let p = gamma as f64 * within;

@@ -17,6 +17,7 @@
 use super::path::{Measured, contribution, regenerate, stretch_density};
 use crate::integrator::Counters;
 use crate::integrator::bidir::Vertex;
+use crate::integrator::mlt::ChainPaths;
 use crate::sampling::Random;
 use crate::scene::Scene;
 
@@ -28,6 +29,9 @@ pub struct Lengths {
     /// A direct-light pass renders the paths of one edge and the two-edge paths through a
     /// rough vertex: the chains' two-edge paths are those through a Dirac lobe alone.
     pub direct_separate: bool,
+    /// A specular pass renders the paths whose every scattering vertex was left through a
+    /// Dirac lobe ([`super::specular_pass`]): the chains' paths have a rough vertex.
+    pub specular_separate: bool,
 }
 
 impl Lengths {
@@ -35,7 +39,18 @@ impl Lengths {
     #[inline]
     pub fn covers(&self, x: &[Vertex]) -> bool {
         let k = x.len().saturating_sub(1);
-        (self.min..=self.max).contains(&k) && !(self.direct_separate && k == 2 && !x[1].delta)
+        (self.min..=self.max).contains(&k)
+            && !(self.direct_separate && k == 2 && !x[1].delta)
+            && !(self.specular_separate && k >= 2 && x[1..k].iter().all(|v| v.delta))
+    }
+
+    /// The paths the chains take, as the bootstrap's BDPT samples count them.
+    pub(crate) fn chain_paths(&self) -> ChainPaths {
+        ChainPaths {
+            min_edges: self.min + usize::from(self.direct_separate),
+            dirac_two_edges: self.direct_separate,
+            dirac_only: !self.specular_separate,
+        }
     }
 }
 
@@ -193,7 +208,7 @@ mod tests {
     #[test]
     fn moves_are_drawn_with_their_probabilities() {
         use crate::sampling::chi2::discrete_chi2;
-        let lengths = Lengths { min: 2, max: 7, direct_separate: false };
+        let lengths = Lengths { min: 2, max: 7, direct_separate: false, specular_separate: false };
         let n = 400_000;
         for k in [2, 4, 7] {
             let (counts, expected) = draw_counts(k, lengths, n, |kd, a, ka| move_pmf(k, kd, a, ka, lengths));
@@ -217,7 +232,7 @@ mod tests {
 
     #[test]
     fn moves_sum_to_one_and_every_move_has_its_reverse() {
-        let lengths = Lengths { min: 2, max: 7, direct_separate: false };
+        let lengths = Lengths { min: 2, max: 7, direct_separate: false, specular_separate: false };
         for k in lengths.min..=lengths.max {
             let all = moves(k, lengths);
             let total: f64 = all.iter().map(|m| m.3).sum();

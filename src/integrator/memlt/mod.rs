@@ -30,6 +30,7 @@ pub mod lens;
 pub mod manifold_perturbation;
 pub mod multichain;
 pub mod path;
+pub mod specular_pass;
 
 use super::stays::{LongestStay, Stay, Stays, near, pixel_of};
 use super::two_stage::Importance;
@@ -152,7 +153,7 @@ pub struct MemltStats {
 pub fn lengths(scene: &Scene) -> Lengths {
     let spec = &scene.integrator;
     let max = if spec.max_depth < 0 { MAX_EDGES } else { (spec.max_depth as usize).min(MAX_EDGES) };
-    Lengths { min: if spec.hide_emitters { 2 } else { 1 }, max, direct_separate: false }
+    Lengths { min: if spec.hide_emitters { 2 } else { 1 }, max, direct_separate: false, specular_separate: false }
 }
 
 /// Probability of drawing a start path of `k` edges: `∝ 2^-(k - min)`.
@@ -396,15 +397,10 @@ fn normalisation(
     let (mut sum, mut variance, mut counters) = ([0.0; 2], [0.0; 2], Counters::default());
     let batches = super::mlt::in_batches(opts, start, opts.mlt.bootstrap_fraction, |batch| {
         let offset = batch * n as u64;
-        let (target, plain, c) = super::mlt::bdpt_normalisation(
-            scene,
-            opts,
-            pool,
-            n,
-            (lengths.min + usize::from(lengths.direct_separate), lengths.direct_separate),
-            importance,
-            &|s, i| key(s ^ BOOTSTRAP_STREAM, i + offset),
-        );
+        let (target, plain, c) =
+            super::mlt::bdpt_normalisation(scene, opts, pool, n, lengths.chain_paths(), importance, &|s, i| {
+                key(s ^ BOOTSTRAP_STREAM, i + offset)
+            });
         counters += c;
         for (i, (m, e)) in [target, plain].into_iter().enumerate() {
             sum[i] += m;
@@ -433,6 +429,7 @@ const SEED_STREAM: u64 = 0x7365_6564;
 const LEARNED_SEED_STREAM: u64 = SEED_STREAM ^ 2;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 const DIRECT_STREAM: u64 = 0x6469_7265;
+const SPECULAR_STREAM: u64 = 0x7370_6563;
 
 /// Renders with MEMLT: all of the budget, or for `iterations` `A..B` (a chunk of a
 /// distributed render) `B - A` mutations per pixel by chains of their own, with their own
@@ -474,14 +471,19 @@ pub fn render(
     let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let mut lengths = lengths(scene);
+    let dirac = scene.shapes.iter().any(|sh| scene.bsdfs[sh.bsdf].lobes(glam::Vec2::ZERO).any(|l| l.is_delta()));
+    // The specular pass, beside the direct-light pass, where a surface has a Dirac lobe.
+    let specular = (direct > 0 && dirac).then_some(opts.mlt.specular_samples).filter(|&n| n > 0);
     if direct > 0 {
-        // The chains keep the two-edge paths through a Dirac lobe; where no surface has one,
-        // they start at three edges, so that no move proposes a path the direct pass renders.
-        if scene.shapes.iter().any(|sh| scene.bsdfs[sh.bsdf].lobes(glam::Vec2::ZERO).any(|l| l.is_delta())) {
+        // The chains start at three edges, so that no move proposes a path the direct pass
+        // renders, but keep the two-edge paths through a Dirac lobe when no specular pass
+        // takes them; beside one, their paths have a rough vertex.
+        if dirac && specular.is_none() {
             lengths.min = lengths.min.max(2);
             lengths.direct_separate = true;
         } else {
             lengths.min = lengths.min.max(3);
+            lengths.specular_separate = specular.is_some();
         }
     }
     let (w, h) = (scene.film.width, scene.film.height);
@@ -498,22 +500,35 @@ pub fn render(
     };
     // The direct light by the path tracer, when asked for: paths of one edge, and of two
     // through a rough vertex (those through a Dirac lobe, a small light's reflection in
-    // glass say, are the chains').
+    // glass say, are the specular pass's, or the chains' without one).
     let mut base = Film::new(w, h, scene.film.filter);
     let mut counters = Counters::default();
-    if direct > 0 {
+    let pass = |method: &dyn Fn(&RenderOptions) -> Result<RenderOutput, Error>, spp: u32, stream: u64| {
         let mut o = opts.clone();
-        o.budget = Budget::Spp(direct as u32);
-        o.seed = crate::sampling::hash_words(&key(DIRECT_STREAM, 0));
+        o.budget = Budget::Spp(spp);
+        o.seed = crate::sampling::hash_words(&key(stream, 0));
         o.checkpoints.clear();
         o.progress = false;
-        let spec = &scene.integrator;
+        method(&o)
+    };
+    let spec = &scene.integrator;
+    if direct > 0 {
         let max_depth = if spec.max_depth < 0 { 2 } else { (spec.max_depth as u32).min(2) };
         let pt = super::path::PathTracer { max_depth, dirac_emission: false, ..super::path::PathTracer::new(spec) };
-        let out = super::render_loop::run(scene, &o, pt, false, None)?;
+        let out = pass(&|o| super::render_loop::run(scene, o, pt.clone(), false, None), direct as u32, DIRECT_STREAM)?;
         counters += out.stats.counters;
         if let Some(f) = &out.film {
             base.merge_film(f);
+        }
+    }
+    if let Some(n) = specular {
+        // Its own sample count: its image adds to the direct pass's.
+        let max_edges = if spec.max_depth < 0 { MAX_EDGES as u32 } else { spec.max_depth as u32 };
+        let sp = specular_pass::SpecularPass { max_edges };
+        let out = pass(&|o| super::render_loop::run(scene, o, sp.clone(), false, None), n, SPECULAR_STREAM)?;
+        counters += out.stats.counters;
+        if let Some(f) = &out.film {
+            base.add_to_mean(&f.develop());
         }
     }
     if lengths.min > lengths.max {
@@ -536,7 +551,7 @@ pub fn render(
     }
     // Two-stage Metropolis: the first stage takes the first half of the bootstrap's time;
     // its streams are the render's, not a chunk's, so that every chunk has the same map.
-    let paths = (lengths.min + usize::from(lengths.direct_separate), lengths.direct_separate);
+    let paths = lengths.chain_paths();
     let (importance, first_stage_samples) = if opts.mlt.two_stage {
         let fraction = opts.mlt.bootstrap_fraction / 2.0;
         let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];

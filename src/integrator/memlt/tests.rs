@@ -6,6 +6,7 @@
 
 use super::*;
 use crate::integrator::bidir::VertexKind;
+use crate::integrator::mlt::ChainPaths;
 
 /// A scene of the repository with `-D` style overrides.
 fn scene(file: &str, overrides: &[(&str, &str)]) -> Scene {
@@ -35,7 +36,8 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
 fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
     let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
     let pool = super::super::thread_pool(2).unwrap();
-    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, (min, false), None, &|s, i| vec![11, s, i]).0.0
+    let paths = ChainPaths { min_edges: min, ..ChainPaths::ALL };
+    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, paths, None, &|s, i| vec![11, s, i]).0.0
 }
 
 /// `|a - b|` in standard errors.
@@ -105,7 +107,7 @@ fn skewed_strategies(lengths: Lengths) -> Strategies {
 #[test]
 fn learned_strategies_sample_their_probabilities_chi2() {
     use crate::sampling::chi2::discrete_chi2;
-    let lengths = Lengths { min: 2, max: 7, direct_separate: false };
+    let lengths = Lengths { min: 2, max: 7, direct_separate: false, specular_separate: false };
     let strategies = skewed_strategies(lengths);
     let cells: Vec<(usize, usize)> = (lengths.min..=lengths.max).flat_map(|k| (0..=k).map(move |s| (k, s))).collect();
     let total: f64 = cells.iter().map(|&(k, s)| strategies.probability(k, s)).sum();
@@ -519,10 +521,9 @@ fn chains_beside_the_direct_pass_take_the_two_edge_paths_through_dirac_lobes() {
     lengths.direct_separate = true;
     let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
     let pool = super::super::thread_pool(2).unwrap();
-    let b = |dirac: bool| {
-        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 400_000, (3, dirac), None, &|s, i| vec![31, s, i])
-            .0
-            .0
+    let b = |dirac_two_edges: bool| {
+        let paths = ChainPaths { min_edges: 3, dirac_two_edges, dirac_only: true };
+        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 400_000, paths, None, &|s, i| vec![31, s, i]).0.0
     };
     let chains = mean_and_error(4_000_000, |i| {
         let mut rng = Sampler::new(&[33, i as u64]);
@@ -555,6 +556,92 @@ fn sky() -> Scene {
 <shape type="sphere"><point name="center" x="0.9" y="0.3" z="0.35"/><float name="radius" value="0.35"/>
   <bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></shape>"#;
     inline_scene("sky.xml", (5, 50.0), ("0.3, -3.5, 2.2", "0.2, 0, 0.3"), (24, 18), shapes)
+}
+
+#[test]
+fn chains_beside_the_specular_pass_take_the_paths_with_a_rough_vertex() {
+    // Beside the direct-light and specular passes the chains' paths have three edges or
+    // more and a rough vertex: the generator restricted to them (`Lengths::covers`) must
+    // estimate what the BDPT bootstrap counts for them (`Lengths::chain_paths`). Counting
+    // the sky seen through the glass ball (paths through Dirac lobes alone) there must be
+    // caught.
+    let scene = sky();
+    let mut lengths = lengths(&scene);
+    lengths.min = 3;
+    lengths.specular_separate = true;
+    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
+    let pool = super::super::thread_pool(2).unwrap();
+    let b = |paths: ChainPaths| {
+        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 1_000_000, paths, None, &|s, i| vec![37, s, i]).0.0
+    };
+    let uniform = Strategies::uniform(lengths);
+    let chains = mean_and_error(4_000_000, |i| {
+        let mut rng = Sampler::new(&[39, i as u64]);
+        let Some((y, m, p)) = independent_path(&scene, lengths, &uniform, &mut rng, &mut Counters::default()) else {
+            return 0.0;
+        };
+        assert!(lengths.covers(&y) && y[1..y.len() - 1].iter().any(|v| !v.delta));
+        scalar(&m) / p
+    });
+    let (without, with) = (b(lengths.chain_paths()), b(ChainPaths { dirac_only: true, ..lengths.chain_paths() }));
+    assert!(
+        sigmas(chains, without) < 4.0 && chains.1 < 0.02 * without,
+        "chains' paths: {chains:?} against BDPT's {without}"
+    );
+    assert!(
+        sigmas(chains, with) > 6.0,
+        "the paths through the glass alone were not left out: {chains:?} against {with}"
+    );
+}
+
+#[test]
+fn the_direct_and_specular_passes_and_the_chains_share_every_path() {
+    // MEMLT's direct-light pass (paths of one edge and of two through a rough vertex), its
+    // specular pass (paths through Dirac lobes alone: the sky seen through the glass ball)
+    // and the chains' paths (three edges or more, a rough vertex) make the whole image: the
+    // passes' mean luminances plus BDPT's estimate of the chains' part is BDPT's estimate of
+    // every path. A specular pass that stops at two edges must be caught.
+    use crate::integrator::path::PathTracer;
+    use crate::integrator::render_loop::{Iterative, run};
+    use specular_pass::SpecularPass;
+    let scene = sky();
+    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
+    let pool = super::super::thread_pool(2).unwrap();
+    let bdpt = |paths: ChainPaths| {
+        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 1_000_000, paths, None, &|s, i| vec![41, s, i]).0
+    };
+    let chains = ChainPaths { min_edges: 3, dirac_two_edges: false, dirac_only: false };
+    let (all, chains) = (bdpt(ChainPaths::ALL), bdpt(chains));
+    // A pass's mean luminance and its standard error over four seeds.
+    fn pass<M: Iterative + Clone>(scene: &Scene, method: M, spp: u32) -> (f64, f64) {
+        let means: Vec<f64> = (0..4)
+            .map(|seed| {
+                let mut o = RenderOptions::new(super::super::IntegratorKind::Path, Budget::Spp(spp));
+                (o.threads, o.progress, o.seed) = (2, false, 43 + seed);
+                let out = run(scene, &o, method.clone(), false, None).unwrap();
+                let image = out.film.unwrap().develop();
+                image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / image.len() as f64
+            })
+            .collect();
+        let m = means.iter().sum::<f64>() / 4.0;
+        (m, (means.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / 12.0).sqrt())
+    }
+    let direct =
+        pass(&scene, PathTracer { max_depth: 2, dirac_emission: false, ..PathTracer::new(&scene.integrator) }, 512);
+    let check = |specular: (f64, f64)| {
+        let gap = direct.0 + specular.0 + chains.0 - all.0;
+        let error = [direct.1, specular.1, chains.1, all.1].iter().map(|e| e * e).sum::<f64>().sqrt();
+        (gap, error)
+    };
+    let good = pass(&scene, SpecularPass { max_edges: 5 }, 256);
+    let (gap, error) = check(good);
+    assert!(
+        gap.abs() < 4.0 * error && gap.abs() < 0.01 * all.0,
+        "passes {direct:?} + {good:?} + chains {chains:?} against {all:?}"
+    );
+    let short = pass(&scene, SpecularPass { max_edges: 2 }, 256);
+    let (gap, error) = check(short);
+    assert!(gap.abs() > 6.0 * error, "a specular pass stopped at two edges was not caught: {short:?} against {good:?}");
 }
 
 #[test]

@@ -1,0 +1,99 @@
+//! MEMLT's specular pass: the paths that scatter through Dirac lobes alone, from the camera
+//! to a light (a small light seen in a mirror or through a glass ball), rendered beside the
+//! chains by camera walks, with `--specular-samples` positions per pixel in stratified cells.
+//!
+//! Only a camera walk that hits the light finds such a path: no connection can end at a
+//! Dirac vertex. A chain enters these paths only by a whole-path move that happens to do that
+//! walk, and a light reflected in a ball is hundreds of times the image's mean radiance in a
+//! few pixels, so the chains' share of it comes in rare, long visits (and the chains' fixed
+//! total spreads what they miss over the rest of the image). Here each pixel estimates it
+//! directly; the pixel's cells make its share of a reflection it covers in part nearly
+//! exact. The chains' paths are the rest ([`super::bidirectional::Lengths::covers`]).
+
+use super::super::Counters;
+use super::super::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_in};
+use crate::accel::Ray;
+use crate::bsdf::TransportMode;
+use crate::film::Tile;
+use crate::math::Rgb;
+use crate::sampling::Random;
+use crate::scene::Scene;
+use std::ops::Range;
+
+/// Camera walks through Dirac lobes alone.
+#[derive(Clone, Debug)]
+pub struct SpecularPass {
+    /// The longest path, in edges.
+    pub max_edges: u32,
+}
+
+impl SpecularPass {
+    /// The light arriving along a camera ray by paths of two edges or more (at most
+    /// `max_edges`) whose every scattering was through a Dirac lobe: the walk follows the
+    /// lobe each BSDF sample picks and ends at the first rough one (that path is the chains').
+    pub fn li<R: Random>(&self, scene: &Scene, mut ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
+        let mut l = Rgb::ZERO;
+        let mut beta = Rgb::ONE;
+        // Edges traced so far.
+        let mut edges = 0u32;
+        while edges < self.max_edges {
+            counters.extension_rays += 1;
+            let Some(si) = scene.intersect(&ray) else {
+                // The ray leaves the scene: a light at infinity ends the path, after at least
+                // one scattering.
+                if edges > 0 {
+                    let d = ray.d.normalize();
+                    for &light_index in &scene.infinite_lights {
+                        l += beta * scene.lights[light_index].eval_infinite(d);
+                    }
+                }
+                break;
+            };
+            edges += 1;
+            if edges >= 2
+                && let Some((_, light)) = scene.area_light(&si)
+            {
+                l += beta * light.radiance(si.ng, si.uv, si.wo);
+            }
+            if edges >= self.max_edges {
+                break;
+            }
+            let bsdf = scene.bsdf(&si);
+            let wo = si.shading.to_local(si.wo);
+            let (u_lobe, u_dir) = (sampler.next_1d(), sampler.next_2d());
+            let Some(bs) = bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance) else {
+                break;
+            };
+            if !bs.delta {
+                break;
+            }
+            beta *= bs.weight;
+            if beta == Rgb::ZERO {
+                break;
+            }
+            ray = si.spawn_ray(si.shading.to_world(bs.wi));
+        }
+        l
+    }
+}
+
+/// The pass in the render loop: no state between iterations, positions in the pixel's cells
+/// when the render has a sample count.
+impl Iterative for SpecularPass {
+    type Pass = ();
+
+    fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {
+        Prepared::only(())
+    }
+
+    fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
+        sample_tile_in(ctx, tile, (first, count), ctx.planned_spp, |pos, sampler, sink, counters| {
+            let ray = ctx.scene.camera.generate_ray(pos);
+            counters.camera_rays += 1;
+            sink.l = self.li(ctx.scene, ray, sampler, counters);
+            true
+        })
+    }
+
+    fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
+}
