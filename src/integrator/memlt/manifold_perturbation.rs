@@ -16,9 +16,10 @@
 //! walk back from the proposal must return to the current path. One more plan moves the
 //! light point itself ([`position_plan`]): an area light's point is displaced in its tangent
 //! plane by a Gaussian whose density peaks at the light walk's density of the point times
-//! `λ²`, projected back onto the light along its normal, and joined to its rough neighbour
-//! (the walk back from the new point must find the current one; the pinhole, the other
-//! end, has no area to move on).
+//! `λ²`, projected back onto the light along its normal, and joined to `c`, the first rough
+//! vertex after it, directly or through the specular chain between them, walked from `c`
+//! to the new point (the walk back from the new point must find the current one; the
+//! pinhole, the other end, has no area to move on).
 //!
 //! Under a light at infinity (`x_0` a direction) no plan starts at `x_0` (the direction it
 //! sends light along is its own) or walks a chain to it (its edge has no length to walk
@@ -79,7 +80,8 @@ pub struct Plan {
     pub b: usize,
     pub c: Option<usize>,
     /// The light point itself moves (`a = b = 0`, towards the camera): displaced on its
-    /// light's surface by a Gaussian, then joined to `c`.
+    /// light's surface by a Gaussian, then joined to `c` (through the specular chain between
+    /// them where there is one).
     pub position: bool,
 }
 
@@ -259,8 +261,10 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
 }
 
 /// The plan that moves the light point on its surface, where the path admits it: an area
-/// light's point whose neighbour `x_1` is a rough vertex it is joined to (not the pinhole: a
-/// path of one edge is the direct light's, or moves with the camera's plans). Under a light
+/// light's point and `c`, the first rough vertex after it, joined to the moved point directly
+/// (`c = 1`) or through the specular chain between them, walked onto its manifold from `c`
+/// (not the pinhole: a path of one edge is the direct light's, or moves with the camera's
+/// plans, and no chain can end at the pinhole). Under a light
 /// at infinity the line the light arrives along moves instead, its direction kept: `x_1`
 /// is the first surface on the displaced line, the light follows the path's Dirac lobes (and
 /// kept half-vectors) from there to `b`, the first non-specular vertex after `x_0`, which is
@@ -269,12 +273,18 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
 pub fn position_plan(scene: &Scene, x: &[Vertex], treatment: &Treatment) -> Option<Plan> {
     let k = x.len() - 1;
     if !x[0].infinite {
-        let ok = hittable_light(scene, &x[0])
-            && k >= 2
-            && x[1].kind == VertexKind::Surface
-            && connectible(scene, &x[1])
-            && !treatment.specular(1);
-        return ok.then_some(Plan { a: 0, toward_light: false, b: 0, c: Some(1), position: true });
+        // `c` is the first rough vertex after the light point; the specular chain between
+        // them is walked from `c` to the moved point (a caustic's light point moves with
+        // the point on the floor kept).
+        if !hittable_light(scene, &x[0]) || k < 2 {
+            return None;
+        }
+        let mut c = 1;
+        while c < k && treatment.specular(c) {
+            c += 1;
+        }
+        let ok = c < k && x[c].kind == VertexKind::Surface && connectible(scene, &x[c]);
+        return ok.then_some(Plan { a: 0, toward_light: false, b: 0, c: Some(c), position: true });
     }
     let mut b = 1;
     while b < k && treatment.specular(b) {
@@ -485,9 +495,20 @@ fn chain_of(scene: &Scene, x: &[Vertex], plan: &Plan, treatment: &Treatment) -> 
     let interior = &indices[..indices.len() - 1];
     let scatters: Vec<Scatter> = interior.iter().map(|&i| scatter_of(x, i)).collect();
     let halves: Vec<Half> = interior.iter().map(|&i| kept_half(scene, x, i, treatment)).collect();
-    let shapes: Vec<u32> = indices.iter().map(|&i| x[i].shape).collect();
+    let shapes: Vec<u32> = indices.iter().map(|&i| shape_of(scene, &x[i])).collect();
     let chain = manifold::trace(scene, (x[c].p, x[c].ng), x[indices[0]].p, (&scatters, &halves), &shapes)?;
     ((chain.end().p - x[b].p).length() as f64 <= 1e-3 * chain.length()).then_some(chain)
+}
+
+/// The shape a vertex lies on: an area light's point sampled on its light carries none.
+fn shape_of(scene: &Scene, v: &Vertex) -> u32 {
+    match v.kind {
+        VertexKind::Light(l) if v.shape == u32::MAX => match scene.lights[l as usize] {
+            crate::light::Light::Area { shape, .. } => shape as u32,
+            _ => v.shape,
+        },
+        _ => v.shape,
+    }
 }
 
 /// Re-traces glossy vertex `x_i` along `ray` keeping its half-vector: the hit's vertex, and

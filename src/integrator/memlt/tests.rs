@@ -356,6 +356,20 @@ fn the_light_point_perturbation_is_in_detailed_balance() {
     assert!(skewed.abs() > 6.0 * se, "a skewed forward density was not caught: {skewed} ± {se}");
 }
 
+#[test]
+fn the_light_point_perturbation_through_a_specular_chain_is_in_detailed_balance() {
+    // On the glass ball's scene: the light point moved on the small spherical light with the
+    // first rough vertex after it kept (the floor's caustic point), the chain through the
+    // ball walked onto its manifold from there to the moved point. Only those moves (a walk
+    // tried) count; a skewed forward density must be caught.
+    let scene = glass_caustic();
+    let only = |w: &manifold_perturbation::WalkStats| w.light_points > 0 && w.tried > 0;
+    let (good, se) = balance_of(&scene, Mutator::Manifold, false, (50.0, 1.0, 1_200_000), only);
+    assert!(good.abs() < 4.0 * se && se < 0.03, "E[r] - P(r > 0) = {good} ± {se} of P(r > 0)");
+    let (skewed, se) = balance_of(&scene, Mutator::Manifold, true, (50.0, 1.0, 1_200_000), only);
+    assert!(skewed.abs() > 6.0 * se, "a skewed forward density was not caught: {skewed} ± {se}");
+}
+
 /// A tilted glass cube over a diffuse floor under a small area light: the light walk
 /// refracts into one face and out of another at different angles (a sphere's two crossings
 /// would mirror each other).
