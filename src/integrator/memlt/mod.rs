@@ -503,19 +503,20 @@ pub fn render(
     // glass say, are the specular pass's, or the chains' without one).
     let mut base = Film::new(w, h, scene.film.filter);
     let mut counters = Counters::default();
-    let pass = |method: &dyn Fn(&RenderOptions) -> Result<RenderOutput, Error>, spp: u32, stream: u64| {
+    // A pass's options: its sample count and its own stream.
+    let pass = |spp: u32, stream: u64| {
         let mut o = opts.clone();
         o.budget = Budget::Spp(spp);
         o.seed = crate::sampling::hash_words(&key(stream, 0));
         o.checkpoints.clear();
         o.progress = false;
-        method(&o)
+        o
     };
     let spec = &scene.integrator;
     if direct > 0 {
         let max_depth = if spec.max_depth < 0 { 2 } else { (spec.max_depth as u32).min(2) };
         let pt = super::path::PathTracer { max_depth, dirac_emission: false, ..super::path::PathTracer::new(spec) };
-        let out = pass(&|o| super::render_loop::run(scene, o, pt.clone(), false, None), direct as u32, DIRECT_STREAM)?;
+        let out = super::render_loop::run(scene, &pass(direct as u32, DIRECT_STREAM), pt, false, None)?;
         counters += out.stats.counters;
         if let Some(f) = &out.film {
             base.merge_film(f);
@@ -525,7 +526,7 @@ pub fn render(
         // Its own sample count: its image adds to the direct pass's.
         let max_edges = if spec.max_depth < 0 { MAX_EDGES as u32 } else { spec.max_depth as u32 };
         let sp = specular_pass::SpecularPass { max_edges };
-        let out = pass(&|o| super::render_loop::run(scene, o, sp.clone(), false, None), n, SPECULAR_STREAM)?;
+        let out = super::render_loop::run(scene, &pass(n, SPECULAR_STREAM), sp, false, None)?;
         counters += out.stats.counters;
         if let Some(f) = &out.film {
             base.add_to_mean(&f.develop());

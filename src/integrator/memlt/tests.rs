@@ -32,12 +32,37 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
     (m, ((s2 / n as f64 - m * m) / n as f64).sqrt())
 }
 
-/// BDPT's estimate of the luminance of paths of at least `min` edges, with its error.
-fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
+/// BDPT's estimate of the luminance of `paths` (the bootstrap's, `n` samples of stream
+/// `seed`), with its standard error.
+fn bootstrap_estimate(scene: &Scene, paths: ChainPaths, (seed, n): (u64, usize)) -> (f64, f64) {
     let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
     let pool = super::super::thread_pool(2).unwrap();
-    let paths = ChainPaths { min_edges: min, ..ChainPaths::ALL };
-    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, 400_000, paths, None, &|s, i| vec![11, s, i]).0.0
+    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, n, paths, None, &|s, i| vec![seed, s, i]).0
+}
+
+/// BDPT's estimate of the luminance of paths of at least `min` edges.
+fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
+    bootstrap_estimate(scene, ChainPaths { min_edges: min, ..ChainPaths::ALL }, (11, 400_000)).0
+}
+
+/// The start paths' generator restricted to `lengths` (`Lengths::covers`): the mean of
+/// `f / p` over `n` draws of stream `seed`, with its standard error; every path it gives
+/// must be one of the chains' and pass `check`.
+fn chains_estimate(
+    scene: &Scene,
+    lengths: Lengths,
+    (seed, n): (u64, usize),
+    check: impl Fn(&[Vertex]) -> bool + Sync,
+) -> (f64, f64) {
+    let uniform = Strategies::uniform(lengths);
+    mean_and_error(n, |i| {
+        let mut rng = Sampler::new(&[seed, i as u64]);
+        let Some((y, m, p)) = independent_path(scene, lengths, &uniform, &mut rng, &mut Counters::default()) else {
+            return 0.0;
+        };
+        assert!(lengths.covers(&y) && check(&y));
+        scalar(&m) / p
+    })
 }
 
 /// `|a - b|` in standard errors.
@@ -533,22 +558,11 @@ fn chains_beside_the_direct_pass_take_the_two_edge_paths_through_dirac_lobes() {
     let mut lengths = lengths(&scene);
     lengths.min = 2;
     lengths.direct_separate = true;
-    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
-    let pool = super::super::thread_pool(2).unwrap();
     let b = |dirac_two_edges: bool| {
         let paths = ChainPaths { min_edges: 3, dirac_two_edges, dirac_only: true };
-        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 400_000, paths, None, &|s, i| vec![31, s, i]).0.0
+        bootstrap_estimate(&scene, paths, (31, 400_000)).0
     };
-    let chains = mean_and_error(4_000_000, |i| {
-        let mut rng = Sampler::new(&[33, i as u64]);
-        let Some((y, m, p)) =
-            independent_path(&scene, lengths, &Strategies::uniform(lengths), &mut rng, &mut Counters::default())
-        else {
-            return 0.0;
-        };
-        assert!(lengths.covers(&y));
-        scalar(&m) / p
-    });
+    let chains = chains_estimate(&scene, lengths, (33, 4_000_000), |_| true);
     let (with, without) = (b(true), b(false));
     assert!(sigmas(chains, with) < 4.0 && chains.1 < 0.02 * with, "chains' paths: {chains:?} against BDPT's {with}");
     assert!(sigmas(chains, without) > 6.0, "the mirror's two-edge paths were not missed: {chains:?} against {without}");
@@ -583,20 +597,9 @@ fn chains_beside_the_specular_pass_take_the_paths_with_a_rough_vertex() {
     let mut lengths = lengths(&scene);
     lengths.min = 3;
     lengths.specular_separate = true;
-    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
-    let pool = super::super::thread_pool(2).unwrap();
-    let b = |paths: ChainPaths| {
-        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 1_000_000, paths, None, &|s, i| vec![37, s, i]).0.0
-    };
-    let uniform = Strategies::uniform(lengths);
-    let chains = mean_and_error(4_000_000, |i| {
-        let mut rng = Sampler::new(&[39, i as u64]);
-        let Some((y, m, p)) = independent_path(&scene, lengths, &uniform, &mut rng, &mut Counters::default()) else {
-            return 0.0;
-        };
-        assert!(lengths.covers(&y) && y[1..y.len() - 1].iter().any(|v| !v.delta));
-        scalar(&m) / p
-    });
+    let b = |paths: ChainPaths| bootstrap_estimate(&scene, paths, (37, 1_000_000)).0;
+    let rough = |y: &[Vertex]| y[1..y.len() - 1].iter().any(|v| !v.delta);
+    let chains = chains_estimate(&scene, lengths, (39, 4_000_000), rough);
     let (without, with) = (b(lengths.chain_paths()), b(ChainPaths { dirac_only: true, ..lengths.chain_paths() }));
     assert!(
         sigmas(chains, without) < 4.0 && chains.1 < 0.02 * without,
@@ -619,11 +622,7 @@ fn the_direct_and_specular_passes_and_the_chains_share_every_path() {
     use crate::integrator::render_loop::{Iterative, run};
     use specular_pass::SpecularPass;
     let scene = sky();
-    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
-    let pool = super::super::thread_pool(2).unwrap();
-    let bdpt = |paths: ChainPaths| {
-        super::super::mlt::bdpt_normalisation(&scene, &opts, &pool, 1_000_000, paths, None, &|s, i| vec![41, s, i]).0
-    };
+    let bdpt = |paths: ChainPaths| bootstrap_estimate(&scene, paths, (41, 1_000_000));
     let chains = ChainPaths { min_edges: 3, dirac_two_edges: false, dirac_only: false };
     let (all, chains) = (bdpt(ChainPaths::ALL), bdpt(chains));
     // A pass's mean luminance and its standard error over four seeds.
