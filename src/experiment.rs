@@ -106,8 +106,10 @@ pub struct MethodEntry {
     pub lens_perturbation: Option<bool>,
     pub caustic_perturbation: Option<bool>,
     pub multichain_perturbation: Option<bool>,
+    pub light_hit_perturbation: Option<bool>,
     pub independent_mutation: Option<bool>,
     pub independent_defensive: Option<f64>,
+    pub independent_camera_walks: Option<f64>,
     pub learned_starts: Option<bool>,
     pub lambda: Option<f64>,
     pub theta_diff: Option<f64>,
@@ -286,11 +288,17 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     if let Some(x) = m.multichain_perturbation {
         o.mlt.multichain_perturbation = x;
     }
+    if let Some(x) = m.light_hit_perturbation {
+        o.mlt.light_hit_perturbation = x;
+    }
     if let Some(x) = m.independent_mutation {
-        o.mlt.independent_mutation = x;
+        o.mlt.independent_mutation = Some(x);
     }
     if let Some(x) = m.independent_defensive {
         o.mlt.independent_defensive = x;
+    }
+    if let Some(x) = m.independent_camera_walks {
+        o.mlt.independent_camera_walks = x;
     }
     if let Some(x) = m.learned_starts {
         o.mlt.learned_starts = x;

@@ -185,15 +185,29 @@ struct RenderArgs {
     /// MEMLT: Veach's multi-chain perturbation among the mutations.
     #[arg(long, default_value_t = MltOptions::default().multichain_perturbation, action = clap::ArgAction::Set)]
     multichain_perturbation: bool,
+    /// MEMLT: the multi-chain perturbation re-traced on to the light, for paths whose light end
+    /// no shadow ray joins (`L S+ D S+ E`: a caustic seen in glass; `L S+ E`); not Mitsuba 0.6's.
+    #[arg(long, default_value_t = MltOptions::default().light_hit_perturbation, action = clap::ArgAction::Set)]
+    light_hit_perturbation: bool,
     /// MEMLT: the independent mutation among the mutations (a whole new path from the
     /// bidirectional generator, Kelemen's large step in path space; not Mitsuba 0.6's).
-    #[arg(long, default_value_t = MltOptions::default().independent_mutation, action = clap::ArgAction::Set)]
-    independent_mutation: bool,
+    ///
+    /// Default `auto`: on where `--bootstrap` camera walks to the first light find at least
+    /// 1.5% of their light in paths that only such a walk makes (no edge takes a shadow ray:
+    /// a caustic seen in a glass ball at its rim), off elsewhere (the statistics print the
+    /// share and the choice).
+    #[arg(long, action = clap::ArgAction::Set)]
+    independent_mutation: Option<bool>,
     /// MEMLT: the share of the independent mutation's path lengths and splits drawn as the
     /// start paths' generator draws them (length ∝ 2^-k, split uniform); the rest follow
     /// what each length and split found among the start-path candidates. 1: all uniform.
     #[arg(long, default_value_t = MltOptions::default().independent_defensive)]
     independent_defensive: f64,
+    /// MEMLT: the share of the learned generator's draws (the independent mutation's and the
+    /// learned start paths') that are camera walks going on until they find a light, making a
+    /// path of any length, as a path tracer's sample does; the rest draw a length and a split.
+    #[arg(long, default_value_t = MltOptions::default().independent_camera_walks)]
+    independent_camera_walks: f64,
     /// MEMLT: draw the chains' start paths from a second set of candidates made by the
     /// learned generator of the independent mutation (their weights spread less), instead of
     /// the first set (lengths ∝ 2^-k, uniform splits).
@@ -567,8 +581,10 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         lens_perturbation: a.lens_perturbation,
         caustic_perturbation: a.caustic_perturbation,
         multichain_perturbation: a.multichain_perturbation,
+        light_hit_perturbation: a.light_hit_perturbation,
         independent_mutation: a.independent_mutation,
         independent_defensive: a.independent_defensive,
+        independent_camera_walks: a.independent_camera_walks,
         learned_starts: a.learned_starts,
         manifold_perturbation: a.manifold_perturbation,
         lambda: a.lambda,
@@ -693,6 +709,11 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.manifold_walks.light_points,
             m.manifold_walks.sky_points,
             m.bootstrap_seconds
+        );
+        eprintln!(
+            "  MEMLT: {:.2}% of the light camera walks find in paths only such a walk makes; independent mutation {}",
+            m.walk_only_share * 100.0,
+            if m.independent_mutation { "on" } else { "off" }
         );
         print_first_stage(m.first_stage_samples, m.mean_luminance);
         print_longest_stay("memlt", m.longest_stay.as_ref());

@@ -178,6 +178,7 @@ fn memlt_refuses_options_that_leave_no_chain() {
     o.mlt.lens_perturbation = false;
     o.mlt.caustic_perturbation = false;
     o.mlt.multichain_perturbation = false;
+    o.mlt.light_hit_perturbation = false;
     o.mlt.manifold_perturbation = false;
     let e = integrator::render(&scene, &o).err().expect("no mutation must be refused").to_string();
     assert!(e.contains("at least one mutation"), "{e}");
@@ -236,7 +237,8 @@ fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     o.mlt.lens_perturbation = false;
     o.mlt.caustic_perturbation = false;
     o.mlt.manifold_perturbation = false;
-    o.mlt.independent_mutation = false;
+    o.mlt.light_hit_perturbation = false;
+    o.mlt.independent_mutation = Some(false);
     let out = integrator::render(&scene, &o).unwrap();
     let stay = out.stats.memlt.as_ref().unwrap().longest_stay.unwrap();
     assert_eq!(stay.mutations, out.width as u64 * out.height as u64 * 4);

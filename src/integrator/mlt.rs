@@ -69,12 +69,23 @@ pub struct MltOptions {
     pub lens_perturbation: bool,
     pub caustic_perturbation: bool,
     pub multichain_perturbation: bool,
+    /// MEMLT: the multi-chain perturbation's re-trace on to the light, for paths whose light
+    /// end no shadow ray joins (a caustic or a small light seen through glass; not Mitsuba
+    /// 0.6's).
+    pub light_hit_perturbation: bool,
     pub manifold_perturbation: bool,
-    pub independent_mutation: bool,
+    /// `None`: `auto`, on where `--bootstrap` camera walks to the first light find at least
+    /// 1.5% of their light in paths that only such a walk makes
+    /// (`memlt::independent_mutation_on`).
+    pub independent_mutation: Option<bool>,
     /// MEMLT: the share of the independent mutation's lengths and splits drawn as the start
     /// paths' generator draws them (the rest in proportion to what each found among the
     /// start-path candidates; 1: all as the start paths').
     pub independent_defensive: f64,
+    /// MEMLT: the share of the learned generator's draws (the independent mutation's and the
+    /// learned start paths') that are camera walks to the first light they find, which make
+    /// a path of any length (the rest draw a length and a split first).
+    pub independent_camera_walks: f64,
     /// MEMLT: the chains' start paths are drawn from a second set of candidates, made by the
     /// independent mutation's learned generator (whose weights spread less), instead of the
     /// first set, made by lengths `∝ 2^-k` and uniform splits (on by default: less relMSE on
@@ -138,8 +149,10 @@ impl Default for MltOptions {
             lens_perturbation: true,
             caustic_perturbation: true,
             multichain_perturbation: true,
-            independent_mutation: false,
+            light_hit_perturbation: true,
+            independent_mutation: None,
             independent_defensive: 0.2,
+            independent_camera_walks: 0.5,
             learned_starts: true,
             manifold_perturbation: true,
             lambda: 50.0,

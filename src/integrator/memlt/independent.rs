@@ -16,6 +16,16 @@
 //! `f / p`, each length and split with the share of the target it sampled), mixed with the
 //! start paths' proportions (`--independent-defensive`, so that every strategy that can
 //! find a path keeps a share and the proposal covers all the chains' paths).
+//!
+//! **Camera walks to the first light** (`--independent-camera-walks`, a share of the
+//! draws). One camera walk that goes on until it finds a light makes a path of whatever
+//! length that light is found at, as a path tracer's (or BDPT's `s = 0`) sample does; a
+//! length and a split drawn first make only the paths of that length. The paths that only
+//! such walks find (a floor's caustic seen in a glass ball at its rim: no edge of the path
+//! takes a shadow ray) are proposed as often as BDPT samples them, where the split
+//! generator proposes them at the rate of its one length's `s = 0` share. The mixture's
+//! density adds the share times the walk's density (the camera-only split's, for a path with
+//! no interior vertex on an emitter).
 
 use super::bidirectional::{Lengths, Proposal};
 use crate::integrator::Counters;
@@ -35,13 +45,27 @@ pub struct Strategies {
     length: Vec<f64>,
     /// For each length, the probability of each split given it; `None`: uniform over `0..=k`.
     split: Option<Vec<Vec<f64>>>,
+    /// The share of draws that are camera walks to the first light ([`super::path::camera_walk_to_light`]);
+    /// the lengths and splits above share the rest.
+    camera_walks: f64,
 }
 
 impl Strategies {
     /// Lengths `∝ 2^-(k - min)`, splits uniform: the start paths' generator.
     pub fn uniform(lengths: Lengths) -> Self {
         let length = (lengths.min..=lengths.max).map(|k| super::seed_length_pmf(lengths, k)).collect();
-        Strategies { min: lengths.min, length, split: None }
+        Strategies { min: lengths.min, length, split: None, camera_walks: 0.0 }
+    }
+
+    /// The same strategies with a share `camera_walks` (from 0 to 1) of the draws made camera
+    /// walks to the first light.
+    pub fn with_camera_walks(self, camera_walks: f64) -> Self {
+        Strategies { camera_walks: camera_walks.clamp(0.0, 1.0), ..self }
+    }
+
+    /// The share of draws that are camera walks to the first light.
+    pub fn camera_walks(&self) -> f64 {
+        self.camera_walks
     }
 
     /// Lengths and splits in proportion to `found[k - min][s]` (what the uniform generator's
@@ -72,7 +96,7 @@ impl Strategies {
             .zip(&length)
             .map(|(r, &l)| r.into_iter().map(|p| if l > 0.0 { p / l } else { 0.0 }).collect())
             .collect();
-        Strategies { min: lengths.min, length, split: Some(split) }
+        Strategies { min: lengths.min, length, split: Some(split), camera_walks: 0.0 }
     }
 
     /// [`Strategies::learned`] from candidates of the start paths' generator: each one's

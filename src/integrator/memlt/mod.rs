@@ -7,7 +7,9 @@
 //! regenerated: [`bidirectional`]'s whole-path move), each chain's drawn in proportion to
 //! `f / p`; their mean is a second, independent estimate of `b` (`seed_normalisation` in the
 //! statistics). What each length and split of the generator found among them teaches the
-//! independent mutation's generator ([`independent::Strategies`]); with `--learned-starts`
+//! independent mutation's generator ([`independent::Strategies`]), and the share of their
+//! light in paths that only a camera walk makes decides whether that mutation runs
+//! (`--independent-mutation auto`, [`independent_mutation_on`]); with `--learned-starts`
 //! (the default) a second set of candidates from that generator gives the starts. Each step
 //! proposes a mutation chosen uniformly among the mutators that suit the current path,
 //! accepts it with probability `min(1, f(y) T(y→x) / f(x) T(x→y))` on luminances, and
@@ -59,16 +61,19 @@ pub enum Mutator {
     Lens,
     Caustic,
     MultiChain,
+    /// The multi-chain perturbation's re-trace on to the light (`multichain.rs`).
+    LightHit,
     Manifold,
     Independent,
 }
 
 impl Mutator {
-    pub const ALL: [Mutator; 6] = [
+    pub const ALL: [Mutator; 7] = [
         Mutator::Bidirectional,
         Mutator::Lens,
         Mutator::Caustic,
         Mutator::MultiChain,
+        Mutator::LightHit,
         Mutator::Manifold,
         Mutator::Independent,
     ];
@@ -87,21 +92,39 @@ fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) ->
         if on(Mutator::Lens) { lens::suits(scene, x) } else { None },
         if on(Mutator::Caustic) { caustic::suits(scene, x) } else { None },
         if on(Mutator::MultiChain) { multichain::suits(scene, x) } else { None },
+        if on(Mutator::LightHit) { multichain::suits_light_hit(scene, x) } else { None },
         (on(Mutator::Manifold) && manifold_perturbation::suits(scene, x)).then_some(0),
         on(Mutator::Independent).then_some(0),
     ]
 }
 
-/// The mutators the options enable, in [`Mutator::ALL`]'s order.
-pub fn enabled(o: &super::mlt::MltOptions) -> [bool; Mutator::ALL.len()] {
+/// The mutators the options enable, in [`Mutator::ALL`]'s order, with the independent
+/// mutation as `independent` resolves `--independent-mutation auto`
+/// ([`independent_mutation_on`]).
+pub fn enabled(o: &super::mlt::MltOptions, independent: bool) -> [bool; Mutator::ALL.len()] {
     [
         o.bidirectional_mutation,
         o.lens_perturbation,
         o.caustic_perturbation,
         o.multichain_perturbation,
+        o.light_hit_perturbation,
         o.manifold_perturbation,
-        o.independent_mutation,
+        independent,
     ]
+}
+
+/// The share of the light that `--bootstrap` camera walks to the first light find (their
+/// summed `f / p`) above which `--independent-mutation auto` turns the independent mutation
+/// on: light in paths that only camera walks make.
+pub const AUTO_INDEPENDENT_SHARE: f64 = 0.015;
+
+/// Whether the independent mutation runs: as `--independent-mutation` says, or with `auto`
+/// (`None`) where a share `walk_only` of at least [`AUTO_INDEPENDENT_SHARE`] of the light
+/// that camera walks to the first light find is in paths that only such a walk makes (no
+/// edge takes a shadow ray: [`path::joined_nowhere`]); the split generator proposes those
+/// at its one length's `s = 0` rate, the camera walks at a path tracer's (BENCHMARKS.md).
+pub fn independent_mutation_on(option: Option<bool>, walk_only: f64) -> bool {
+    option.unwrap_or(walk_only >= AUTO_INDEPENDENT_SHARE)
 }
 
 /// Proposals and acceptances of one mutator.
@@ -127,6 +150,12 @@ pub struct MemltStats {
     /// from, in effect.
     pub start_ess: f64,
     pub start_candidates: usize,
+    /// With `--independent-mutation auto`, the share of the light that `--bootstrap` camera
+    /// walks to the first light find in paths that only such a walk makes
+    /// ([`path::joined_nowhere`]), and whether the independent mutation ran (`auto` turns it
+    /// on from [`AUTO_INDEPENDENT_SHARE`] of it).
+    pub walk_only_share: f64,
+    pub independent_mutation: bool,
     pub bootstrap_samples: u64,
     pub chains: usize,
     pub mutations: u64,
@@ -186,15 +215,22 @@ fn generated_path<R: Random>(
     counters: &mut Counters,
 ) -> Option<(Vec<Vertex>, Measured, f64, Split)> {
     let u = rng.next_1d() as f64;
-    let (k, s) = strategies.sample(u, rng.next_1d());
-    let camera = Vertex::camera(scene.camera.position);
-    let y = path::regenerate(scene, &[], std::slice::from_ref(&camera), s, k - s, rng, counters)?;
+    let walks = strategies.camera_walks();
+    let (y, split) = if u < walks {
+        let y = path::camera_walk_to_light(scene, lengths.max, rng, counters)?;
+        let k = y.len() - 1;
+        (y, (k, 0))
+    } else {
+        let (k, s) = strategies.sample((u - walks) / (1.0 - walks), rng.next_1d());
+        let camera = Vertex::camera(scene.camera.position);
+        (path::regenerate(scene, &[], std::slice::from_ref(&camera), s, k - s, rng, counters)?, (k, s))
+    };
     if !lengths.covers(&y) {
         return None;
     }
     let m = path::contribution(scene, &y)?;
     let p = whole_path_density(scene, strategies, &y);
-    (p > 0.0).then_some((y, m, p, (k, s)))
+    (p > 0.0).then_some((y, m, p, split))
 }
 
 /// The density with which [`independent_path`] generates path `x` from `strategies` (0 for a
@@ -202,10 +238,14 @@ fn generated_path<R: Random>(
 pub fn whole_path_density(scene: &Scene, strategies: &Strategies, x: &[Vertex]) -> f64 {
     let k = x.len() - 1;
     let l = strategies.length(k);
-    if l <= 0.0 {
-        return 0.0;
+    let walks = strategies.camera_walks();
+    if walks == 0.0 {
+        return if l > 0.0 { l * strategies.over_splits(k, path::split_densities(scene, x, 0, k)) } else { 0.0 };
     }
-    l * strategies.over_splits(k, path::split_densities(scene, x, 0, k))
+    let d: Vec<f64> = path::split_densities(scene, x, 0, k).collect();
+    let splits = if l > 0.0 { (1.0 - walks) * l * strategies.over_splits(k, d.iter().copied()) } else { 0.0 };
+    let walk = if path::walks_to_light(scene, x) { walks * d[0] } else { 0.0 };
+    splits + walk
 }
 
 /// Scalar contribution of a path: its luminance (zero when not positive and finite).
@@ -287,7 +327,9 @@ impl Chain {
             Mutator::Bidirectional => bidirectional::propose(scene, x, lengths, rng, c),
             Mutator::Lens => lens::propose(scene, x, self.current.raster, at, radii, rng, c),
             Mutator::Caustic => caustic::propose(scene, x, at, radii, rng, c),
-            Mutator::MultiChain => multichain::propose(scene, x, self.current.raster, at, radii, rng, c),
+            Mutator::MultiChain | Mutator::LightHit => {
+                multichain::propose(scene, x, self.current.raster, at, radii, rng, c)
+            }
             Mutator::Manifold => {
                 manifold_perturbation::propose(scene, x, (set.lambda, set.theta_diff), rng, c, &mut self.walks)
             }
@@ -339,8 +381,13 @@ impl Chain {
     }
 }
 
+/// Start-path candidates: each one's weight `f / p` with the length and split it drew, the
+/// work they took, and the share of their weights in paths that only a camera walk makes.
+type Candidates = (Vec<(f32, Split)>, Counters, f64);
+
 /// `n` start-path candidates from `strategies` (streams `key(i)`): each one's weight `f / p`
-/// (0 where the generator failed) with the length and split it drew.
+/// (0 where the generator failed) with the length and split it drew, and the share of the
+/// weights in paths that only a camera walk makes ([`path::joined_nowhere`]).
 fn candidates(
     scene: &Scene,
     pool: &rayon::ThreadPool,
@@ -349,32 +396,44 @@ fn candidates(
     importance: Option<&Importance>,
     n: usize,
     key: &(dyn Fn(u64) -> Vec<u64> + Sync),
-) -> (Vec<(f32, Split)>, Counters) {
+) -> Candidates {
     let chunk = 1024usize;
-    let parts: Vec<(Vec<(f32, Split)>, Counters)> = pool.install(|| {
+    let parts: Vec<Candidates> = pool.install(|| {
         (0..n.div_ceil(chunk))
             .into_par_iter()
             .map(|c| {
                 crate::accel::embree::set_flush_denormals();
                 let mut counters = Counters::default();
+                let mut walk_only = 0.0;
                 let ws = (c * chunk..((c + 1) * chunk).min(n))
                     .map(|i| {
                         let mut rng = Sampler::new(&key(i as u64));
-                        generated_path(scene, lengths, strategies, &mut rng, &mut counters)
-                            .map_or((0.0, (0, 0)), |(_, m, p, ks)| ((target(&m, importance) / p) as f32, ks))
+                        generated_path(scene, lengths, strategies, &mut rng, &mut counters).map_or(
+                            (0.0, (0, 0)),
+                            |(y, m, p, ks)| {
+                                let w = (target(&m, importance) / p) as f32;
+                                if path::joined_nowhere(scene, &y) {
+                                    walk_only += w as f64;
+                                }
+                                (w, ks)
+                            },
+                        )
                     })
                     .collect();
-                (ws, counters)
+                (ws, counters, walk_only)
             })
             .collect()
     });
     let mut all = Vec::with_capacity(n);
     let mut counters = Counters::default();
-    for (ws, c) in parts {
+    let mut walk_only = 0.0;
+    for (ws, c, w) in parts {
         all.extend(ws);
         counters += c;
+        walk_only += w;
     }
-    (all, counters)
+    let total: f64 = all.iter().map(|&(w, _)| w as f64).sum();
+    (all, counters, if total > 0.0 { walk_only / total } else { 0.0 })
 }
 
 const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
@@ -428,6 +487,7 @@ fn rescaled(image: Vec<Rgb>, direct: &[Rgb], luminance: f64) -> (Vec<Rgb>, f64) 
 const SEED_STREAM: u64 = 0x7365_6564;
 const LEARNED_SEED_STREAM: u64 = SEED_STREAM ^ 2;
 const CHAIN_STREAM: u64 = 0x6368_6169;
+const WALK_STREAM: u64 = 0x7761_6c6b;
 const DIRECT_STREAM: u64 = 0x6469_7265;
 const SPECULAR_STREAM: u64 = 0x7370_6563;
 
@@ -449,8 +509,9 @@ pub fn render(
             "--direct-samples must be a positive sample count or -1 (direct light in the chains), got {direct}"
         )));
     }
-    if !enabled(&opts.mlt).iter().any(|&e| e) {
-        return Err(Error::Usage("memlt needs at least one mutation (all six are switched off)".into()));
+    // `auto` may leave the independent mutation off: it does not count here.
+    if !enabled(&opts.mlt, opts.mlt.independent_mutation.unwrap_or(false)).iter().any(|&e| e) {
+        return Err(Error::Usage("memlt needs at least one mutation (all are switched off; `--independent-mutation auto` may leave that one off too)".into()));
     }
     let fraction = opts.mlt.bootstrap_fraction;
     if !(0.0..1.0).contains(&fraction) {
@@ -463,6 +524,10 @@ pub fn render(
     let defensive = opts.mlt.independent_defensive;
     if !(0.0..=1.0).contains(&defensive) {
         return Err(Error::Usage(format!("--independent-defensive must be a share from 0 to 1, got {defensive}")));
+    }
+    let walks = opts.mlt.independent_camera_walks;
+    if !(0.0..=1.0).contains(&walks) {
+        return Err(Error::Usage(format!("--independent-camera-walks must be a share from 0 to 1, got {walks}")));
     }
     let theta_diff = opts.mlt.theta_diff;
     if !(0.0..=180.0).contains(&theta_diff) {
@@ -572,14 +637,27 @@ pub fn render(
     // generator teaches the independent generator's lengths and splits, a second set from
     // that one gives the starts (their weights spread less).
     let uniform = Strategies::uniform(lengths);
-    let (first, c) = candidates(scene, &pool, lengths, &uniform, importance, n_boot, &|i| key(SEED_STREAM, i));
+    let (first, c, _) = candidates(scene, &pool, lengths, &uniform, importance, n_boot, &|i| key(SEED_STREAM, i));
     counters += c;
-    let strategies = Strategies::from_candidates(lengths, &first, defensive);
+    // With `--independent-mutation auto`, camera walks to the first light measure the share
+    // of their light in paths only such walks make (the split generator seldom makes those).
+    let walk_only = if opts.mlt.independent_mutation.is_none() {
+        let walks = Strategies::uniform(lengths).with_camera_walks(1.0);
+        let (_, c, share) = candidates(scene, &pool, lengths, &walks, importance, n_boot, &|i| key(WALK_STREAM, i));
+        counters += c;
+        share
+    } else {
+        0.0
+    };
+    // The camera walks are the learned generator's where the independent mutation runs.
+    let independent = independent_mutation_on(opts.mlt.independent_mutation, walk_only);
+    let walks = if independent { opts.mlt.independent_camera_walks } else { 0.0 };
+    let strategies = Strategies::from_candidates(lengths, &first, defensive).with_camera_walks(walks);
     let learned = opts.mlt.learned_starts;
     let (starts, start_stream) = if learned { (&strategies, LEARNED_SEED_STREAM) } else { (&uniform, SEED_STREAM) };
     let start_key = |i: u64| key(start_stream, i);
     let weights: Vec<f32> = if learned {
-        let (set, c) = candidates(scene, &pool, lengths, starts, importance, n_boot, &start_key);
+        let (set, c, _) = candidates(scene, &pool, lengths, starts, importance, n_boot, &start_key);
         counters += c;
         set.into_iter().map(|(w, _)| w).collect()
     } else {
@@ -596,6 +674,8 @@ pub fn render(
         seed_normalisation: seed_b,
         start_ess,
         start_candidates: n_boot,
+        walk_only_share: walk_only,
+        independent_mutation: independent,
         bootstrap_samples: (n_boot * boot_batches) as u64,
         chains: opts.mlt.chains,
         bootstrap_seconds,
@@ -611,7 +691,7 @@ pub fn render(
     let mut done = 0u64;
     let mut chains: Vec<Chain> = Vec::new();
     if b > 0.0 && seed_b > 0.0 && !interrupted {
-        let on = enabled(&opts.mlt);
+        let on = enabled(&opts.mlt, independent);
         let dist = Distribution1D::new(&weights);
         for i in 0..opts.mlt.chains as u64 {
             let mut pick = Sampler::new(&key(CHAIN_STREAM, i));

@@ -12,10 +12,21 @@
 //! are symmetric in the two paths; what remains of the transition density is the Jacobian
 //! from the film and those directions to the re-traced vertices' areas: the pinhole's
 //! direction density times each re-traced vertex's area factor.
+//!
+//! **The light hit** ([`Mutator::LightHit`](super::Mutator), beyond Veach and Mitsuba 0.6):
+//! where no two neighbouring vertices of the path are rough, its light end is a chain of
+//! Dirac vertices that no shadow ray joins (`L S+ D S+ E`: a floor's caustic seen in a glass
+//! ball; `L S+ E`: a small light seen in it). Then the same re-trace goes on to the light
+//! itself, which the ray must find (an area light; `x_0` is re-traced too, its area factor
+//! in the Jacobian). With no Newton walk, the move is not held at a caustic's fold, where the
+//! manifold perturbation's walk fails: like a primary-sample-space step, `f / T` stays
+//! bounded there, both holding the chain's singular geometric factor.
 
 use super::bidirectional::Proposal;
 use super::lens::Radii;
-use super::path::{area_factor, connectible, contribution, join, ray_from, retrace, settle_sky};
+use super::path::{
+    area_factor, as_light, connectible, contribution, hittable_light, join, ray_from, retrace, settle_sky,
+};
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::math::Frame;
@@ -27,42 +38,57 @@ use glam::{Vec2, Vec3};
 /// (Mitsuba 0.6's: 10⁻⁴ to 0.1 degrees).
 const THETA: (f32, f32) = (1e-4 * std::f32::consts::PI / 180.0, 0.1 * std::f32::consts::PI / 180.0);
 
-/// Where the multi-chain perturbation works: the index `l` of the kept vertex that the
-/// re-traced camera end is joined to (`x_l` and `x_{l+1}` rough, the first such pair from
-/// the camera), when more than one rough vertex lies between it and the pinhole.
-pub fn suits(scene: &Scene, x: &[Vertex]) -> Option<usize> {
+/// The first pair of neighbouring rough vertices from the camera, `(x_{i-1}, x_i)`: `i`
+/// (`0` when there is none), and the number of rough vertices from `x_i` to the pinhole
+/// (`x_i` included, the pinhole excluded).
+fn first_rough_pair(scene: &Scene, x: &[Vertex]) -> Option<(usize, usize)> {
     let k = x.len() - 1;
     let rough = |i: usize| x[i].kind != VertexKind::Camera && connectible(scene, &x[i]);
     let mut i = k.checked_sub(1)?;
-    let mut chains = 1;
+    let mut rough_seen = usize::from(rough(i));
     while i >= 1 && !(rough(i) && rough(i - 1)) {
-        if rough(i) {
-            chains += 1;
-        }
         i -= 1;
+        rough_seen += usize::from(rough(i));
     }
-    (i >= 1 && chains >= 2 && x[i].kind == VertexKind::Surface).then_some(i - 1)
+    Some((i, rough_seen))
 }
 
-/// The Jacobian of the re-traced vertices `x_{l+1} .. x_{k-1}` with respect to the film and
+/// Where the multi-chain perturbation works: the number of vertices it keeps at the light's
+/// end, `x_0 ..= x_l` (`l + 1`; `x_l` and `x_{l+1}` rough, the first such pair from the
+/// camera, and the re-traced camera end joined to `x_l`), when more than one rough vertex
+/// lies between `x_l` and the pinhole.
+pub fn suits(scene: &Scene, x: &[Vertex]) -> Option<usize> {
+    let (i, rough) = first_rough_pair(scene, x)?;
+    (i >= 1 && rough >= 2 && x[i].kind == VertexKind::Surface).then_some(i)
+}
+
+/// Where the light hit works: `Some(0)` (no vertex kept; the re-trace ends on the light)
+/// when no two neighbouring vertices of `x` are rough and its light is an area light a ray
+/// can find.
+pub fn suits_light_hit(scene: &Scene, x: &[Vertex]) -> Option<usize> {
+    let (i, _) = first_rough_pair(scene, x)?;
+    (i == 0 && !x[0].infinite && hittable_light(scene, &x[0])).then_some(0)
+}
+
+/// The Jacobian of the re-traced vertices `x_kept .. x_{k-1}` with respect to the film and
 /// the turned directions: the pinhole's direction density and each vertex's area factor.
-fn jacobian(scene: &Scene, x: &[Vertex], l: usize) -> f64 {
+fn jacobian(scene: &Scene, x: &[Vertex], kept: usize) -> f64 {
     let k = x.len() - 1;
     let w = (x[k - 1].p - x[k].p).normalize();
     let mut j = scene.camera.pdf_direction(w) as f64;
-    for i in l + 1..k {
+    for i in kept..k {
         j *= area_factor(x, i, i + 1);
     }
     j
 }
 
-/// Proposes a multi-chain perturbation of `x` (film position `raster`), keeping `x_0 ..=
-/// x_l`.
+/// Proposes a multi-chain perturbation of `x` (film position `raster`), keeping its first
+/// `kept` vertices ([`suits`]) or none (the light hit, [`suits_light_hit`]).
 pub fn propose<R: Random>(
     scene: &Scene,
     x: &[Vertex],
     raster: Vec2,
-    l: usize,
+    kept: usize,
     radii: Radii,
     rng: &mut R,
     counters: &mut Counters,
@@ -70,10 +96,10 @@ pub fn propose<R: Random>(
     let k = x.len() - 1;
     let mut ray = radii.camera_ray(scene, raster, rng.next_2d(), counters)?;
     let mut y = x.to_vec();
-    for i in (l + 1..k).rev() {
+    for i in (kept..k).rev() {
         let specular = x[i].delta;
-        y[i] = retrace(scene, &mut ray, x, i, specular && i > l + 1, counters)?;
-        if !specular && i > l + 1 {
+        y[i] = retrace(scene, &mut ray, x, i, specular && i > kept, counters)?;
+        if !specular && i > kept {
             if !connectible(scene, &y[i]) {
                 return None;
             }
@@ -86,12 +112,20 @@ pub fn propose<R: Random>(
             ray = ray_from(&y[i], Frame::from_normal(old).to_world(local));
         }
     }
-    settle_sky(scene, &mut y);
-    if !join(scene, &y[l], &y[l + 1], counters) {
-        return None;
+    if kept == 0 {
+        // The ray found the light's point (or another light's).
+        y[0] = as_light(scene, &y[0])?;
+        if !hittable_light(scene, &y[0]) {
+            return None;
+        }
+    } else {
+        settle_sky(scene, &mut y);
+        if !join(scene, &y[kept - 1], &y[kept], counters) {
+            return None;
+        }
     }
     let measured = contribution(scene, &y)?;
-    let forward = jacobian(scene, &y, l);
-    let backward = jacobian(scene, x, l);
+    let forward = jacobian(scene, &y, kept);
+    let backward = jacobian(scene, x, kept);
     Some(Proposal { path: y, measured, forward, backward })
 }

@@ -304,6 +304,62 @@ pub fn walk<R: Random>(
     true
 }
 
+/// A camera walk that stops at the first light it finds: a uniform film position, then
+/// radiance-mode BSDF sampling at every surface, of at most `max` edges; the path it makes
+/// (light first), ending on an emitting surface (on its front or back) or, where the scene
+/// has a light at infinity, on the sky when the ray leaves the scene. `None` when it finds
+/// none within `max` edges (or a BSDF absorbs it). A path of `k` edges comes with the
+/// density of the camera-only split of [`split_densities`] when no interior vertex lies on
+/// an emitting shape ([`walks_to_light`]), and never otherwise.
+pub fn camera_walk_to_light<R: Random>(
+    scene: &Scene,
+    max: usize,
+    rng: &mut R,
+    counters: &mut Counters,
+) -> Option<Vec<Vertex>> {
+    let mut v = vec![Vertex::camera(scene.camera.position)];
+    let mut ray = leave(scene, &mut v, 0, 0, TransportMode::Radiance, rng)?;
+    for _ in 0..max {
+        counters.extension_rays += 1;
+        let Some(si) = scene.intersect(&ray) else {
+            let from = v.last().map_or(ray.o, |x| x.p);
+            v.push(sky_vertex(scene, None, from, ray.d)?);
+            v.reverse();
+            return Some(v);
+        };
+        let b = scene.bsdf_index(&si);
+        let bsdf = &scene.bsdfs[b];
+        let mut x = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
+        if scene.area_light(&si).is_some() {
+            v.push(as_light(scene, &x)?);
+            v.reverse();
+            return Some(v);
+        }
+        let lo = si.shading.to_local(-ray.d);
+        let u1 = rng.next_1d();
+        let s = bsdf.sample(lo, si.at(), u1, rng.next_2d(), TransportMode::Radiance)?;
+        x.delta = s.delta;
+        ray = si.spawn_ray(si.shading.to_world(s.wi));
+        v.push(x);
+    }
+    None
+}
+
+/// Whether no edge of path `x` joins two vertices a shadow ray can join ([`connectible`]:
+/// the light, the pinhole and rough vertices), so that of the bidirectional strategies only
+/// a camera walk that finds the light makes it (a floor's caustic seen in a glass ball; a
+/// small light seen in it).
+pub fn joined_nowhere(scene: &Scene, x: &[Vertex]) -> bool {
+    !x.windows(2).any(|e| connectible(scene, &e[0]) && connectible(scene, &e[1]))
+}
+
+/// Whether [`camera_walk_to_light`] can make path `x`: none of its interior vertices lies on
+/// an emitting shape (the walk would have stopped there).
+pub fn walks_to_light(scene: &Scene, x: &[Vertex]) -> bool {
+    let k = x.len() - 1;
+    x[1..k].iter().all(|v| scene.shapes.get(v.shape as usize).is_none_or(|s| s.light.is_none()))
+}
+
 /// The ray leaving vertex `x` along unit `d`, on the line through `x`: its origin is moved
 /// along `d` until it lies off the surface by the usual offset ([`offset_origin`]'s), so
 /// that the vertex the ray finds lies exactly in direction `d` from `x` (a perturbation's

@@ -172,6 +172,47 @@ fn whole_path_density_follows_learned_strategies() {
     generator_matches_bdpt(&scene, &skewed, (4, 300_000), as_uniform, "learned strategies", "the uniform density");
 }
 
+#[test]
+fn whole_path_density_holds_with_camera_walks_to_the_light() {
+    // Half the draws camera walks that go on until they find the light (paths of every
+    // length): `f / p` still averages to BDPT's estimate; a density that leaves the walks
+    // out (the lengths' and splits' share alone) must be caught.
+    let scene = cornell();
+    let lengths = lengths(&scene);
+    let walks = skewed_strategies(lengths).with_camera_walks(0.5);
+    let splits = skewed_strategies(lengths);
+    let without = |y: &[Vertex], _| 0.5 * whole_path_density(&scene, &splits, y);
+    generator_matches_bdpt(
+        &scene,
+        &walks,
+        (5, 300_000),
+        without,
+        "camera walks to the light",
+        "a density without them",
+    );
+}
+
+#[test]
+fn camera_walks_stop_at_the_first_light() {
+    // Every walk ends on the light or the sky it found first, with no interior vertex on an
+    // emitter; its density is the camera-only split's.
+    let scene = cornell();
+    let lengths = lengths(&scene);
+    let mut found = 0;
+    for i in 0..20_000u64 {
+        let mut rng = Sampler::new(&[31, i]);
+        let Some(y) = path::camera_walk_to_light(&scene, lengths.max, &mut rng, &mut Counters::default()) else {
+            continue;
+        };
+        found += 1;
+        assert!(matches!(y[0].kind, VertexKind::Light(_)));
+        assert!(y.len() - 1 <= lengths.max && path::walks_to_light(&scene, &y));
+        assert_eq!(y.last().map(|v| v.kind), Some(VertexKind::Camera));
+    }
+    // About 3% of them find the small light within the depth of 4.
+    assert!(found > 300, "only {found} walks found the light");
+}
+
 /// A current path of three edges (light, two surfaces, pinhole).
 fn three_edges(scene: &Scene, lengths: Lengths) -> Vec<Vertex> {
     (0..)
@@ -283,7 +324,7 @@ fn balance_of(
     let radii = lens::Radii::for_film(scene.film.width, scene.film.height);
     // The current paths are drawn from the start paths' generator; the independent mutation
     // proposes from a learned one (its densities both ways are that one's).
-    let (uniform, learned) = (Strategies::uniform(lengths), skewed_strategies(lengths));
+    let (uniform, learned) = (Strategies::uniform(lengths), skewed_strategies(lengths).with_camera_walks(0.3));
     let (d, d2, valid) = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -300,7 +341,9 @@ fn balance_of(
                 Mutator::Bidirectional => bidirectional::propose(scene, &x, lengths, &mut rng, &mut c),
                 Mutator::Lens => lens::propose(scene, &x, mx.raster, at, radii, &mut rng, &mut c),
                 Mutator::Caustic => caustic::propose(scene, &x, at, radii, &mut rng, &mut c),
-                Mutator::MultiChain => multichain::propose(scene, &x, mx.raster, at, radii, &mut rng, &mut c),
+                Mutator::MultiChain | Mutator::LightHit => {
+                    multichain::propose(scene, &x, mx.raster, at, radii, &mut rng, &mut c)
+                }
                 Mutator::Independent => independent::propose(scene, &x, lengths, &learned, &mut rng, &mut c),
                 Mutator::Manifold => manifold_perturbation::propose(
                     scene,
@@ -336,12 +379,17 @@ fn every_mutator_is_in_detailed_balance() {
     // On the glass ball's scene the lens perturbation has the floor seen directly and
     // through the ball to work on, the caustic perturbation the caustic seen directly, the
     // multi-chain perturbation the floor seen directly and lit through the ball by another
-    // floor point, the manifold perturbation the caustic through the ball too. The bidirectional mutation's
+    // floor point, the light hit the caustic seen directly and the light seen in the ball
+    // (re-traced on to the light), the manifold perturbation the caustic through the ball
+    // too. The bidirectional mutation's
     // ratios are too heavy-tailed there (whole new paths through the ball) for a tight
     // check: it is checked on the Cornell box, with the perturbations again (the caustic
     // perturbation there with empty chains: the seen point moved from the light's side).
     let checks = [
-        (glass_caustic(), &[Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::Manifold][..]),
+        (
+            glass_caustic(),
+            &[Mutator::Lens, Mutator::Caustic, Mutator::MultiChain, Mutator::LightHit, Mutator::Manifold][..],
+        ),
         (
             cornell(),
             &[Mutator::Bidirectional, Mutator::Lens, Mutator::Caustic, Mutator::Manifold, Mutator::Independent][..],
@@ -357,6 +405,7 @@ fn every_mutator_is_in_detailed_balance() {
                 Mutator::Bidirectional => 4_800_000,
                 Mutator::Independent => 3_600_000,
                 Mutator::MultiChain => 4_000_000,
+                Mutator::LightHit => 1_200_000,
                 _ => 300_000,
             };
             let (good, se) = balance(scene, m, false, (50.0, 1.0, n));
