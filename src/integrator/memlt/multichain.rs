@@ -113,11 +113,8 @@ pub fn propose<R: Random>(
         }
     }
     if kept == 0 {
-        // The ray found the light's point (or another light's).
+        // The ray found the light's point (or another area light's).
         y[0] = as_light(scene, &y[0])?;
-        if !hittable_light(scene, &y[0]) {
-            return None;
-        }
     } else {
         settle_sky(scene, &mut y);
         if !join(scene, &y[kept - 1], &y[kept], counters) {

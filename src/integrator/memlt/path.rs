@@ -289,19 +289,31 @@ pub fn walk<R: Random>(
             }
             return false;
         };
-        let b = scene.bsdf_index(&si);
-        let bsdf = &scene.bsdfs[b];
-        let mut v = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
+        let mut v = surface_vertex(scene, &si, false);
         if i + 1 < n {
-            let lo = si.shading.to_local(-ray.d);
-            let u1 = rng.next_1d();
-            let Some(s) = bsdf.sample(lo, si.at(), u1, rng.next_2d(), mode) else { return false };
-            v.delta = s.delta;
-            ray = si.spawn_ray(si.shading.to_world(s.wi));
+            let Some((next, delta)) = scatter_on(scene, &si, &ray, mode, rng) else { return false };
+            v.delta = delta;
+            ray = next;
         }
         out.push(v);
     }
     true
+}
+
+/// The ray a walk's vertex at hit `si`, reached along `ray`, sends on by sampling its BSDF
+/// in `mode`, and whether it left through a Dirac lobe; `None` when the BSDF gives no
+/// direction.
+fn scatter_on<R: Random>(
+    scene: &Scene,
+    si: &crate::scene::shape::SurfaceInteraction,
+    ray: &Ray,
+    mode: TransportMode,
+    rng: &mut R,
+) -> Option<(Ray, bool)> {
+    let lo = si.shading.to_local(-ray.d);
+    let u1 = rng.next_1d();
+    let s = scene.bsdf(si).sample(lo, si.at(), u1, rng.next_2d(), mode)?;
+    Some((si.spawn_ray(si.shading.to_world(s.wi)), s.delta))
 }
 
 /// A camera walk that stops at the first light it finds: a uniform film position, then
@@ -327,19 +339,15 @@ pub fn camera_walk_to_light<R: Random>(
             v.reverse();
             return Some(v);
         };
-        let b = scene.bsdf_index(&si);
-        let bsdf = &scene.bsdfs[b];
-        let mut x = Vertex::surface(&si, b as u32, Rgb::ONE, !bsdf.is_delta());
+        let mut x = surface_vertex(scene, &si, false);
         if scene.area_light(&si).is_some() {
             v.push(as_light(scene, &x)?);
             v.reverse();
             return Some(v);
         }
-        let lo = si.shading.to_local(-ray.d);
-        let u1 = rng.next_1d();
-        let s = bsdf.sample(lo, si.at(), u1, rng.next_2d(), TransportMode::Radiance)?;
-        x.delta = s.delta;
-        ray = si.spawn_ray(si.shading.to_world(s.wi));
+        let (next, delta) = scatter_on(scene, &si, &ray, TransportMode::Radiance, rng)?;
+        x.delta = delta;
+        ray = next;
         v.push(x);
     }
     None
