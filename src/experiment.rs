@@ -99,6 +99,7 @@ pub struct MethodEntry {
     pub bootstrap: Option<usize>,
     pub mlt_path_integrator: Option<String>,
     pub direct_samples: Option<i32>,
+    pub direct_balance: Option<bool>,
     pub specular_samples: Option<u32>,
     pub bootstrap_fraction: Option<f64>,
     pub manifold_perturbation: Option<bool>,
@@ -266,6 +267,9 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
     }
     if let Some(x) = m.direct_samples {
         o.mlt.direct_samples = x;
+    }
+    if let Some(x) = m.direct_balance {
+        o.mlt.direct_balance = x;
     }
     if let Some(x) = m.specular_samples {
         o.mlt.specular_samples = x;

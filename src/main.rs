@@ -161,6 +161,11 @@ struct RenderArgs {
     /// the chains'); -1 leaves every path to the Markov chains.
     #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
     direct_samples: i32,
+    /// MEMLT with --time: the direct-light pass goes on past --direct-samples for the share
+    /// of the time that balances its noise against the chains' (both measured, each from two
+    /// independent halves, a tenth into the chains' time; at most half of the time then left)
+    #[arg(long, default_value_t = MltOptions::default().direct_balance, action = clap::ArgAction::Set)]
+    direct_balance: bool,
     /// MEMLT beside the direct-light pass: samples per pixel, in stratified cells, of a
     /// specular pass that renders the paths through Dirac lobes alone (the light seen in
     /// mirrors and through glass); 0 leaves them to the chains.
@@ -575,6 +580,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         bootstrap: a.bootstrap,
         base: a.mlt_path_integrator,
         direct_samples: a.direct_samples,
+        direct_balance: a.direct_balance,
         specular_samples: a.specular_samples,
         bootstrap_fraction: a.bootstrap_fraction,
         bidirectional_mutation: a.bidirectional_mutation,
@@ -715,6 +721,12 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
             m.walk_only_share * 100.0,
             if m.independent_mutation { "on" } else { "off" }
         );
+        if let Some(d) = &m.direct_balance {
+            eprintln!(
+                "  MEMLT: direct light {} samples per pixel in {:.2} s ({} added after {:.2} s of the chains: relative variance per second, direct {:.3e}, chains {:.3e})",
+                m.direct_samples, m.direct_seconds, d.extra_samples, d.measured_after, d.direct_noise, d.chain_noise
+            );
+        }
         print_first_stage(m.first_stage_samples, m.mean_luminance);
         print_longest_stay("memlt", m.longest_stay.as_ref());
     } else if !a.quiet && s.bidir.is_some() {

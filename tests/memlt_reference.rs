@@ -171,6 +171,32 @@ fn memlt_sunlit_room() {
 }
 
 #[test]
+fn memlt_balances_its_direct_light_under_a_time_budget() {
+    // Under a time budget the direct-light pass goes on for its share of the time. The
+    // sun-lit room is lit mostly directly: the pass takes samples beyond the two passes of
+    // 16 that measure its noise, and the image still matches the reference.
+    let scene = SUNLIT_ROOM.scene();
+    let timed = |o: &mut RenderOptions| o.budget = Budget::Time(6.0);
+    let (a, b) = (memlt_with(&scene, 0, 1, &timed), memlt_with(&scene, 0, 2, &timed));
+    for out in [&a, &b] {
+        let s = out.stats.memlt.as_ref().unwrap();
+        let d = s.direct_balance.expect("the balance measured both parts");
+        assert!(d.direct_noise > 0.0 && d.chain_noise > 0.0, "{d:?}");
+        assert!(d.extra_samples > 0 && s.direct_samples == 32 + d.extra_samples, "{} samples, {d:?}", s.direct_samples);
+    }
+    SUNLIT_ROOM.check(&image(a), &image(b), "MEMLT, 2 × 6 s, the direct light balanced");
+    // Without the balance, or with a budget of mutations, the pass takes its 16 samples.
+    let off = |o: &mut RenderOptions| {
+        o.budget = Budget::Time(1.0);
+        o.mlt.direct_balance = false;
+    };
+    for out in [memlt_with(&scene, 0, 1, &off), memlt(&scene, 1, 1, 16)] {
+        let s = out.stats.memlt.as_ref().unwrap();
+        assert!(s.direct_samples == 16 && s.direct_balance.is_none(), "{} samples", s.direct_samples);
+    }
+}
+
+#[test]
 fn memlt_refuses_options_that_leave_no_chain() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "16"), ("resy", "16")], Backend::Embree);
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));

@@ -54,6 +54,9 @@ pub struct MltOptions {
     /// (16 by default, as Mitsuba 0.6: paths of one edge, and of two through a rough
     /// vertex), the chains rendering the others; -1 leaves every path to the chains.
     pub direct_samples: i32,
+    /// MEMLT with a time budget: the direct-light pass goes on past `direct_samples` for the
+    /// share of the time that balances its noise against the chains' (`direct_balance.rs`).
+    pub direct_balance: bool,
     /// MEMLT beside a direct-light pass: samples per pixel, in stratified cells, of a
     /// specular pass that renders the paths through Dirac lobes alone (the light seen in
     /// mirrors and through glass); 0 leaves them to the chains.
@@ -143,6 +146,7 @@ impl Default for MltOptions {
             bootstrap: 100_000,
             base: MltBase::Bdpt,
             direct_samples: 16,
+            direct_balance: true,
             specular_samples: 0,
             bootstrap_fraction: 0.1,
             bidirectional_mutation: true,
@@ -857,19 +861,21 @@ pub fn render(
             .collect();
         let bf = b as f32;
         let n_boot = weights.len();
-        let done;
-        (done, interrupted) = super::run_chains(
+        let run = super::run_chains(
             &pool,
             opts,
             start,
             pixels,
             total,
+            super::ChainSpan::default(),
             &mut chains,
             &mut film,
             |ch, film| ch.step(&ev, bf, film),
             &mut snapshots,
             |chains, f| develop_chains(chains, &f, b, plain, n_boot).0,
         );
+        let done = run.done;
+        interrupted = run.interrupted;
         stats.normalisation = refined_normalisation(&chains, b, n_boot);
         stats.mean_luminance = plain.map_or(stats.normalisation, |l| refined_luminance(&chains, l, n_boot));
         longest = stays::longest(chains.iter().map(|c| &c.stays));

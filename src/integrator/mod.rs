@@ -343,15 +343,34 @@ impl RenderStats {
     }
 }
 
-/// Runs Markov chains for the budget: `total` mutations (or the time budget) in rounds of
-/// about one mutation per pixel, every chain running `step` the same number of times per
-/// round, so that time budgets and Ctrl-C are checked regularly. The chains are split into
-/// one contiguous group per worker thread, each group's steps splatting into a film of the
-/// thread's own: a chain's steps do not depend on the group it is in, and the films' sums
-/// are exact, so the image does not depend on the number of threads. After each round the
-/// snapshots due are developed by `develop(chains, film)`, `film` being `into` with the
-/// splats so far (and the mutations done as its light paths); at the end the splats are
-/// added to `into`. Returns the mutations done and whether the render was interrupted.
+/// Where a run of Markov chains stops, and what it starts from: `done` mutations of an
+/// earlier run of the same chains (whose splats `into` holds), and a time (seconds since
+/// the render's start) before the budget's, if any.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ChainSpan {
+    pub done: u64,
+    pub until: Option<f64>,
+}
+
+/// What a run of Markov chains did: the mutations done (with the span's earlier ones),
+/// whether the render was interrupted, and the groups' films (their splats, already added
+/// to `into`) with the number of chains in each.
+pub(crate) struct ChainRun {
+    pub done: u64,
+    pub interrupted: bool,
+    pub groups: Vec<(Film, usize)>,
+}
+
+/// Runs Markov chains for the budget: `total` mutations (or the time budget, or the span's
+/// end) in rounds of about one mutation per pixel, every chain running `step` the same
+/// number of times per round, so that time budgets and Ctrl-C are checked regularly. The
+/// chains are split into one contiguous group per worker thread (at least two groups, so
+/// that two independent halves of the chains can be compared), each group's steps splatting
+/// into a film of its own: a chain's steps do not depend on the group it is in, and the
+/// films' sums are exact, so the image does not depend on the number of threads. After each
+/// round the snapshots due are developed by `develop(chains, film)`, `film` being `into`
+/// with the splats so far (and the mutations done as its light paths); at the end the
+/// splats are added to `into`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_chains<C: Send>(
     pool: &rayon::ThreadPool,
@@ -359,21 +378,22 @@ pub(crate) fn run_chains<C: Send>(
     start: std::time::Instant,
     pixels: u64,
     total: u64,
+    span: ChainSpan,
     chains: &mut [C],
     into: &mut Film,
     step: impl Fn(&mut C, &mut Film) + Sync,
     snapshots: &mut Vec<Snapshot>,
     develop: impl Fn(&[C], Film) -> Vec<Rgb>,
-) -> (u64, bool) {
+) -> ChainRun {
     use rayon::prelude::*;
     let count = chains.len() as u64;
     if count == 0 {
-        return (0, false);
+        return ChainRun { done: span.done, interrupted: false, groups: Vec::new() };
     }
-    let mut films = vec![Film::new(into.width, into.height, into.filter); pool.current_num_threads()];
+    let mut films = vec![Film::new(into.width, into.height, into.filter); pool.current_num_threads().max(2)];
     let per_group = chains.len().div_ceil(films.len());
     let per_round = pixels.div_ceil(count);
-    let (mut done, mut interrupted) = (0u64, false);
+    let (mut done, mut interrupted) = (span.done, false);
     while done < total {
         let n = per_round.min((total - done).div_ceil(count));
         pool.install(|| {
@@ -400,14 +420,19 @@ pub(crate) fn run_chains<C: Send>(
             interrupted = true;
             break;
         }
+        let elapsed = start.elapsed().as_secs_f64();
         if let Budget::Time(t) = opts.budget
-            && start.elapsed().as_secs_f64() >= t
+            && elapsed >= t
         {
+            break;
+        }
+        if span.until.is_some_and(|u| elapsed >= u) {
             break;
         }
     }
     into.add_splat_films(&films);
-    (done, interrupted)
+    let sizes = chains.chunks(per_group).map(|g| g.len());
+    ChainRun { done, interrupted, groups: films.into_iter().zip(sizes).collect() }
 }
 
 /// The output of a Markov-chain render (PSSMLT, MEMLT): its statistics, with the

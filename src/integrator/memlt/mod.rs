@@ -27,6 +27,7 @@
 
 pub mod bidirectional;
 pub mod caustic;
+pub mod direct_balance;
 pub mod independent;
 pub mod lens;
 pub mod manifold_perturbation;
@@ -176,6 +177,12 @@ pub struct MemltStats {
     /// chains' part of the image has this mean (`normalisation` without a first stage).
     pub mean_luminance: f64,
     pub mean_luminance_error: f64,
+    /// The separate direct-light pass: its samples per pixel in all (0 without it), its
+    /// seconds, and with `--direct-balance` under a time budget what the balance measured
+    /// and added ([`direct_balance`]).
+    pub direct_samples: u32,
+    pub direct_seconds: f64,
+    pub direct_balance: Option<direct_balance::DirectBalance>,
 }
 
 /// The path lengths a scene's integrator settings allow.
@@ -566,7 +573,6 @@ pub fn render(
     // The direct light by the path tracer, when asked for: paths of one edge, and of two
     // through a rough vertex (those through a Dirac lobe, a small light's reflection in
     // glass say, are the specular pass's, or the chains' without one).
-    let mut base = Film::new(w, h, scene.film.filter);
     let mut counters = Counters::default();
     // A pass's options: its sample count and its own stream.
     let pass = |spp: u32, stream: u64| {
@@ -578,25 +584,55 @@ pub fn render(
         o
     };
     let spec = &scene.integrator;
-    if direct > 0 {
+    // The direct pass at `spp` samples per pixel from its own stream: its film and work.
+    let direct_pass = |spp: u32, stream: u64| -> Result<(Film, Counters), Error> {
         let max_depth = if spec.max_depth < 0 { 2 } else { (spec.max_depth as u32).min(2) };
         let pt = super::path::PathTracer { max_depth, dirac_emission: false, ..super::path::PathTracer::new(spec) };
-        let out = super::render_loop::run(scene, &pass(direct as u32, DIRECT_STREAM), pt, false, None)?;
-        counters += out.stats.counters;
-        if let Some(f) = &out.film {
-            base.merge_film(f);
+        let out = super::render_loop::run(scene, &pass(spp, stream), pt, false, None)?;
+        Ok((out.film.unwrap_or_else(|| Film::new(w, h, scene.film.filter)), out.stats.counters))
+    };
+    // With `--direct-balance` under a time budget, a second pass of as many samples from
+    // another stream gives the direct light's noise (`direct_balance`), and the pass may go
+    // on once the chains' noise is known.
+    let balance = opts.mlt.direct_balance && direct > 0 && iterations.is_none() && matches!(opts.budget, Budget::Time(_));
+    let mut direct_film = Film::new(w, h, scene.film.filter);
+    let mut direct_halves = None;
+    let mut direct_samples = 0u32;
+    let direct_start = Instant::now();
+    if direct > 0 {
+        let (a, c) = direct_pass(direct as u32, DIRECT_STREAM)?;
+        counters += c;
+        direct_film.merge_film(&a);
+        direct_samples = direct as u32;
+        if balance {
+            let (b, c) = direct_pass(direct as u32, DIRECT_STREAM ^ 1)?;
+            counters += c;
+            direct_film.merge_film(&b);
+            direct_samples *= 2;
+            direct_halves = Some((a.develop(), b.develop()));
         }
     }
-    if let Some(n) = specular {
-        // Its own sample count: its image adds to the direct pass's.
-        let max_edges = if spec.max_depth < 0 { MAX_EDGES as u32 } else { spec.max_depth as u32 };
-        let sp = specular_pass::SpecularPass { max_edges };
-        let out = super::render_loop::run(scene, &pass(n, SPECULAR_STREAM), sp, false, None)?;
-        counters += out.stats.counters;
-        if let Some(f) = &out.film {
-            base.add_to_mean(&f.develop());
+    let mut direct_seconds = direct_start.elapsed().as_secs_f64();
+    // Its own sample count: its image adds to the direct pass's.
+    let specular_image = match specular {
+        Some(n) => {
+            let max_edges = if spec.max_depth < 0 { MAX_EDGES as u32 } else { spec.max_depth as u32 };
+            let sp = specular_pass::SpecularPass { max_edges };
+            let out = super::render_loop::run(scene, &pass(n, SPECULAR_STREAM), sp, false, None)?;
+            counters += out.stats.counters;
+            out.film.map(|f| f.develop())
         }
-    }
+        None => None,
+    };
+    // The film the chains splat into: the direct and specular passes' light.
+    let passes = |direct: &Film| {
+        let mut f = direct.clone();
+        if let Some(image) = &specular_image {
+            f.add_to_mean(image);
+        }
+        f
+    };
+    let mut base = passes(&direct_film);
     if lengths.min > lengths.max {
         // No path is left to the chains.
         return finish(
@@ -632,7 +668,7 @@ pub fn render(
         normalisation(scene, opts, &pool, lengths, start, importance, &key);
     counters += c;
     // The direct light's image, beside which two-stage Metropolis scales the chains' part.
-    let rescale = importance.map(|_| (base.develop(), mean_luminance.0));
+    let mut rescale = importance.map(|_| (base.develop(), mean_luminance.0));
     // Start-path candidates and their weights f / p: a first set from the start paths'
     // generator teaches the independent generator's lengths and splits, a second set from
     // that one gives the starts (their weights spread less).
@@ -684,6 +720,8 @@ pub fn render(
         first_stage_samples,
         mean_luminance: mean_luminance.0,
         mean_luminance_error: mean_luminance.1,
+        direct_samples,
+        direct_seconds,
         ..Default::default()
     };
     let mut snapshots = Vec::new();
@@ -728,21 +766,78 @@ pub fn render(
             importance,
             strategies: &strategies,
         };
-        (done, interrupted) = super::run_chains(
-            &pool,
-            opts,
-            start,
-            pixels,
-            total,
-            &mut chains,
-            &mut base,
-            |ch, film| ch.step(scene, &set, film),
-            &mut snapshots,
-            |_, f| match &rescale {
-                Some((direct, l)) => rescaled(f.develop(), direct, *l).0,
-                None => f.develop(),
-            },
-        );
+        let run = |chains: &mut [Chain], base: &mut Film, span, rescale: &Option<(Vec<Rgb>, f64)>, snapshots: &mut _| {
+            super::run_chains(
+                &pool,
+                opts,
+                start,
+                pixels,
+                total,
+                span,
+                chains,
+                base,
+                |ch, film| ch.step(scene, &set, film),
+                snapshots,
+                |_, f| match rescale {
+                    Some((direct, l)) => rescaled(f.develop(), direct, *l).0,
+                    None => f.develop(),
+                },
+            )
+        };
+        let mut span = super::ChainSpan::default();
+        let mut time_left = true;
+        if let (Some(halves), Budget::Time(t)) = (&direct_halves, opts.budget) {
+            // A tenth of the chains' time, then the balance.
+            let chains_start = start.elapsed().as_secs_f64();
+            span.until = Some(chains_start + direct_balance::MEASURE_SHARE * (t - chains_start));
+            let first = run(&mut chains, &mut base, span, &rescale, &mut snapshots);
+            (done, interrupted) = (first.done, first.interrupted);
+            span = super::ChainSpan { done, until: None };
+            let now = start.elapsed().as_secs_f64();
+            time_left = now < t;
+            if !interrupted && time_left && done > 0 {
+                // The image so far, against which both parts' noise is relative.
+                let mut film = base.clone();
+                film.light_paths = done;
+                let (estimate, scale) = match &rescale {
+                    Some((direct, l)) => rescaled(film.develop(), direct, *l),
+                    None => (film.develop(), 1.0),
+                };
+                let seconds = (direct_seconds, now - chains_start, t - now);
+                let mut b = direct_balance::DirectBalance::default();
+                if let Some(chain_halves) = direct_balance::chain_halves(&first.groups, done, chains.len()) {
+                    b = direct_balance::measure(halves, &chain_halves, &estimate, scale, seconds);
+                }
+                let per_sample = direct_seconds / direct_samples as f64;
+                let extra = (b.extra_seconds / per_sample).floor().min(u32::MAX as f64) as u32;
+                if extra > 0 {
+                    let extra_start = Instant::now();
+                    let (f, c) = direct_pass(extra, DIRECT_STREAM ^ 2)?;
+                    counters += c;
+                    direct_film.merge_film(&f);
+                    direct_samples += extra;
+                    b.extra_seconds = extra_start.elapsed().as_secs_f64();
+                    direct_seconds += b.extra_seconds;
+                    // The chains' splats so far onto the passes' new film.
+                    let mut film = passes(&direct_film);
+                    film.add_film_splats(&base);
+                    base = film;
+                    if let Some((direct, _)) = &mut rescale {
+                        *direct = passes(&direct_film).develop();
+                    }
+                } else {
+                    b.extra_seconds = 0.0;
+                }
+                b.extra_samples = extra;
+                stats.direct_balance = Some(b);
+                stats.direct_samples = direct_samples;
+                stats.direct_seconds = direct_seconds;
+            }
+        }
+        if !interrupted && time_left {
+            let rest = run(&mut chains, &mut base, span, &rescale, &mut snapshots);
+            (done, interrupted) = (rest.done, rest.interrupted);
+        }
     }
     let longest = super::stays::longest(chains.iter().map(|c| &c.stays));
     let mut proposed = [0u64; Mutator::ALL.len()];
