@@ -129,7 +129,7 @@ pub struct DirectBalance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::{Random, Sampler};
+    use crate::sampling::Sampler;
 
     /// Normal deviates by Box–Muller.
     fn normal(rng: &mut Sampler) -> f64 {

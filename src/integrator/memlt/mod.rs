@@ -17,6 +17,9 @@
 //! each with its own seed, run the same number of mutations; the worker threads splat them
 //! into films of their own, whose exact sums make the image independent of the thread count.
 //!
+//! The direct light is by default a separate estimate ([`separate_light`]) whose share of
+//! a time budget balances its noise against the chains' ([`direct_balance`]).
+//!
 //! Every kind of light the renderer has may light the scene: lights at infinity enter a
 //! path as a vertex in their direction ([`path`]).
 //!
@@ -33,6 +36,7 @@ pub mod lens;
 pub mod manifold_perturbation;
 pub mod multichain;
 pub mod path;
+pub mod separate_light;
 pub mod specular_pass;
 
 use super::stays::{LongestStay, Stay, Stays, near, pixel_of};
@@ -47,6 +51,7 @@ use bidirectional::Lengths;
 use independent::{Split, Strategies};
 use path::Measured;
 use rayon::prelude::*;
+use separate_light::SeparateLight;
 use serde::Serialize;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
@@ -495,8 +500,6 @@ const SEED_STREAM: u64 = 0x7365_6564;
 const LEARNED_SEED_STREAM: u64 = SEED_STREAM ^ 2;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 const WALK_STREAM: u64 = 0x7761_6c6b;
-const DIRECT_STREAM: u64 = 0x6469_7265;
-const SPECULAR_STREAM: u64 = 0x7370_6563;
 
 /// Renders with MEMLT: all of the budget, or for `iterations` `A..B` (a chunk of a
 /// distributed render) `B - A` mutations per pixel by chains of their own, with their own
@@ -570,69 +573,15 @@ pub fn render(
         }
         k
     };
-    // The direct light by the path tracer, when asked for: paths of one edge, and of two
-    // through a rough vertex (those through a Dirac lobe, a small light's reflection in
-    // glass say, are the specular pass's, or the chains' without one).
+    // The direct light by the path tracer, and the specular pass, when asked for. With
+    // `--direct-balance` under a time budget the direct pass runs twice, so that its noise can
+    // be measured, and may go on once the chains' is known.
     let mut counters = Counters::default();
-    // A pass's options: its sample count and its own stream.
-    let pass = |spp: u32, stream: u64| {
-        let mut o = opts.clone();
-        o.budget = Budget::Spp(spp);
-        o.seed = crate::sampling::hash_words(&key(stream, 0));
-        o.checkpoints.clear();
-        o.progress = false;
-        o
-    };
-    let spec = &scene.integrator;
-    // The direct pass at `spp` samples per pixel from its own stream: its film and work.
-    let direct_pass = |spp: u32, stream: u64| -> Result<(Film, Counters), Error> {
-        let max_depth = if spec.max_depth < 0 { 2 } else { (spec.max_depth as u32).min(2) };
-        let pt = super::path::PathTracer { max_depth, dirac_emission: false, ..super::path::PathTracer::new(spec) };
-        let out = super::render_loop::run(scene, &pass(spp, stream), pt, false, None)?;
-        Ok((out.film.unwrap_or_else(|| Film::new(w, h, scene.film.filter)), out.stats.counters))
-    };
-    // With `--direct-balance` under a time budget, a second pass of as many samples from
-    // another stream gives the direct light's noise (`direct_balance`), and the pass may go
-    // on once the chains' noise is known.
-    let balance = opts.mlt.direct_balance && direct > 0 && iterations.is_none() && matches!(opts.budget, Budget::Time(_));
-    let mut direct_film = Film::new(w, h, scene.film.filter);
-    let mut direct_halves = None;
-    let mut direct_samples = 0u32;
-    let direct_start = Instant::now();
-    if direct > 0 {
-        let (a, c) = direct_pass(direct as u32, DIRECT_STREAM)?;
-        counters += c;
-        direct_film.merge_film(&a);
-        direct_samples = direct as u32;
-        if balance {
-            let (b, c) = direct_pass(direct as u32, DIRECT_STREAM ^ 1)?;
-            counters += c;
-            direct_film.merge_film(&b);
-            direct_samples *= 2;
-            direct_halves = Some((a.develop(), b.develop()));
-        }
-    }
-    let mut direct_seconds = direct_start.elapsed().as_secs_f64();
-    // Its own sample count: its image adds to the direct pass's.
-    let specular_image = match specular {
-        Some(n) => {
-            let max_edges = if spec.max_depth < 0 { MAX_EDGES as u32 } else { spec.max_depth as u32 };
-            let sp = specular_pass::SpecularPass { max_edges };
-            let out = super::render_loop::run(scene, &pass(n, SPECULAR_STREAM), sp, false, None)?;
-            counters += out.stats.counters;
-            out.film.map(|f| f.develop())
-        }
-        None => None,
-    };
-    // The film the chains splat into: the direct and specular passes' light.
-    let passes = |direct: &Film| {
-        let mut f = direct.clone();
-        if let Some(image) = &specular_image {
-            f.add_to_mean(image);
-        }
-        f
-    };
-    let mut base = passes(&direct_film);
+    let balance =
+        opts.mlt.direct_balance && direct > 0 && iterations.is_none() && matches!(opts.budget, Budget::Time(_));
+    let (mut light, c) = SeparateLight::render(scene, opts, &key, direct, balance, specular)?;
+    counters += c;
+    let mut base = light.film(None);
     if lengths.min > lengths.max {
         // No path is left to the chains.
         return finish(
@@ -720,8 +669,8 @@ pub fn render(
         first_stage_samples,
         mean_luminance: mean_luminance.0,
         mean_luminance_error: mean_luminance.1,
-        direct_samples,
-        direct_seconds,
+        direct_samples: light.samples,
+        direct_seconds: light.seconds,
         ..Default::default()
     };
     let mut snapshots = Vec::new();
@@ -766,27 +715,28 @@ pub fn render(
             importance,
             strategies: &strategies,
         };
-        let run = |chains: &mut [Chain], base: &mut Film, span, rescale: &Option<(Vec<Rgb>, f64)>, snapshots: &mut _| {
-            super::run_chains(
-                &pool,
-                opts,
-                start,
-                pixels,
-                total,
-                span,
-                chains,
-                base,
-                |ch, film| ch.step(scene, &set, film),
-                snapshots,
-                |_, f| match rescale {
-                    Some((direct, l)) => rescaled(f.develop(), direct, *l).0,
-                    None => f.develop(),
-                },
-            )
-        };
+        let run =
+            |chains: &mut [Chain], base: &mut Film, span, rescale: &Option<(Vec<Rgb>, f64)>, snapshots: &mut _| {
+                super::run_chains(
+                    &pool,
+                    opts,
+                    start,
+                    pixels,
+                    total,
+                    span,
+                    chains,
+                    base,
+                    |ch, film| ch.step(scene, &set, film),
+                    snapshots,
+                    |_, f| match rescale {
+                        Some((direct, l)) => rescaled(f.develop(), direct, *l).0,
+                        None => f.develop(),
+                    },
+                )
+            };
         let mut span = super::ChainSpan::default();
         let mut time_left = true;
-        if let (Some(halves), Budget::Time(t)) = (&direct_halves, opts.budget) {
+        if let (Some(halves), Budget::Time(t)) = (light.halves.take(), opts.budget) {
             // A tenth of the chains' time, then the balance.
             let chains_start = start.elapsed().as_secs_f64();
             span.until = Some(chains_start + direct_balance::MEASURE_SHARE * (t - chains_start));
@@ -795,7 +745,8 @@ pub fn render(
             span = super::ChainSpan { done, until: None };
             let now = start.elapsed().as_secs_f64();
             time_left = now < t;
-            if !interrupted && time_left && done > 0 {
+            let chain_halves = direct_balance::chain_halves(&first.groups, done, chains.len());
+            if let Some(chain_halves) = chain_halves.filter(|_| !interrupted && time_left && done > 0) {
                 // The image so far, against which both parts' noise is relative.
                 let mut film = base.clone();
                 film.light_paths = done;
@@ -803,35 +754,25 @@ pub fn render(
                     Some((direct, l)) => rescaled(film.develop(), direct, *l),
                     None => (film.develop(), 1.0),
                 };
-                let seconds = (direct_seconds, now - chains_start, t - now);
-                let mut b = direct_balance::DirectBalance::default();
-                if let Some(chain_halves) = direct_balance::chain_halves(&first.groups, done, chains.len()) {
-                    b = direct_balance::measure(halves, &chain_halves, &estimate, scale, seconds);
-                }
-                let per_sample = direct_seconds / direct_samples as f64;
-                let extra = (b.extra_seconds / per_sample).floor().min(u32::MAX as f64) as u32;
+                let seconds = (light.seconds, now - chains_start, t - now);
+                let mut b = direct_balance::measure(&halves, &chain_halves, &estimate, scale, seconds);
+                let extra =
+                    (b.extra_seconds * light.samples as f64 / light.seconds).floor().min(u32::MAX as f64) as u32;
+                b.extra_seconds = 0.0;
                 if extra > 0 {
-                    let extra_start = Instant::now();
-                    let (f, c) = direct_pass(extra, DIRECT_STREAM ^ 2)?;
-                    counters += c;
-                    direct_film.merge_film(&f);
-                    direct_samples += extra;
-                    b.extra_seconds = extra_start.elapsed().as_secs_f64();
-                    direct_seconds += b.extra_seconds;
+                    let before = light.seconds;
+                    counters += light.more_direct(scene, opts, &key, extra)?.1;
+                    b.extra_seconds = light.seconds - before;
                     // The chains' splats so far onto the passes' new film.
-                    let mut film = passes(&direct_film);
-                    film.add_film_splats(&base);
-                    base = film;
+                    base = light.film(Some(&base));
                     if let Some((direct, _)) = &mut rescale {
-                        *direct = passes(&direct_film).develop();
+                        *direct = light.film(None).develop();
                     }
-                } else {
-                    b.extra_seconds = 0.0;
                 }
                 b.extra_samples = extra;
                 stats.direct_balance = Some(b);
-                stats.direct_samples = direct_samples;
-                stats.direct_seconds = direct_seconds;
+                stats.direct_samples = light.samples;
+                stats.direct_seconds = light.seconds;
             }
         }
         if !interrupted && time_left {
