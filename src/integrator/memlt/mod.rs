@@ -589,7 +589,7 @@ pub fn render(
             opts,
             threads,
             base,
-            MemltStats::default(),
+            MemltStats { direct_samples: light.samples, direct_seconds: light.seconds, ..Default::default() },
             counters,
             start,
             Vec::new(),
