@@ -27,11 +27,20 @@ pub fn check_same_size(a: &Image, b: &Image) -> Result<()> {
     Ok(())
 }
 
+/// The `0.01` of relMSE's denominator.
+pub const RELMSE_EPSILON: f64 = 0.01;
+
 /// Per-channel relative squared error of one value.
 #[inline]
 pub fn relmse_term(t: f32, r: f32) -> f64 {
-    let (t, r) = (t as f64, r as f64);
-    (t - r) * (t - r) / (r * r + 0.01)
+    relative_square(t as f64 - r as f64, r)
+}
+
+/// A difference `d` squared relative to the reference value `r`, as relMSE weighs it.
+#[inline]
+pub fn relative_square(d: f64, r: f32) -> f64 {
+    let r = r as f64;
+    d * d / (r * r + RELMSE_EPSILON)
 }
 
 pub fn metrics(reference: &Image, test: &Image) -> Result<Metrics> {

@@ -16,6 +16,7 @@
 //! chains' noise measured early includes their start-up, so `V_c` errs high and the direct
 //! pass's share low.
 
+use crate::compare::relative_square;
 use crate::film::Film;
 use crate::math::Rgb;
 
@@ -43,10 +44,7 @@ pub fn halves_variance(a: &[Rgb], b: &[Rgb], (na, nb): (f64, f64), reference: &[
         .map(|((p, q), r)| {
             [(p.x, q.x, r.x), (p.y, q.y, r.y), (p.z, q.z, r.z)]
                 .iter()
-                .map(|&(p, q, r)| {
-                    let d = p as f64 - q as f64;
-                    d * d / (r as f64 * r as f64 + 0.01)
-                })
+                .map(|&(p, q, r)| relative_square(p as f64 - q as f64, r))
                 .sum::<f64>()
         })
         .sum();
@@ -89,8 +87,9 @@ pub fn chain_halves(groups: &[(Film, usize)], done: u64, chains: usize) -> Optio
     Some([half(&groups[..k]), half(&groups[k..])])
 }
 
-/// Both parts' relative variances per second and the direct pass's extra seconds
-/// ([`extra_direct_seconds`]): the direct pass's two halves of `seconds.0` seconds in all,
+/// Both parts' relative variances per second (the extra samples and seconds left at zero)
+/// and the seconds the direct pass should go on for ([`extra_direct_seconds`]): the direct
+/// pass's two halves of `seconds.0` seconds in all,
 /// the chains' halves after `seconds.1` seconds, whose part of the image is finally scaled by
 /// `scale` (two-stage Metropolis), relative to the image so far, `estimate`, with
 /// `seconds.2` left.
@@ -100,17 +99,18 @@ pub fn measure(
     estimate: &[Rgb],
     scale: f64,
     (direct_seconds, chain_seconds, rest): (f64, f64, f64),
-) -> DirectBalance {
+) -> (DirectBalance, f64) {
     let v_direct = halves_variance(&direct.0, &direct.1, (1.0, 1.0), estimate) * direct_seconds;
     let [(a, na), (b, nb)] = chains;
     let v_chains = halves_variance(a, b, (*na, *nb), estimate) * scale * scale * chain_seconds;
-    DirectBalance {
+    let measured = DirectBalance {
         direct_noise: v_direct,
         chain_noise: v_chains,
         measured_after: chain_seconds,
         extra_samples: 0,
-        extra_seconds: extra_direct_seconds(direct_seconds, chain_seconds, rest, v_direct, v_chains),
-    }
+        extra_seconds: 0.0,
+    };
+    (measured, extra_direct_seconds(direct_seconds, chain_seconds, rest, v_direct, v_chains))
 }
 
 /// What the balance measured and did, for the statistics.
@@ -129,6 +129,7 @@ pub struct DirectBalance {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::compare::RELMSE_EPSILON;
     use crate::sampling::Sampler;
 
     /// Normal deviates by Box–Muller.
@@ -157,7 +158,8 @@ mod tests {
         };
         let (a, b) = (mean_of(na, &mut rng), mean_of(nb, &mut rng));
         let whole = sigma * sigma / (na + nb) as f64;
-        let truth = reference.iter().map(|r| whole / (r.x as f64 * r.x as f64 + 0.01)).sum::<f64>() / pixels as f64;
+        let truth =
+            reference.iter().map(|r| whole / (r.x as f64 * r.x as f64 + RELMSE_EPSILON)).sum::<f64>() / pixels as f64;
         (a, b, reference, truth)
     }
 

@@ -496,6 +496,15 @@ fn rescaled(image: Vec<Rgb>, direct: &[Rgb], luminance: f64) -> (Vec<Rgb>, f64) 
     let image = image.into_iter().zip(direct).map(|(p, d)| *d + (p - *d) * s as f32).collect();
     (image, s)
 }
+
+/// A film's image, with two-stage Metropolis' final scale where `rescale` (the passes'
+/// image beside the chains and the luminance) is given ([`rescaled`]); also the factor.
+fn developed(film: &Film, rescale: Option<&(Vec<Rgb>, f64)>) -> (Vec<Rgb>, f64) {
+    match rescale {
+        Some((direct, l)) => rescaled(film.develop(), direct, *l),
+        None => (film.develop(), 1.0),
+    }
+}
 const SEED_STREAM: u64 = 0x7365_6564;
 const LEARNED_SEED_STREAM: u64 = SEED_STREAM ^ 2;
 const CHAIN_STREAM: u64 = 0x6368_6169;
@@ -581,7 +590,7 @@ pub fn render(
         opts.mlt.direct_balance && direct > 0 && iterations.is_none() && matches!(opts.budget, Budget::Time(_));
     let (mut light, c) = SeparateLight::render(scene, opts, &key, direct, balance, specular)?;
     counters += c;
-    let mut base = light.film(None);
+    let mut base = light.film();
     if lengths.min > lengths.max {
         // No path is left to the chains.
         return finish(
@@ -728,10 +737,7 @@ pub fn render(
                     base,
                     |ch, film| ch.step(scene, &set, film),
                     snapshots,
-                    |_, f| match rescale {
-                        Some((direct, l)) => rescaled(f.develop(), direct, *l).0,
-                        None => f.develop(),
-                    },
+                    |_, f| developed(&f, rescale.as_ref()).0,
                 )
             };
         let mut span = super::ChainSpan::default();
@@ -750,24 +756,21 @@ pub fn render(
                 // The image so far, against which both parts' noise is relative.
                 let mut film = base.clone();
                 film.light_paths = done;
-                let (estimate, scale) = match &rescale {
-                    Some((direct, l)) => rescaled(film.develop(), direct, *l),
-                    None => (film.develop(), 1.0),
-                };
+                let (estimate, scale) = developed(&film, rescale.as_ref());
                 let seconds = (light.seconds, now - chains_start, t - now);
-                let mut b = direct_balance::measure(&halves, &chain_halves, &estimate, scale, seconds);
-                let extra =
-                    (b.extra_seconds * light.samples as f64 / light.seconds).floor().min(u32::MAX as f64) as u32;
-                b.extra_seconds = 0.0;
+                let (mut b, asked) = direct_balance::measure(&halves, &chain_halves, &estimate, scale, seconds);
+                let extra = (asked * light.samples as f64 / light.seconds).floor().min(u32::MAX as f64) as u32;
                 if extra > 0 {
                     let before = light.seconds;
                     counters += light.more_direct(scene, opts, &key, extra)?.1;
                     b.extra_seconds = light.seconds - before;
                     // The chains' splats so far onto the passes' new film.
-                    base = light.film(Some(&base));
+                    let mut film = light.film();
                     if let Some((direct, _)) = &mut rescale {
-                        *direct = light.film(None).develop();
+                        *direct = film.develop();
                     }
+                    film.add_film_splats(&base);
+                    base = film;
                 }
                 b.extra_samples = extra;
                 stats.direct_balance = Some(b);
@@ -848,10 +851,7 @@ fn finish(
     stats.mutations = done;
     let seconds = start.elapsed().as_secs_f64();
     let spp = (done / pixels) as u32;
-    let (image, s) = match &rescale {
-        Some((direct, l)) if done > 0 => rescaled(film.develop(), direct, *l),
-        _ => (film.develop(), 1.0),
-    };
+    let (image, s) = developed(&film, rescale.as_ref().filter(|_| done > 0));
     stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b * s, done);
     Ok(super::chains_output(
         scene,

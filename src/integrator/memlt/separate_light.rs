@@ -104,15 +104,11 @@ impl SeparateLight {
         Ok((film, out.stats.counters))
     }
 
-    /// The film the chains splat into: the passes' light (and `splats`' splats, a film the
-    /// chains splatted into before).
-    pub fn film(&self, splats: Option<&Film>) -> Film {
+    /// The film the chains splat into: the passes' light.
+    pub fn film(&self) -> Film {
         let mut f = self.direct.clone();
         if let Some(image) = &self.specular {
             f.add_to_mean(image);
-        }
-        if let Some(s) = splats {
-            f.add_film_splats(s);
         }
         f
     }

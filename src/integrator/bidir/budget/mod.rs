@@ -179,7 +179,7 @@ pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 pub const DEFAULT_HORIZON: u32 = 256;
 
 /// The `0.01` of relMSE's denominator.
-const REL_EPSILON: f64 = 0.01;
+const REL_EPSILON: f64 = crate::compare::RELMSE_EPSILON;
 
 /// What an iteration spends on the pool: connections per camera vertex, and light paths
 /// that form the pool and that splat.
