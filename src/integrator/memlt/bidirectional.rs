@@ -17,7 +17,7 @@
 use super::path::{Measured, contribution, regenerate, stretch_density};
 use crate::integrator::Counters;
 use crate::integrator::bidir::Vertex;
-use crate::integrator::mlt::ChainPaths;
+use crate::integrator::mlt::bootstrap::ChainPaths;
 use crate::sampling::Random;
 use crate::scene::Scene;
 

@@ -466,12 +466,17 @@ fn normalisation(
 ) -> ((f64, f64), (f64, f64), usize, Counters) {
     let n = opts.mlt.bootstrap;
     let (mut sum, mut variance, mut counters) = ([0.0; 2], [0.0; 2], Counters::default());
-    let batches = super::mlt::in_batches(opts, start, opts.mlt.bootstrap_fraction, |batch| {
+    let batches = super::mlt::bootstrap::in_batches(opts, start, opts.mlt.bootstrap_fraction, |batch| {
         let offset = batch * n as u64;
-        let (target, plain, c) =
-            super::mlt::bdpt_normalisation(scene, opts, pool, n, lengths.chain_paths(), importance, &|s, i| {
-                key(s ^ BOOTSTRAP_STREAM, i + offset)
-            });
+        let (target, plain, c) = super::mlt::bootstrap::bdpt_normalisation(
+            scene,
+            opts,
+            pool,
+            n,
+            lengths.chain_paths(),
+            importance,
+            &|s, i| key(s ^ BOOTSTRAP_STREAM, i + offset),
+        );
         counters += c;
         for (i, (m, e)) in [target, plain].into_iter().enumerate() {
             sum[i] += m;
@@ -615,7 +620,8 @@ pub fn render(
     let (importance, first_stage_samples) = if opts.mlt.two_stage {
         let fraction = opts.mlt.bootstrap_fraction / 2.0;
         let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];
-        let (map, n, c) = super::mlt::first_stage(scene, opts, &pool, n_boot, paths, start, fraction, &render_key);
+        let (map, n, c) =
+            super::mlt::bootstrap::first_stage(scene, opts, &pool, n_boot, paths, start, fraction, &render_key);
         counters += c;
         (map, n)
     } else {

@@ -6,7 +6,7 @@
 
 use super::*;
 use crate::integrator::bidir::VertexKind;
-use crate::integrator::mlt::ChainPaths;
+use crate::integrator::mlt::bootstrap::ChainPaths;
 
 /// A scene of the repository with `-D` style overrides.
 fn scene(file: &str, overrides: &[(&str, &str)]) -> Scene {
@@ -37,7 +37,7 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
 fn bootstrap_estimate(scene: &Scene, paths: ChainPaths, (seed, n): (u64, usize)) -> (f64, f64) {
     let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
     let pool = super::super::thread_pool(2).unwrap();
-    super::super::mlt::bdpt_normalisation(scene, &opts, &pool, n, paths, None, &|s, i| vec![seed, s, i]).0
+    super::super::mlt::bootstrap::bdpt_normalisation(scene, &opts, &pool, n, paths, None, &|s, i| vec![seed, s, i]).0
 }
 
 /// BDPT's estimate of the luminance of paths of at least `min` edges.

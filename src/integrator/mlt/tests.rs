@@ -2,7 +2,9 @@
 //! primary-sample-space sampler (the small step's symmetry, its range, rejected proposals
 //! restored).
 
+use super::bootstrap::bdpt_normalisation;
 use super::*;
+use crate::integrator::two_stage::{Grid, Importance};
 
 #[test]
 fn two_stage_normalisation_is_the_image_over_the_map() {
