@@ -310,6 +310,31 @@ struct StepSettings<'a> {
 }
 
 impl Chain {
+    /// A chain at `path` (measured as `current`), stepping with `rng`; `counters` holds the
+    /// work its start took.
+    fn new(
+        scene: &Scene,
+        rng: Sampler,
+        path: Vec<Vertex>,
+        current: Measured,
+        counters: Counters,
+        importance: Option<&Importance>,
+        enabled: [bool; Mutator::ALL.len()],
+    ) -> Chain {
+        Chain {
+            rng,
+            f: target(&current, importance),
+            suits: suitable(scene, &path, enabled),
+            path,
+            current,
+            counters,
+            proposed: [0; Mutator::ALL.len()],
+            accepted: [0; Mutator::ALL.len()],
+            walks: Default::default(),
+            stays: Stays::default(),
+        }
+    }
+
     /// One step: a proposal, both paths splatted with their expected weights (each with
     /// luminance `b`), the proposal accepted or not.
     fn step(&mut self, scene: &Scene, set: &StepSettings<'_>, film: &mut Film) {
@@ -515,16 +540,59 @@ const LEARNED_SEED_STREAM: u64 = SEED_STREAM ^ 2;
 const CHAIN_STREAM: u64 = 0x6368_6169;
 const WALK_STREAM: u64 = 0x7761_6c6b;
 
-/// Renders with MEMLT: all of the budget, or for `iterations` `A..B` (a chunk of a
-/// distributed render) `B - A` mutations per pixel by chains of their own, with their own
-/// bootstrap (streams keyed by `A` as well).
-pub fn render(
+/// What the direct-light balance measures a tenth into the chains' time: the direct pass's
+/// two halves, the chains' (their images and mutations), the mutations done, and the chains'
+/// seconds so far and the render's seconds left.
+struct Measurement<'a> {
+    halves: &'a (Vec<Rgb>, Vec<Rgb>),
+    chain_halves: &'a [(Vec<Rgb>, f64); 2],
+    done: u64,
+    seconds: (f64, f64),
+}
+
+/// `--direct-balance` ([`direct_balance`]): both parts' relative variance per second against
+/// the image so far (the direct light in `base`, with the chains' splats over
+/// `measured.done` mutations) decide how much longer the direct pass runs; its new samples
+/// go onto a new film, which takes the chains' splats so far and replaces `base`, and
+/// two-stage's image of the direct light in `rescale` is developed again. The balance's
+/// figures and the work the added samples took.
+fn balance(
     scene: &Scene,
     opts: &RenderOptions,
-    iterations: Option<std::ops::Range<u32>>,
-) -> Result<RenderOutput, crate::error::Error> {
+    key: separate_light::Keys,
+    light: &mut SeparateLight,
+    measured: &Measurement,
+    base: &mut Film,
+    rescale: &mut Option<(Vec<Rgb>, f64)>,
+) -> Result<(direct_balance::DirectBalance, Counters), crate::error::Error> {
+    // The image so far, against which both parts' noise is relative.
+    let mut film = base.clone();
+    film.light_paths = measured.done;
+    let (estimate, scale) = developed(&film, rescale.as_ref());
+    let (chain_seconds, rest) = measured.seconds;
+    let seconds = (light.seconds, chain_seconds, rest);
+    let (mut b, asked) = direct_balance::measure(measured.halves, measured.chain_halves, &estimate, scale, seconds);
+    let extra = (asked * light.samples as f64 / light.seconds).floor().min(u32::MAX as f64) as u32;
+    let mut counters = Counters::default();
+    if extra > 0 {
+        let before = light.seconds;
+        counters += light.more_direct(scene, opts, key, extra)?.1;
+        b.extra_seconds = light.seconds - before;
+        // The chains' splats so far onto the passes' new film.
+        let mut film = light.film();
+        if let Some((direct, _)) = rescale {
+            *direct = film.develop();
+        }
+        film.add_film_splats(base);
+        *base = film;
+    }
+    b.extra_samples = extra;
+    Ok((b, counters))
+}
+
+/// Refuses MEMLT's options out of their ranges, and scenes it cannot render.
+fn check_options(scene: &Scene, opts: &RenderOptions) -> Result<(), crate::error::Error> {
     use crate::error::Error;
-    let n_boot = opts.mlt.bootstrap;
     opts.mlt.check_counts()?;
     super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
     let direct = opts.mlt.direct_samples;
@@ -557,6 +625,22 @@ pub fn render(
     if !(0.0..=180.0).contains(&theta_diff) {
         return Err(Error::Usage(format!("--theta-diff must be an angle from 0 to 180 degrees, got {theta_diff}")));
     }
+    Ok(())
+}
+
+/// Renders with MEMLT: all of the budget, or for `iterations` `A..B` (a chunk of a
+/// distributed render) `B - A` mutations per pixel by chains of their own, with their own
+/// bootstrap (streams keyed by `A` as well).
+pub fn render(
+    scene: &Scene,
+    opts: &RenderOptions,
+    iterations: Option<std::ops::Range<u32>>,
+) -> Result<RenderOutput, crate::error::Error> {
+    use crate::error::Error;
+    check_options(scene, opts)?;
+    let n_boot = opts.mlt.bootstrap;
+    let direct = opts.mlt.direct_samples;
+    let defensive = opts.mlt.independent_defensive;
     let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let mut lengths = lengths(scene);
@@ -591,9 +675,9 @@ pub fn render(
     // `--direct-balance` under a time budget the direct pass runs twice, so that its noise can
     // be measured, and may go on once the chains' is known.
     let mut counters = Counters::default();
-    let balance =
+    let balanced =
         opts.mlt.direct_balance && direct > 0 && iterations.is_none() && matches!(opts.budget, Budget::Time(_));
-    let (mut light, c) = SeparateLight::render(scene, opts, &key, direct, balance, specular)?;
+    let (mut light, c) = SeparateLight::render(scene, opts, &key, direct, balanced, specular)?;
     counters += c;
     let mut base = light.film();
     if lengths.min > lengths.max {
@@ -696,24 +780,15 @@ pub fn render(
         let on = enabled(&opts.mlt, independent);
         let dist = Distribution1D::new(&weights);
         for i in 0..opts.mlt.chains as u64 {
+            // A start candidate in proportion to its weight, regenerated from its stream.
             let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
             let (j, _) = dist.sample(pick.next_1d());
             let mut rng = Sampler::new(&start_key(j as u64));
             let mut c = Counters::default();
             let (path, current, _) = independent_path(scene, lengths, starts, &mut rng, &mut c)
                 .ok_or_else(|| Error::Usage("a start path could not be regenerated".into()))?;
-            chains.push(Chain {
-                rng: Sampler::new(&key(CHAIN_STREAM ^ 1, i)),
-                f: target(&current, importance),
-                suits: suitable(scene, &path, on),
-                path,
-                current,
-                counters: c,
-                proposed: [0; Mutator::ALL.len()],
-                accepted: [0; Mutator::ALL.len()],
-                walks: Default::default(),
-                stays: Stays::default(),
-            });
+            let rng = Sampler::new(&key(CHAIN_STREAM ^ 1, i));
+            chains.push(Chain::new(scene, rng, path, current, c, importance, on));
         }
         let total = match opts.budget {
             Budget::Spp(_) if let Some(r) = &iterations => r.len() as u64 * pixels,
@@ -759,26 +834,14 @@ pub fn render(
             time_left = now < t;
             let chain_halves = direct_balance::chain_halves(&first.groups, done, chains.len());
             if let Some(chain_halves) = chain_halves.filter(|_| !interrupted && time_left && done > 0) {
-                // The image so far, against which both parts' noise is relative.
-                let mut film = base.clone();
-                film.light_paths = done;
-                let (estimate, scale) = developed(&film, rescale.as_ref());
-                let seconds = (light.seconds, now - chains_start, t - now);
-                let (mut b, asked) = direct_balance::measure(&halves, &chain_halves, &estimate, scale, seconds);
-                let extra = (asked * light.samples as f64 / light.seconds).floor().min(u32::MAX as f64) as u32;
-                if extra > 0 {
-                    let before = light.seconds;
-                    counters += light.more_direct(scene, opts, &key, extra)?.1;
-                    b.extra_seconds = light.seconds - before;
-                    // The chains' splats so far onto the passes' new film.
-                    let mut film = light.film();
-                    if let Some((direct, _)) = &mut rescale {
-                        *direct = film.develop();
-                    }
-                    film.add_film_splats(&base);
-                    base = film;
-                }
-                b.extra_samples = extra;
+                let measured = Measurement {
+                    halves: &halves,
+                    chain_halves: &chain_halves,
+                    done,
+                    seconds: (now - chains_start, t - now),
+                };
+                let (b, c) = balance(scene, opts, &key, &mut light, &measured, &mut base, &mut rescale)?;
+                counters += c;
                 stats.direct_balance = Some(b);
                 stats.direct_samples = light.samples;
                 stats.direct_seconds = light.seconds;
@@ -790,28 +853,7 @@ pub fn render(
         }
     }
     let longest = super::stays::longest(chains.iter().map(|c| &c.stays));
-    let mut proposed = [0u64; Mutator::ALL.len()];
-    let mut accepted = [0u64; Mutator::ALL.len()];
-    for ch in &chains {
-        counters += ch.counters;
-        stats.manifold_walks += ch.walks;
-        for m in 0..Mutator::ALL.len() {
-            proposed[m] += ch.proposed[m];
-            accepted[m] += ch.accepted[m];
-        }
-    }
-    stats.mutators = Mutator::ALL
-        .iter()
-        .map(|&m| {
-            let (p, a) = (proposed[m as usize], accepted[m as usize]);
-            MutatorStats {
-                mutator: m,
-                proposed: p,
-                accepted: a,
-                acceptance: if p == 0 { 0.0 } else { a as f64 / p as f64 },
-            }
-        })
-        .collect();
+    tally(&chains, &mut counters, &mut stats);
     let seconds = start.elapsed().as_secs_f64();
     stats.mutations_per_second = done as f64 / (seconds - stats.bootstrap_seconds).max(1e-9);
     // What one mutation's splat carries around the longest stay's pixel.
@@ -831,6 +873,33 @@ pub fn render(
         (longest, b_there),
         rescale,
     )
+}
+
+/// The chains' work into `counters`, and their manifold walks and mutations proposed and
+/// accepted into `stats`.
+fn tally(chains: &[Chain], counters: &mut Counters, stats: &mut MemltStats) {
+    let mut proposed = [0u64; Mutator::ALL.len()];
+    let mut accepted = [0u64; Mutator::ALL.len()];
+    for ch in chains {
+        *counters += ch.counters;
+        stats.manifold_walks += ch.walks;
+        for m in 0..Mutator::ALL.len() {
+            proposed[m] += ch.proposed[m];
+            accepted[m] += ch.accepted[m];
+        }
+    }
+    stats.mutators = Mutator::ALL
+        .iter()
+        .map(|&m| {
+            let (p, a) = (proposed[m as usize], accepted[m as usize]);
+            MutatorStats {
+                mutator: m,
+                proposed: p,
+                accepted: a,
+                acceptance: if p == 0 { 0.0 } else { a as f64 / p as f64 },
+            }
+        })
+        .collect();
 }
 
 /// The render's output: the film (direct light and the chains' splats over `done`
