@@ -39,6 +39,7 @@ pub mod path;
 pub mod separate_light;
 pub mod specular_pass;
 
+use super::mlt::bootstrap::Keys;
 use super::stays::{LongestStay, Stay, Stays, near, pixel_of};
 use super::two_stage::Importance;
 use super::{Budget, Counters, RenderOptions, RenderOutput};
@@ -487,7 +488,7 @@ fn normalisation(
     lengths: Lengths,
     start: Instant,
     importance: Option<&Importance>,
-    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+    key: Keys,
 ) -> ((f64, f64), (f64, f64), usize, Counters) {
     let n = opts.mlt.bootstrap;
     let (mut sum, mut variance, mut counters) = ([0.0; 2], [0.0; 2], Counters::default());
@@ -559,7 +560,7 @@ struct Measurement<'a> {
 fn balance(
     scene: &Scene,
     opts: &RenderOptions,
-    key: separate_light::Keys,
+    key: Keys,
     light: &mut SeparateLight,
     measured: &Measurement,
     base: &mut Film,

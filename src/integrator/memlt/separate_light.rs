@@ -10,6 +10,7 @@
 use super::specular_pass::SpecularPass;
 use crate::error::Error;
 use crate::film::Film;
+use crate::integrator::mlt::bootstrap::Keys;
 use crate::integrator::path::PathTracer;
 use crate::integrator::{Budget, Counters, RenderOptions, render_loop};
 use crate::math::Rgb;
@@ -18,10 +19,6 @@ use std::time::Instant;
 
 const DIRECT_STREAM: u64 = 0x6469_7265;
 const SPECULAR_STREAM: u64 = 0x7370_6563;
-
-/// A render's streams: `key(stream, i)` (the seed, the stream, and a distributed render's
-/// chunk).
-pub type Keys<'a> = &'a (dyn Fn(u64, u64) -> Vec<u64> + Sync);
 
 /// The passes' light.
 pub struct SeparateLight {

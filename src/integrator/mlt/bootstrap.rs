@@ -26,6 +26,10 @@ use rayon::prelude::*;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
+/// A render's streams: `key(stream, i)` (the seed, the stream, and a distributed render's
+/// chunk).
+pub type Keys<'a> = &'a (dyn Fn(u64, u64) -> Vec<u64> + Sync);
+
 /// The paths a Metropolis render's chains take (and its bootstrap counts) beside the passes
 /// that render the others (MEMLT's direct-light and specular passes).
 #[derive(Clone, Copy, Debug)]
@@ -220,7 +224,7 @@ pub(super) fn bootstrap(
     large_step_prob: f32,
     paths: ChainPaths,
     importance: Option<&Importance>,
-    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+    key: Keys,
 ) -> (Vec<f32>, Vec<f32>, Counters) {
     let (parts, counters) = sample_chunks(
         pool,
@@ -262,7 +266,7 @@ pub(crate) fn bdpt_normalisation(
     n: usize,
     paths: ChainPaths,
     importance: Option<&Importance>,
-    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+    key: Keys,
 ) -> ((f64, f64), (f64, f64), Counters) {
     let ev = evaluator(scene, opts, MltBase::Bdpt);
     let (weights, luminances, counters) = bootstrap(pool, &ev, n, 1.0, paths, importance, key);
@@ -285,7 +289,7 @@ pub(crate) fn first_stage(
     paths: ChainPaths,
     start: Instant,
     fraction: f64,
-    key: &(dyn Fn(u64, u64) -> Vec<u64> + Sync),
+    key: Keys,
 ) -> (Option<Importance>, u64, Counters) {
     let grid = Grid::new(scene.film.width, scene.film.height, opts.mlt.first_stage_reduction);
     let ev = evaluator(scene, opts, MltBase::Bdpt);

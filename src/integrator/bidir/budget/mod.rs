@@ -178,9 +178,6 @@ pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 /// against renders at 256.
 pub const DEFAULT_HORIZON: u32 = 256;
 
-/// The `0.01` of relMSE's denominator.
-const REL_EPSILON: f64 = crate::compare::RELMSE_EPSILON;
-
 /// What an iteration spends on the pool: connections per camera vertex, and light paths
 /// that form the pool and that splat.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -649,7 +646,7 @@ impl Budget {
             .collect();
         let means = self.smoothed_means();
         self.recount_rare_tops(&means);
-        let norm = |id: usize| 1.0 / (means[id] * means[id] + REL_EPSILON);
+        let norm = |id: usize| 1.0 / (means[id] * means[id] + crate::compare::RELMSE_EPSILON);
         // The independence of connections: given, or their spread within camera vertices
         // over the pixels as relMSE weighs them.
         let mut spread = Spread::default();
