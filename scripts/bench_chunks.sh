@@ -16,7 +16,7 @@
 # and 16 chunks (best of 3): its cost per megapixel and part.
 #
 # Uses the cluster of $SLURM_CONF if `sinfo` answers, else starts a single-node cluster
-# of its own (scripts/slurm/local_cluster.sh; needs root and scripts/setup.sh --with-slurm)
+# of its own (scripts/slurm/local_cluster.sh; needs root and scripts/setup.sh)
 # and stops it at the end. The binary is $PCBPT, else target/release/pcbpt.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)

@@ -14,7 +14,7 @@ and the pcbpt binary must then be at the same paths on every worker (a shared fi
 when a chunk fails, chunks already running on other machines are left to finish.
 The render options must include what fixes the image, --spp and --seed. The merge runs
 here. Exits non-zero if a chunk or the merge fails, printing its command and stderr.
-Needs `dask[distributed]` (`scripts/setup.sh --with-dask`).
+Needs `dask[distributed]` (`scripts/setup.sh` installs it).
 """
 
 import argparse
@@ -77,7 +77,7 @@ def main():
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
-        print("dask_render: dask.distributed is not installed: run scripts/setup.sh --with-dask", file=sys.stderr)
+        print("dask_render: dask.distributed is not installed: run scripts/setup.sh", file=sys.stderr)
         sys.exit(2)
 
     # Workers elsewhere get absolute paths.

@@ -1,27 +1,31 @@
 #!/usr/bin/env bash
-# Installs what pcbpt needs to build on Debian/Ubuntu: the system Embree (headers and
-# library), libclang for bindgen, pkg-config, g++ (the FLIP metric's C++ core). Idempotent: installs only what is missing.
+# Installs what pcbpt needs to build and to pass its tests on Debian/Ubuntu: the system
+# Embree (headers and library), libclang for bindgen, pkg-config, g++ (the FLIP metric's C++
+# core), Slurm's controller, node daemon and client commands with MUNGE (distributed renders
+# through `scripts/slurm/`, and `tests/slurm.rs`, which starts its own single-node cluster:
+# the packages' services are not started or needed) and Dask's distributed scheduler
+# (`scripts/dask_render.py` and `tests/dask.rs`; python3 with pip from the system if there is
+# no python3, then `dask[distributed]` from PyPI). Idempotent: installs only what is missing.
+# `--build-only` installs only what building and rendering need (no Slurm, no Dask).
 # `--with-oiio` also installs OpenImageIO (headers, library, pkg-config file) for
 # `cargo build --features oiio`; `--with-embree4` what `scripts/embree4.sh` needs to
 # assemble an Embree 4 (python3 with pip, binutils' readelf; the C compiler comes with g++).
-# `--with-slurm` installs Slurm's controller, node daemon and client commands with MUNGE
-# (distributed renders through `scripts/slurm/`, and `tests/slurm.rs`, which starts its own
-# single-node cluster: the packages' services are not started or needed); `--with-dask`
-# installs Dask's distributed scheduler for `scripts/dask_render.py` (python3 with pip
-# from the system if there is no python3, then `dask[distributed]` from PyPI).
 set -euo pipefail
 
 packages=(libembree-dev libclang-dev pkg-config g++)
-with_dask=0
+with_dask=1
+with_slurm=1
 for arg in "$@"; do
   case "$arg" in
+    --build-only) with_dask=0; with_slurm=0 ;;
     --with-oiio) packages+=(libopenimageio-dev) ;;
     --with-embree4) packages+=(python3 python3-pip binutils) ;;
-    --with-slurm) packages+=(slurmctld slurmd slurm-client munge) ;;
-    --with-dask) with_dask=1 ;;
-    *) echo "setup: unknown option $arg (known: --with-oiio, --with-embree4, --with-slurm, --with-dask)" >&2; exit 2 ;;
+    *) echo "setup: unknown option $arg (known: --build-only, --with-oiio, --with-embree4)" >&2; exit 2 ;;
   esac
 done
+if [ "$with_slurm" -eq 1 ]; then
+  packages+=(slurmctld slurmd slurm-client munge)
+fi
 # Dask needs a python3 with pip; a python3 already on PATH (a virtual environment, pyenv)
 # is used as it is, otherwise the system's is installed.
 if [ "$with_dask" -eq 1 ] && ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then

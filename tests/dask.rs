@@ -3,7 +3,7 @@
 //! render bit for bit; a failing chunk makes the script exit non-zero with the chunk's
 //! stderr and no image.
 //!
-//! Needs python3 with `dask[distributed]` (`scripts/setup.sh --with-dask`); without it the
+//! Needs python3 with `dask[distributed]` (`scripts/setup.sh` installs it); without it the
 //! test fails saying so, unless `PCBPT_SKIP_DASK=1`.
 
 mod common;
@@ -23,7 +23,7 @@ fn dask_available() -> bool {
         Ok(_) => vec!["python3 -c 'import dask.distributed' failed".to_string()],
         Err(e) => vec![format!("python3: {e}")],
     };
-    tools_or_skip("Dask", "PCBPT_SKIP_DASK", "--with-dask", &missing).unwrap_or_else(|e| panic!("{e}"))
+    tools_or_skip("Dask", "PCBPT_SKIP_DASK", &missing).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn dask_render(n: usize, outdir: &Path, options: &[String]) -> Output {

@@ -7,7 +7,7 @@
 //! naming the chunk, with no image. The daemons are stopped by their PIDs when the test
 //! ends, passed or failed.
 //!
-//! Needs root and the Slurm packages (`scripts/setup.sh --with-slurm`); without them the test
+//! Needs root and the Slurm packages (`scripts/setup.sh` installs them); without them the test
 //! fails saying so, unless `PCBPT_SKIP_SLURM=1`.
 #![cfg(unix)]
 
@@ -94,7 +94,7 @@ impl Drop for Cluster {
 fn slurm_available() -> bool {
     let missing =
         missing_programs(&["munged", "mungekey", "slurmctld", "slurmd", "sbatch", "sinfo", "scontrol", "setpriv"]);
-    let ok = tools_or_skip("Slurm", "PCBPT_SKIP_SLURM", "--with-slurm", &missing).unwrap_or_else(|e| panic!("{e}"));
+    let ok = tools_or_skip("Slurm", "PCBPT_SKIP_SLURM", &missing).unwrap_or_else(|e| panic!("{e}"));
     if ok {
         let uid = Command::new("id").arg("-u").output().expect("runs id");
         assert_eq!(

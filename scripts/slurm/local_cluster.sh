@@ -11,7 +11,7 @@
 # slurmctld and slurmd, each in the foreground of a background process whose PID goes to
 # DIR/pids/NAME; it returns once the node is idle. `stop` cancels the cluster's jobs and
 # stops the daemons by those PIDs. Needs root (munged runs as munge, slurmd launches jobs)
-# and `scripts/setup.sh --with-slurm`. Nothing outside DIR is written.
+# and `scripts/setup.sh`. Nothing outside DIR is written.
 set -euo pipefail
 export PATH=$PATH:/usr/sbin:/sbin
 
@@ -100,9 +100,9 @@ esac
 
 [ "$(id -u)" -eq 0 ] || { echo "local_cluster: needs root (munged runs as user munge, slurmd launches the jobs)" >&2; exit 1; }
 for b in munged mungekey munge slurmctld slurmd sbatch sinfo squeue scancel setpriv; do
-  command -v "$b" >/dev/null || { echo "local_cluster: $b not found; run scripts/setup.sh --with-slurm" >&2; exit 1; }
+  command -v "$b" >/dev/null || { echo "local_cluster: $b not found; run scripts/setup.sh" >&2; exit 1; }
 done
-id munge >/dev/null 2>&1 || { echo "local_cluster: no user munge; run scripts/setup.sh --with-slurm" >&2; exit 1; }
+id munge >/dev/null 2>&1 || { echo "local_cluster: no user munge; run scripts/setup.sh" >&2; exit 1; }
 [ ! -f "$dir/pids/slurmctld" ] || { echo "local_cluster: $dir holds a cluster already (stop it first)" >&2; exit 1; }
 
 mkdir -p "$dir/munge" "$dir/state" "$dir/spool" "$dir/log" "$dir/pids"

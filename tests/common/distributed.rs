@@ -11,11 +11,11 @@ use std::process::{Command, Output};
 /// Whether the test may run: `Ok(true)` when every tool is there, `Ok(false)` when they are
 /// not and `skip_var=1` says to skip the test (printed, so a skip is never silent), `Err`
 /// (the test must fail) otherwise.
-pub fn tools_or_skip(what: &str, skip_var: &str, setup_flag: &str, missing: &[String]) -> Result<bool, String> {
+pub fn tools_or_skip(what: &str, skip_var: &str, missing: &[String]) -> Result<bool, String> {
     if missing.is_empty() {
         return Ok(true);
     }
-    let msg = format!("{what} not found ({}): run `scripts/setup.sh {setup_flag}`", missing.join(", "));
+    let msg = format!("{what} not found ({}): run `scripts/setup.sh` (README.md's first command)", missing.join(", "));
     if std::env::var(skip_var).is_ok_and(|v| v == "1") {
         eprintln!("SKIPPED: {msg} ({skip_var}=1)");
         return Ok(false);
