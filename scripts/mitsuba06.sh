@@ -1,16 +1,14 @@
 #!/usr/bin/env bash
 # Mitsuba 0.6, the PCBPT paper's peer (its `mlt` with the manifold perturbation is MEMLT),
-# for comparisons only: never a dependency of pcbpt.
+# for comparisons only: never a dependency of pcbpt. The script runs an installation of
+# Mitsuba 0.6 that you provide and builds nothing. Name the installation with
+# `--mitsuba PATH` or the environment variable MITSUBA06 (the option wins): the `mitsuba`
+# executable itself, or a folder holding it (the executable's folder, e.g. a build's
+# `dist/`, or a folder with it in `dist/` or `bin/`). Its shared libraries are looked
+# for beside the executable (prepended to LD_LIBRARY_PATH). Without either, or where no
+# executable that reports Mitsuba 0.x is found, the script stops with status 2.
 #
-#   scripts/mitsuba06.sh build DEST
-#       Installs the build's Debian packages, clones the public repository's `scons-python3`
-#       branch (Python 3 SConscripts; `master` has none) into DEST/mitsuba and builds it
-#       with the stock configuration (`-march=nocona`, `-DMTS_DEBUG`, as its users get it)
-#       and the fixes Debian 12 needs: `-std=gnu++11` (hex-float literals), OpenEXR 3's
-#       include folders and libraries, no Python bindings, `Imf::Int64` -> `uint64_t` and an
-#       `ImfFrameBuffer.h` include in bitmap.cpp, boost::placeholders in volcache.cpp.
-#       About 17 minutes on 2 cores.
-#   scripts/mitsuba06.sh memlt DEST SPP OUT.exr [SCENE_DIR] [SWITCH=true|false ...]
+#   scripts/mitsuba06.sh [--mitsuba PATH] memlt SPP OUT.exr [SCENE_DIR] [SWITCH=true|false ...]
 #       Renders veach-ajar (SCENE_DIR, default ../shared/scenes/veach-ajar, its
 #       `scene_v0.6.xml`) at 320x180 with unlimited depth and Mitsuba 0.6's MEMLT (`mlt`,
 #       `manifoldPerturbation` true, every other setting its default: direct light separate
@@ -19,60 +17,108 @@
 #       only its integrator block replaced; its models and textures are linked. SWITCHes
 #       set the integrator's booleans (`lensPerturbation=false`, ...) to compare single
 #       mutations: give SCENE_DIR to give them.
+#
+#   MITSUBA06=/opt/mitsuba-0.6/dist scripts/mitsuba06.sh memlt 820 m06.exr
+#   scripts/mitsuba06.sh --mitsuba /opt/mitsuba-0.6/dist/mitsuba memlt 256 m.exr \
+#       ../shared/scenes/veach-ajar lensPerturbation=false
 set -euo pipefail
 
-cmd=${1:?usage: mitsuba06.sh build DEST | memlt DEST SPP OUT.exr [SCENE_DIR] [SWITCH=BOOL ...]}
-dest=${2:?DEST missing}
-mkdir -p "$dest"
-dest=$(cd "$dest" && pwd)
-root=$(cd "$(dirname "$0")/.." && pwd)
+usage="usage: scripts/mitsuba06.sh [--mitsuba PATH] memlt SPP OUT.exr [SCENE_DIR] [SWITCH=true|false ...]
+  PATH (or \$MITSUBA06): the Mitsuba 0.6 \`mitsuba\` executable or the folder that holds it"
 
+die() {
+    echo "mitsuba06.sh: $*" >&2
+    exit 2
+}
+
+# The installation: --mitsuba PATH (anywhere among the arguments) or $MITSUBA06.
+given=${MITSUBA06:-}
+given_by=MITSUBA06
+args=()
+while [ $# -gt 0 ]; do
+    case $1 in
+    --mitsuba)
+        [ $# -ge 2 ] || die "--mitsuba needs a PATH"$'\n'"$usage"
+        given=$2 given_by=--mitsuba
+        shift 2
+        ;;
+    --mitsuba=*)
+        given=${1#--mitsuba=} given_by=--mitsuba
+        shift
+        ;;
+    -h | --help)
+        echo "$usage"
+        exit 0
+        ;;
+    *)
+        args+=("$1")
+        shift
+        ;;
+    esac
+done
+set -- ${args[@]+"${args[@]}"}
+
+cmd=${1:-}
 case "$cmd" in
-build)
-    sudo=""
-    if [ "$(id -u)" -ne 0 ]; then sudo=sudo; fi
-    $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -q scons libboost-dev libboost-system-dev \
-        libboost-filesystem-dev libboost-thread-dev libopenexr-dev libimath-dev libxerces-c-dev libeigen3-dev \
-        libglewmx-dev libpng-dev libjpeg-dev libfftw3-dev zlib1g-dev libgl1-mesa-dev libxxf86vm-dev git python3
-    if [ ! -d "$dest/mitsuba" ]; then
-        git clone --branch scons-python3 https://github.com/mitsuba-renderer/mitsuba "$dest/mitsuba"
-    fi
-    cd "$dest/mitsuba"
-    cp build/config-linux-gcc.py config.py
-    python3 - <<'PY'
-import re
-s = open('config.py').read()
-s = s.replace("CXXFLAGS       = [", "CXXFLAGS       = ['-std=gnu++11', ", 1)
-s = re.sub(r"OEXRINCLUDE\s*=.*", "OEXRINCLUDE    = ['/usr/include/OpenEXR', '/usr/include/Imath']", s)
-s = re.sub(r"OEXRLIB\s*=.*", "OEXRLIB        = ['OpenEXR', 'Imath', 'Iex', 'IlmThread', 'z']", s)
-i = s.find('# The following runs a helper script')
-if i >= 0:
-    s = s[:i]
-open('config.py', 'w').write(s)
-p = 'src/libcore/bitmap.cpp'
-s = open(p).read().replace('Imf::Int64', 'uint64_t')
-if '#include <ImfFrameBuffer.h>' not in s:
-    s = s.replace('#include <ImfOutputFile.h>', '#include <ImfOutputFile.h>\n#include <ImfFrameBuffer.h>', 1)
-open(p, 'w').write(s)
-p = 'src/volume/volcache.cpp'
-s = open(p).read()
-if 'boost/bind/bind.hpp' not in s:
-    s = s.replace('#include <mitsuba/render/volume.h>',
-                  '#include <mitsuba/render/volume.h>\n#include <boost/bind/bind.hpp>\nusing namespace boost::placeholders;', 1)
-open(p, 'w').write(s)
-PY
-    nice -n 19 scons -j"$(nproc)"
-    echo "Mitsuba 0.6 built in $dest/mitsuba/dist"
-    ;;
-memlt)
-    spp=${3:?SPP missing}
-    out=${4:?OUT.exr missing}
-    scene_dir=${5:-$root/../shared/scenes/veach-ajar}
-    work=$(mktemp -d)
-    trap 'rm -rf "$work"' EXIT
-    ln -s "$(cd "$scene_dir" && pwd)/models" "$work/models"
-    ln -s "$(cd "$scene_dir" && pwd)/textures" "$work/textures"
-    python3 - "$scene_dir/scene_v0.6.xml" "$work/memlt.xml" "${@:6}" <<'PY'
+memlt) ;;
+"") die "no command"$'\n'"$usage" ;;
+*) die "unknown command '$cmd' (the command is memlt)"$'\n'"$usage" ;;
+esac
+
+spp=${2:-}
+out=${3:-}
+[ -n "$spp" ] || die "SPP missing"$'\n'"$usage"
+[[ $spp =~ ^[0-9]+$ ]] && [ "$spp" -gt 0 ] || die "SPP '$spp': expected a positive number of mutations per pixel"
+[ -n "$out" ] || die "OUT.exr missing"$'\n'"$usage"
+
+if [ -z "$given" ]; then
+    die "no Mitsuba 0.6 installation given: set MITSUBA06 or pass --mitsuba PATH, naming its \`mitsuba\` executable or the folder that holds it (a build's dist/)"
+fi
+
+# The executable: PATH itself, a command name on $PATH, or `mitsuba` in the folder PATH
+# (directly, or in its dist/ or bin/, or in mitsuba/dist/ below it).
+mts=""
+if [ -d "$given" ]; then
+    for c in "$given/mitsuba" "$given/dist/mitsuba" "$given/bin/mitsuba" "$given/mitsuba/dist/mitsuba"; do
+        if [ -f "$c" ] && [ -x "$c" ]; then
+            mts=$c
+            break
+        fi
+    done
+    [ -n "$mts" ] || die "$given_by names the folder $given, which holds no \`mitsuba\` executable (looked in it and in its dist/ and bin/)"
+elif [ -f "$given" ]; then
+    [ -x "$given" ] || die "$given_by names $given, which is not executable"
+    mts=$given
+elif [[ $given != */* ]] && command -v "$given" >/dev/null; then
+    mts=$(command -v "$given")
+else
+    die "$given_by names $given, which does not exist"
+fi
+mts_dir=$(cd "$(dirname "$mts")" && pwd)
+mts=$mts_dir/$(basename "$mts")
+export LD_LIBRARY_PATH="$mts_dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+
+# Mitsuba 0.x prints "Mitsuba version 0.6.0 ..." first in its help; Mitsuba 3's `mitsuba`
+# (pip's) is another renderer with other scene files.
+banner=$("$mts" -h 2>&1 | head -n 1 || true)
+case "$banner" in
+*"Mitsuba version 0."*) ;;
+*) die "$mts does not report Mitsuba 0.x (its -h printed: ${banner:-nothing}); $given_by must name a Mitsuba 0.6 installation" ;;
+esac
+
+root=$(cd "$(dirname "$0")/.." && pwd)
+scene_dir=${4:-$root/../shared/scenes/veach-ajar}
+[ -f "$scene_dir/scene_v0.6.xml" ] || die "$scene_dir/scene_v0.6.xml not found (SCENE_DIR: a scene folder with a Mitsuba 0.6 scene_v0.6.xml)"
+scene_dir=$(cd "$scene_dir" && pwd)
+out_dir=$(dirname "$out")
+[ -d "$out_dir" ] || die "the folder of $out does not exist"
+out_abs=$(cd "$out_dir" && pwd)/$(basename "$out")
+
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+ln -s "$scene_dir/models" "$work/models"
+ln -s "$scene_dir/textures" "$work/textures"
+python3 - "$scene_dir/scene_v0.6.xml" "$work/memlt.xml" "${@:5}" <<'PY'
 import re, sys
 s = open(sys.argv[1]).read()
 block = re.search(r'<integrator type="\$integrator">.*?</integrator>', s, re.S)
@@ -89,13 +135,5 @@ s = s.replace(block.group(0), '<integrator type="mlt">\n\t\t<integer name="maxDe
               + flags + '\t</integrator>')
 open(sys.argv[2], 'w').write(s)
 PY
-    export PATH="$dest/mitsuba/dist:$PATH" LD_LIBRARY_PATH="$dest/mitsuba/dist"
-    out_abs=$(cd "$(dirname "$out")" && pwd)/$(basename "$out")
-    (cd "$work" && mitsuba -p 2 -o "$out_abs" memlt.xml -Dresx=320 -Dresy=180 -Dspp="$spp") 2>&1 |
-        grep -E "Render time|Acceptance rate|Accepted mutations|mutation :|perturbation :"
-    ;;
-*)
-    echo "unknown command $cmd: build or memlt" >&2
-    exit 2
-    ;;
-esac
+(cd "$work" && "$mts" -p 2 -o "$out_abs" memlt.xml -Dresx=320 -Dresy=180 -Dspp="$spp") 2>&1 |
+    grep -E "Render time|Acceptance rate|Accepted mutations|mutation :|perturbation :"
