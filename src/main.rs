@@ -1,16 +1,14 @@
 //! The `pcbpt` command line: `render` a Mitsuba scene, `compare` two images.
 
-use clap::{Args, Parser, Subcommand, ValueEnum};
+mod cli_reference;
+
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use pcbpt::accel::{Backend, BuildOptions, BuildQuality, BvhLayout};
 use pcbpt::compare;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
-use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetModel, Independence};
-use pcbpt::integrator::bidir::mis::Heuristic;
-use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
-use pcbpt::integrator::bidir::spcbpt::SpOptions;
-use pcbpt::integrator::mlt::{MltBase, MltOptions};
-use pcbpt::integrator::{self, BidirOptions, Budget, IntegratorKind, RenderOptions};
+use pcbpt::integrator::registry::{self, INTEGRATORS};
+use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -33,14 +31,27 @@ struct Cli {
 #[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
-    /// Render a Mitsuba XML scene.
-    Render(RenderArgs),
+    /// Render a Mitsuba XML scene (`pcbpt render --integrator NAME --help` lists the options
+    /// of integrator NAME).
+    #[command(disable_help_flag = true)]
+    Render(RawArgs),
     /// Compare a test image with a reference: MSE, relMSE and the ratio of image means.
     Compare(CompareArgs),
     /// Run an equal-time experiment described by a TOML file (scenes × methods).
     Experiment(ExperimentArgs),
     /// Merge the partial renders of one render (`render --chunk`) into its image.
     Merge(MergeArgs),
+    /// Print the command-line reference (docs/cli.md) in Markdown.
+    #[command(hide = true)]
+    CliReference,
+}
+
+/// The render command's arguments, read by [`render_command`]'s parser: which options it
+/// takes depends on the integrator.
+#[derive(Args)]
+struct RawArgs {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+    args: Vec<String>,
 }
 
 #[derive(Args)]
@@ -71,6 +82,8 @@ struct ExperimentArgs {
     quiet: bool,
 }
 
+/// The render command's options that every integrator reads; each integrator's own come
+/// from its options struct in the registry ([`render_command`]).
 #[derive(Args)]
 struct RenderArgs {
     /// The scene file (Mitsuba 3 XML; version 0.x files are upgraded).
@@ -131,225 +144,6 @@ struct RenderArgs {
     /// the kernels another CPU would, `verbose=1` prints the ISA Embree selected.
     #[arg(long, value_name = "CONFIG")]
     embree_config: Option<String>,
-    /// MIS heuristic of the bidirectional integrators.
-    #[arg(long, value_enum, default_value_t = Heuristic::Power)]
-    heuristic: Heuristic,
-    /// EORR: Russian-roulette threshold as a fraction of the pixel's mean luminance.
-    #[arg(long, default_value_t = 0.1)]
-    eorr_fraction: f32,
-    /// EORR: the pixel means come from the first this many samples per pixel (0: from every
-    /// earlier pass, a running mean, which a render cut into chunks cannot use).
-    #[arg(long, default_value_t = BidirOptions::default().eorr_pilot_spp)]
-    eorr_pilot_spp: u32,
-    /// LVC: light paths per iteration (0 = one per pixel).
-    #[arg(long, default_value_t = 0)]
-    lvc_light_paths: usize,
-    /// LVC: connections to pool vertices per camera vertex.
-    #[arg(long, default_value_t = 1)]
-    lvc_connections: u32,
-    /// PSSMLT: probability of a large step.
-    #[arg(long, default_value_t = 0.3)]
-    large_step_prob: f32,
-    /// PSSMLT: independent samples for the normalisation and the chains' start states.
-    #[arg(long, default_value_t = 100_000)]
-    bootstrap: usize,
-    /// PSSMLT: the estimator the Markov chains drive.
-    #[arg(long, value_enum, default_value_t = MltBase::Bdpt)]
-    mlt_path_integrator: MltBase,
-    /// MEMLT: samples per pixel of a separate direct-lighting estimate by the path tracer
-    /// (paths of one edge, and of two through a rough vertex; those through a Dirac lobe are
-    /// the chains'); -1 leaves every path to the Markov chains.
-    #[arg(long, default_value_t = MltOptions::default().direct_samples, allow_negative_numbers = true)]
-    direct_samples: i32,
-    /// MEMLT with --time: the direct-light pass goes on past --direct-samples for the share
-    /// of the time that balances its noise against the chains' (both measured, each from two
-    /// independent halves, a tenth into the chains' time; at most half of the time then left)
-    #[arg(long, default_value_t = MltOptions::default().direct_balance, action = clap::ArgAction::Set)]
-    direct_balance: bool,
-    /// MEMLT beside the direct-light pass: samples per pixel, in stratified cells, of a
-    /// specular pass that renders the paths through Dirac lobes alone (the light seen in
-    /// mirrors and through glass); 0 leaves them to the chains.
-    #[arg(long, default_value_t = MltOptions::default().specular_samples)]
-    specular_samples: u32,
-    /// MEMLT with --time: the BDPT bootstrap goes on in batches of --bootstrap samples until
-    /// this fraction of the time is spent (`b`, the image's brightness, is its estimate).
-    #[arg(long, default_value_t = MltOptions::default().bootstrap_fraction)]
-    bootstrap_fraction: f64,
-    /// MEMLT: the manifold perturbation among the mutations (`false` gives Veach's MLT).
-    #[arg(long, default_value_t = MltOptions::default().manifold_perturbation, action = clap::ArgAction::Set)]
-    manifold_perturbation: bool,
-    /// MEMLT: the bidirectional mutation among the mutations.
-    #[arg(long, default_value_t = MltOptions::default().bidirectional_mutation, action = clap::ArgAction::Set)]
-    bidirectional_mutation: bool,
-    /// MEMLT: Veach's lens perturbation among the mutations.
-    #[arg(long, default_value_t = MltOptions::default().lens_perturbation, action = clap::ArgAction::Set)]
-    lens_perturbation: bool,
-    /// MEMLT: Veach's caustic perturbation among the mutations.
-    #[arg(long, default_value_t = MltOptions::default().caustic_perturbation, action = clap::ArgAction::Set)]
-    caustic_perturbation: bool,
-    /// MEMLT: Veach's multi-chain perturbation among the mutations.
-    #[arg(long, default_value_t = MltOptions::default().multichain_perturbation, action = clap::ArgAction::Set)]
-    multichain_perturbation: bool,
-    /// MEMLT: the multi-chain perturbation re-traced on to the light, for paths whose light end
-    /// no shadow ray joins (`L S+ D S+ E`: a caustic seen in glass; `L S+ E`); not Mitsuba 0.6's.
-    #[arg(long, default_value_t = MltOptions::default().light_hit_perturbation, action = clap::ArgAction::Set)]
-    light_hit_perturbation: bool,
-    /// MEMLT: the independent mutation among the mutations (a whole new path from the
-    /// bidirectional generator, Kelemen's large step in path space; not Mitsuba 0.6's).
-    ///
-    /// Default `auto`: on where `--bootstrap` camera walks to the first light find at least
-    /// 1.5% of their light in paths that only such a walk makes (no edge takes a shadow ray:
-    /// a caustic seen in a glass ball at its rim), off elsewhere (the statistics print the
-    /// share and the choice).
-    #[arg(long, action = clap::ArgAction::Set)]
-    independent_mutation: Option<bool>,
-    /// MEMLT: the share of the independent mutation's path lengths and splits drawn as the
-    /// start paths' generator draws them (length ∝ 2^-k, split uniform); the rest follow
-    /// what each length and split found among the start-path candidates. 1: all uniform.
-    #[arg(long, default_value_t = MltOptions::default().independent_defensive)]
-    independent_defensive: f64,
-    /// MEMLT: the share of the learned generator's draws (the independent mutation's and the
-    /// learned start paths') that are camera walks going on until they find a light, making a
-    /// path of any length, as a path tracer's sample does; the rest draw a length and a split.
-    #[arg(long, default_value_t = MltOptions::default().independent_camera_walks)]
-    independent_camera_walks: f64,
-    /// MEMLT: draw the chains' start paths from a second set of candidates made by the
-    /// learned generator of the independent mutation (their weights spread less), instead of
-    /// the first set (lengths ∝ 2^-k, uniform splits).
-    #[arg(long, default_value_t = MltOptions::default().learned_starts, action = clap::ArgAction::Set)]
-    learned_starts: bool,
-    /// MEMLT: the manifold perturbation's sharpness (its von Mises–Fisher lobe's peak
-    /// density is the current direction's scattering density times λ²).
-    #[arg(long, default_value_t = MltOptions::default().lambda)]
-    lambda: f64,
-    /// MEMLT: the half-vector change, in degrees, against which the manifold perturbation
-    /// judges a glossy lobe (a lobe much wider than it is treated as diffuse, one much
-    /// narrower as specular; 0: glossy vertices are never treated as specular).
-    #[arg(long, default_value_t = MltOptions::default().theta_diff)]
-    theta_diff: f64,
-    /// PSSMLT and MEMLT: Markov chains, each started from a bootstrap path drawn in
-    /// proportion to its contribution (the image does not depend on the thread count).
-    #[arg(long, default_value_t = MltOptions::default().chains)]
-    chains: usize,
-    /// PSSMLT and MEMLT: two-stage Metropolis (Mitsuba 0.6's `twoStage`): a first stage of
-    /// BDPT samples estimates the image at a reduced resolution, and the chains sample paths
-    /// in proportion to their luminance over it, so that dim pixels get as many mutations
-    /// as bright ones. On for memlt, off for pssmlt unless given.
-    #[arg(long, action = clap::ArgAction::Set)]
-    two_stage: Option<bool>,
-    /// Two-stage Metropolis: pixels per side of the first stage's cells.
-    #[arg(long, default_value_t = MltOptions::default().first_stage_reduction)]
-    first_stage_reduction: u32,
-    /// Memory limit of a light pool (lvc, pcbpt), in MiB.
-    #[arg(long, default_value_t = 4096)]
-    max_pool_mb: usize,
-    /// PCBPT: light paths per iteration (M), the least (see --pc-pool-vertices).
-    #[arg(long, default_value_t = PcOptions::default().light_paths)]
-    pc_light_paths: usize,
-    /// PCBPT: add light paths per iteration until a pool holds about this many vertices
-    /// (judged on a pilot pool), up to one per pixel; 0 keeps --pc-light-paths exactly.
-    #[arg(long, default_value_t = PcOptions::default().pool_vertices)]
-    pc_pool_vertices: usize,
-    /// PCBPT and SPCBPT: connections drawn per camera vertex (N; 0, with --pc-budget off:
-    /// none, the pool only light traces). With --pc-budget auto (the default), the number the
-    /// budget is measured with.
-    #[arg(long, default_value_t = PcOptions::default().connections)]
-    pc_connections: u32,
-    /// PCBPT: one cache record pixel per stride × stride tile.
-    #[arg(long, default_value_t = PcOptions::default().stride)]
-    pc_cache_stride: u32,
-    /// PCBPT: camera vertices per record pixel that become records.
-    #[arg(long, default_value_t = PcOptions::default().cache_depth)]
-    pc_cache_depth: u32,
-    /// PCBPT: shadow rays in the cache's target (true/false).
-    #[arg(long, default_value_t = PcOptions::default().visibility, action = clap::ArgAction::Set)]
-    pc_visibility: bool,
-    /// PCBPT: weight of the uniform distribution blended into every lookup.
-    #[arg(long, default_value_t = PcOptions::default().uniform_blend)]
-    pc_uniform_blend: f32,
-    /// PCBPT: nearest records blended per lookup.
-    #[arg(long, default_value_t = PcOptions::default().neighbours)]
-    pc_neighbours: usize,
-    /// PCBPT: distance term of the interpolation weights.
-    #[arg(long, value_enum, default_value_t = PcOptions::default().distance_term)]
-    pc_distance_term: DistanceTerm,
-    /// PCBPT: MIS strategy counts of the probabilistic connections.
-    #[arg(long, value_enum, default_value_t = PcOptions::default().mis)]
-    pc_mis: PcMis,
-    /// PCBPT: how a draw inverts the blended PMF (the same distribution either way).
-    #[arg(long, value_enum, default_value_t = PcOptions::default().sampling)]
-    pc_sampling: PcSampling,
-    /// PCBPT: memory limit of the cache (records × pool vertices floats), in MiB.
-    #[arg(long, default_value_t = PcOptions::default().max_cache_mb)]
-    pc_max_cache_mb: usize,
-    /// PCBPT and SPCBPT: choose the connections per camera vertex (0-8) and the light paths
-    /// that are light traced from the second moments and costs of measured iterations
-    /// (auto), or keep --pc-connections and the pool's light paths (off).
-    #[arg(long, value_enum, default_value_t = PcOptions::default().budget)]
-    pc_budget: BudgetMode,
-    /// PCBPT and SPCBPT: iterations measured before the budget is chosen.
-    #[arg(long, default_value_t = PcOptions::default().budget_iterations)]
-    pc_budget_iterations: u32,
-    /// PCBPT and SPCBPT: the share of the connections' predicted change of second moment
-    /// between budgets that counts, 0 to 1 (1 if the draws of a camera vertex were
-    /// independent), or `measured` (from their spread about each camera vertex's mean).
-    #[arg(long, default_value_t = PcOptions::default().budget_independence)]
-    pc_budget_independence: Independence,
-    /// PCBPT and SPCBPT: measured pixels each side whose means are averaged for the relMSE
-    /// weights of the budget's choice (0: each pixel's own mean).
-    #[arg(long, default_value_t = PcOptions::default().budget_smoothing)]
-    pc_budget_smoothing: u32,
-    /// PCBPT and SPCBPT: how the budget predicts a plan's variance: the change of the
-    /// contributions' second moments (moments), or each measured camera sample re-weighted
-    /// as the plan would weigh it, with its connections' spread (realized).
-    #[arg(long, value_enum, default_value_t = PcOptions::default().budget_model)]
-    pc_budget_model: BudgetModel,
-    /// PCBPT and SPCBPT: samples per pixel the budget plans for (default: the render's
-    /// --spp but at least 256, which --time takes). A path that a plan would sample less than (measured
-    /// iterations / horizon) times as densely as the measured plan counts by its chance of
-    /// being found in the render, as the typical render shows it, not by its expected
-    /// variance; 0 counts every path by its expected variance.
-    #[arg(long)]
-    pc_budget_horizon: Option<u32>,
-    /// PCBPT and SPCBPT: the least predicted efficiency gain over the measured plan for
-    /// which the budget leaves it (1: any gain; the predictions are within about a third
-    /// of what renders measure, so smaller gains are noise).
-    #[arg(long, default_value_t = PcOptions::default().budget_margin)]
-    pc_budget_margin: f32,
-    /// PCBPT and SPCBPT: pixels whose moments the budget measures, at most about (those of
-    /// every k-th row and column).
-    #[arg(long, default_value_t = PcOptions::default().budget_pixels)]
-    pc_budget_pixels: usize,
-    /// PCBPT and SPCBPT: whether each measured pixel's largest contribution counts, at the
-    /// horizon, as rarely as its value against the pixel's mean says (false: as a region the
-    /// measured iterations found once, like every other sample).
-    #[arg(long, default_value_t = PcOptions::default().budget_rarity, action = clap::ArgAction::Set)]
-    pc_budget_rarity: bool,
-    /// SPCBPT: eye subspaces (leaves of the k-d tree over camera vertices' positions and
-    /// normals).
-    #[arg(long, default_value_t = SpOptions::default().eye_subspaces)]
-    sp_eye_subspaces: usize,
-    /// SPCBPT: light subspaces (leaves of the k-d tree over light vertices).
-    #[arg(long, default_value_t = SpOptions::default().light_subspaces)]
-    sp_light_subspaces: usize,
-    /// SPCBPT: iterations whose connections train the subspace matrix (0: it stays uniform).
-    #[arg(long, default_value_t = SpOptions::default().training_iterations)]
-    sp_training_iterations: u32,
-    /// SPCBPT: share of the uniform distribution mixed into each trained row of the matrix.
-    #[arg(long, default_value_t = SpOptions::default().uniform)]
-    sp_uniform: f32,
-    /// SPCBPT: MIS strategy counts of the connections (as --pc-mis; resampling is the
-    /// selection density itself, subspace the same with the draw within a light subspace
-    /// taken as uniform).
-    #[arg(long, value_enum, default_value_t = SpOptions::default().mis)]
-    sp_mis: PcMis,
-    /// SPCBPT: memory limit of the matrix and the training samples, in MiB.
-    #[arg(long, default_value_t = SpOptions::default().max_mb)]
-    sp_max_mb: usize,
-    /// SPCBPT: whether the budget measures the last training iterations (the choice comes
-    /// sooner) or the iterations after them.
-    #[arg(long, default_value_t = SpOptions::default().budget_in_training, action = clap::ArgAction::Set)]
-    sp_budget_in_training: bool,
     /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
     #[arg(long, value_name = "DIR")]
     strategy_images: Option<PathBuf>,
@@ -416,10 +210,83 @@ fn parse_define(s: &str) -> std::result::Result<(String, String), String> {
     Ok((k.to_string(), v.to_string()))
 }
 
+/// The `render` command for `kind`'s options (its own, under their heading), or, without
+/// an integrator, every integrator's options hidden (what is read before the scene names
+/// the integrator).
+fn render_command(kind: Option<IntegratorKind>) -> clap::Command {
+    let cmd = RenderArgs::augment_args(
+        clap::Command::new("render")
+            .bin_name("pcbpt render")
+            .about("Render a Mitsuba XML scene")
+            .version(env!("CARGO_PKG_VERSION")),
+    );
+    match kind {
+        Some(k) => (registry::registration(k).args)(cmd.next_help_heading(format!("Options of {}", k.name()))),
+        None => {
+            let names: Vec<&str> = INTEGRATORS.iter().map(|r| r.kind.name()).collect();
+            let mut cmd = cmd.after_help(format!(
+                "Each integrator has options of its own: `pcbpt render --integrator NAME --help` lists them \
+                 (NAME: {}; the reference: docs/cli.md).",
+                names.join(", ")
+            ));
+            for r in &INTEGRATORS {
+                let theirs = (r.args)(clap::Command::new(r.kind.name()));
+                for arg in theirs.get_arguments() {
+                    if !cmd.get_arguments().any(|a| a.get_id() == arg.get_id()) {
+                        cmd = cmd.arg(arg.clone().hide(true).default_value(None::<&str>).required(false));
+                    }
+                }
+            }
+            cmd
+        }
+    }
+}
+
+/// The integrator `--integrator` names among the render command's arguments, if any.
+fn integrator_argument(args: &[String]) -> Option<IntegratorKind> {
+    let value = args.iter().enumerate().find_map(|(i, a)| match a.strip_prefix("--integrator") {
+        Some("") => args.get(i + 1).map(String::as_str),
+        Some(v) => v.strip_prefix('='),
+        None => None,
+    })?;
+    IntegratorKind::from_str(value, true).ok()
+}
+
+/// Parses the render command's arguments for `kind` (or for any integrator), exiting as clap
+/// does on `--help` and bad arguments; an option of another integrator is refused naming the
+/// integrators that read it.
+fn parse_render(args: &[String], kind: Option<IntegratorKind>, whose: &str) -> clap::ArgMatches {
+    let argv = std::iter::once("pcbpt render".to_string()).chain(args.iter().cloned());
+    match render_command(kind).try_get_matches_from(argv) {
+        Ok(m) => m,
+        Err(e) => {
+            use clap::error::{ContextKind, ContextValue, ErrorKind};
+            if let (Some(k), ErrorKind::UnknownArgument, Some(ContextValue::String(flag))) =
+                (kind, e.kind(), e.get(ContextKind::InvalidArg))
+            {
+                let flag = flag.split('=').next().unwrap_or(flag);
+                if flag.starts_with("--") && !registry::readers(&flag[2..]).is_empty() {
+                    eprintln!(
+                        "error: {} ({whose}; `pcbpt render --integrator {} --help` lists its options)",
+                        registry::not_an_option_of(flag, k),
+                        k.name()
+                    );
+                    std::process::exit(2);
+                }
+            }
+            e.exit()
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(a) => render(a),
+        Command::Render(a) => render(a.args),
+        Command::CliReference => {
+            print!("{}", cli_reference::markdown(&Cli::command(), render_command));
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Compare(a) => compare_images(a),
         Command::Merge(a) => merge_parts(a),
         Command::Experiment(a) => pcbpt::experiment::run(&a.file, a.output.as_deref(), a.quiet).map(|r| {
@@ -453,7 +320,10 @@ fn install_signal_handlers() -> Result<Arc<AtomicBool>> {
     Ok(stop)
 }
 
-fn render(a: RenderArgs) -> Result<ExitCode> {
+fn render(args: Vec<String>) -> Result<ExitCode> {
+    let named = integrator_argument(&args);
+    let matches = parse_render(&args, named, "the integrator --integrator names");
+    let a = RenderArgs::from_arg_matches(&matches).map_err(|e| Error::Usage(e.to_string()))?;
     let stop = install_signal_handlers()?;
     let t0 = Instant::now();
     let build = BuildOptions {
@@ -527,81 +397,20 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         ))
     });
     image_io::Format::from_path(&output)?;
+    // The integrator's options, read for the integrator the render uses.
+    let matches = match named {
+        Some(_) => matches,
+        None => parse_render(&args, Some(kind), "the scene's integrator"),
+    };
     let mut opts = RenderOptions::new(kind, budget);
+    opts.method = (registry::registration(kind).parse)(&matches).map_err(|e| Error::Usage(e.to_string()))?;
     opts.seed = a.seed.unwrap_or(scene.sampler.seed);
     opts.threads = a.threads;
     opts.progress = !a.quiet;
     opts.stop = Some(stop);
-    if !(a.eorr_fraction >= 0.0 && a.eorr_fraction.is_finite()) {
-        return Err(Error::Usage(format!("--eorr-fraction must be a non-negative number, got {}", a.eorr_fraction)));
-    }
-    opts.bidir = BidirOptions {
-        heuristic: a.heuristic,
-        eorr_fraction: a.eorr_fraction,
-        eorr_pilot_spp: a.eorr_pilot_spp,
-        lvc_light_paths: a.lvc_light_paths,
-        lvc_connections: a.lvc_connections,
-        max_pool_mb: a.max_pool_mb,
-        pc: PcOptions {
-            light_paths: a.pc_light_paths,
-            pool_vertices: a.pc_pool_vertices,
-            connections: a.pc_connections,
-            stride: a.pc_cache_stride,
-            cache_depth: a.pc_cache_depth,
-            visibility: a.pc_visibility,
-            uniform_blend: a.pc_uniform_blend,
-            neighbours: a.pc_neighbours,
-            distance_term: a.pc_distance_term,
-            mis: a.pc_mis,
-            sampling: a.pc_sampling,
-            max_cache_mb: a.pc_max_cache_mb,
-            budget: a.pc_budget,
-            budget_iterations: a.pc_budget_iterations,
-            budget_independence: a.pc_budget_independence,
-            budget_smoothing: a.pc_budget_smoothing,
-            budget_model: a.pc_budget_model,
-            budget_horizon: a.pc_budget_horizon,
-            budget_margin: a.pc_budget_margin,
-            budget_pixels: a.pc_budget_pixels,
-            budget_rarity: a.pc_budget_rarity,
-        },
-        sp: SpOptions {
-            eye_subspaces: a.sp_eye_subspaces,
-            light_subspaces: a.sp_light_subspaces,
-            training_iterations: a.sp_training_iterations,
-            uniform: a.sp_uniform,
-            mis: a.sp_mis,
-            max_mb: a.sp_max_mb,
-            budget_in_training: a.sp_budget_in_training,
-        },
-    };
-    opts.mlt = MltOptions {
-        large_step_prob: a.large_step_prob,
-        bootstrap: a.bootstrap,
-        base: a.mlt_path_integrator,
-        direct_samples: a.direct_samples,
-        direct_balance: a.direct_balance,
-        specular_samples: a.specular_samples,
-        bootstrap_fraction: a.bootstrap_fraction,
-        bidirectional_mutation: a.bidirectional_mutation,
-        lens_perturbation: a.lens_perturbation,
-        caustic_perturbation: a.caustic_perturbation,
-        multichain_perturbation: a.multichain_perturbation,
-        light_hit_perturbation: a.light_hit_perturbation,
-        independent_mutation: a.independent_mutation,
-        independent_defensive: a.independent_defensive,
-        independent_camera_walks: a.independent_camera_walks,
-        learned_starts: a.learned_starts,
-        manifold_perturbation: a.manifold_perturbation,
-        lambda: a.lambda,
-        theta_diff: a.theta_diff,
-        chains: a.chains,
-        two_stage: a.two_stage.unwrap_or(MltOptions::for_integrator(kind).two_stage),
-        first_stage_reduction: a.first_stage_reduction,
-    };
     opts.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
-        if matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt | IntegratorKind::Memlt) {
+        if !kind.is_bidirectional() {
             return Err(Error::Usage("--strategy-images needs a bidirectional integrator".into()));
         }
         std::fs::create_dir_all(dir)
@@ -729,7 +538,7 @@ fn render(a: RenderArgs) -> Result<ExitCode> {
         }
         print_first_stage(m.first_stage_samples, m.mean_luminance);
         print_longest_stay("memlt", m.longest_stay.as_ref());
-    } else if !a.quiet && s.bidir.is_some() {
+    } else if !a.quiet && kind.is_bidirectional() {
         let c = &s.counters;
         eprintln!(
             "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette, {} repeated draws merged){}; time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",

@@ -21,7 +21,7 @@
 
 use crate::error::{Error, Result};
 use crate::film::{ExactSum, Film, Filter};
-use crate::integrator::{Budget, IntegratorKind, RenderOptions, RenderOutput};
+use crate::integrator::{Budget, RenderOptions, RenderOutput};
 use crate::math::Rgb;
 use crate::scene::Scene;
 use exr::prelude::{
@@ -111,11 +111,10 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         Budget::Spp(s) => Some(s),
         Budget::Time(_) => None,
     };
-    let unidirectional = opts.integrator == IntegratorKind::Path
-        || opts.integrator == IntegratorKind::Pssmlt && opts.mlt.base == crate::integrator::mlt::MltBase::Path;
     serde_json::json!({
         "scene": scene_hash,
-        "integrator": opts.integrator,
+        "integrator": opts.integrator(),
+        "options": opts.method,
         "spp": spp,
         "seed": opts.seed,
         "max_depth": scene.integrator.max_depth,
@@ -123,8 +122,6 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         "hide_emitters": scene.integrator.hide_emitters,
         "film": [scene.film.width, scene.film.height],
         "backend": scene.accel.backend().to_string(),
-        "bidir": (!unidirectional).then_some(&opts.bidir),
-        "mlt": matches!(opts.integrator, IntegratorKind::Pssmlt | IntegratorKind::Memlt).then_some(&opts.mlt),
     })
 }
 

@@ -31,14 +31,14 @@ fn render_model(
 ) -> Image {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
     o.seed = seed;
-    o.bidir.pc.budget = budget;
+    o.method.budget_mut().mode = budget;
     // The realized model with smoothed means is the default; the moments as they were chosen
     // by default before, with each pixel's own mean and no margin (they are here for the
     // other plans they choose).
-    o.bidir.pc.budget_model = model;
+    o.method.budget_mut().model = model;
     if model == BudgetModel::Moments {
-        o.bidir.pc.budget_smoothing = 0;
-        o.bidir.pc.budget_margin = 1.0;
+        o.method.budget_mut().smoothing = 0;
+        o.method.budget_mut().margin = 1.0;
     }
     let out = integrator::render(scene, &o).unwrap();
     if let Some(b) = &out.stats.budget {
@@ -124,7 +124,7 @@ fn short_renders_plan_for_the_default_horizon_and_keep_veach_ajars_connections()
     let scene = veach_ajar("160", "90");
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(8));
     o.seed = 1;
-    o.bidir.pc.budget = BudgetMode::Auto;
+    o.method.budget_mut().mode = BudgetMode::Auto;
     let out = integrator::render(&scene, &o).unwrap();
     let b = out.stats.budget.expect("a budget's statistics");
     println!("veach-ajar 160×90, 8 spp: plan {:?}, planned for {} spp", b.chosen, b.horizon);
@@ -145,8 +145,8 @@ fn a_gain_within_the_margin_keeps_the_measured_plan_and_its_image() {
     let run = |budget: BudgetMode, margin: f32| {
         let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(6));
         o.seed = 2;
-        o.bidir.pc.budget = budget;
-        o.bidir.pc.budget_margin = margin;
+        o.method.budget_mut().mode = budget;
+        o.method.budget_mut().margin = margin;
         integrator::render(&scene, &o).unwrap()
     };
     let free = run(BudgetMode::Auto, 1.0).stats.budget.expect("a budget's statistics");
@@ -180,10 +180,10 @@ fn spcbpt_measures_its_last_training_iterations() {
     let run = |spp: u32, budget: BudgetMode, in_training: bool| {
         let mut o = RenderOptions::new(IntegratorKind::Spcbpt, Budget::Spp(spp));
         o.seed = 2;
-        o.bidir.pc.budget = budget;
+        o.method.budget_mut().mode = budget;
         // A margin no prediction reaches keeps the measured plan.
-        o.bidir.pc.budget_margin = 1e9;
-        o.bidir.sp.budget_in_training = in_training;
+        o.method.budget_mut().margin = 1e9;
+        o.method.spcbpt_mut().sp.budget_in_training = in_training;
         integrator::render(&scene, &o).unwrap()
     };
     let training = pcbpt::integrator::bidir::spcbpt::SpOptions::default().training_iterations;

@@ -53,40 +53,40 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
     let mut cases: Vec<(String, RenderOptions)> =
         [Path, Lighttrace, Bdpt, Eorr, Lvc].into_iter().map(|k| (format!("{k:?}"), options(k, 7, 11))).collect();
     let mut eorr = options(Eorr, 7, 11);
-    eorr.bidir.eorr_pilot_spp = 4;
+    eorr.method.eorr_mut().pilot_spp = 4;
     cases.push(("Eorr with a 4-spp pilot".into(), eorr));
     for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(Pcbpt, 7, 11);
-        o.bidir.pc.mis = mis;
-        o.bidir.pc.light_paths = 300;
+        o.method.pcbpt_mut().pc.mis = mis;
+        o.method.pool_mut().light_paths = 300;
         cases.push((format!("Pcbpt {mis:?}"), o));
         // SPCBPT trains its matrix in iterations 0 and 1 and fixes its state after 2: the
         // cuts fall inside the training, right after the state is fixed, and beyond.
         let mut o = options(Spcbpt, 7, 11);
-        o.bidir.sp.mis = mis;
-        o.bidir.sp.training_iterations = 2;
-        o.bidir.sp.eye_subspaces = 16;
-        o.bidir.sp.light_subspaces = 32;
-        o.bidir.pc.light_paths = 300;
+        o.method.spcbpt_mut().sp.mis = mis;
+        o.method.spcbpt_mut().sp.training_iterations = 2;
+        o.method.spcbpt_mut().sp.eye_subspaces = 16;
+        o.method.spcbpt_mut().sp.light_subspaces = 32;
+        o.method.pool_mut().light_paths = 300;
         cases.push((format!("Spcbpt {mis:?}"), o.clone()));
         // SPCBPT's own count option, whose vertices are labelled with their subspaces.
         if mis == PcMis::Resampling {
-            o.bidir.sp.mis = PcMis::Subspace;
+            o.method.spcbpt_mut().sp.mis = PcMis::Subspace;
             cases.push(("Spcbpt Subspace".into(), o));
         }
     }
     // Budgets measured in iterations 1 and 2 (PCBPT) and 2 and 3 (SPCBPT, after training):
     // the cuts fall inside the measurement, at its end, and beyond.
     let mut o = options(Pcbpt, 7, 11);
-    o.bidir.pc.light_paths = 300;
-    o.bidir.pc.budget = BudgetMode::Auto;
+    o.method.pool_mut().light_paths = 300;
+    o.method.budget_mut().mode = BudgetMode::Auto;
     cases.push(("Pcbpt with a budget".into(), o));
     let mut o = options(Spcbpt, 7, 11);
-    o.bidir.sp.training_iterations = 2;
-    o.bidir.sp.eye_subspaces = 16;
-    o.bidir.sp.light_subspaces = 32;
-    o.bidir.pc.light_paths = 300;
-    o.bidir.pc.budget = BudgetMode::Auto;
+    o.method.spcbpt_mut().sp.training_iterations = 2;
+    o.method.spcbpt_mut().sp.eye_subspaces = 16;
+    o.method.spcbpt_mut().sp.light_subspaces = 32;
+    o.method.pool_mut().light_paths = 300;
+    o.method.budget_mut().mode = BudgetMode::Auto;
     cases.push(("Spcbpt with a budget".into(), o));
     for (name, o) in &cases {
         let whole = integrator::render(&scene, o).unwrap();
@@ -163,7 +163,7 @@ fn pssmlt_chunks(two_stage: bool, what: &str) {
     let dir = tempfile::tempdir().unwrap();
     let merged = |seed, cuts: &[u32]| {
         let mut o = options(IntegratorKind::Pssmlt, 16, seed);
-        o.mlt.two_stage = two_stage;
+        *o.method.two_stage_mut() = two_stage;
         let mut bounds = vec![0];
         bounds.extend_from_slice(cuts);
         bounds.push(16);

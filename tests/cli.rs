@@ -285,7 +285,7 @@ fn bdpt_writes_strategy_images_and_bidirectional_statistics() {
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     let r = &json["render"];
     assert_eq!(r["integrator"], "bdpt");
-    assert_eq!(r["bidir"]["heuristic"], "balance");
+    assert_eq!(r["options"]["heuristic"], "balance");
     for key in ["extension_rays", "shadow_rays", "light_paths", "connections", "connections_occluded"] {
         assert!(r["counters"][key].as_u64().unwrap() > 0, "{key} in {r}");
     }
@@ -437,8 +437,8 @@ fn pcbpt_cache_over_the_memory_limit_is_refused_and_bad_options_are_named() {
     assert!(suggested >= 2, "{err}");
     for (flag, value) in [
         ("--pc-uniform-blend", "0"),
-        ("--pc-budget-iterations", "1"),
-        ("--pc-budget-smoothing", "65"),
+        ("--budget-iterations", "1"),
+        ("--budget-smoothing", "65"),
         ("--pc-neighbours", "40"),
         // SPCBPT's own counts.
         ("--pc-mis", "subspace"),
@@ -485,7 +485,7 @@ fn pcbpt_reports_its_phases_cache_and_shadow_rays() {
         assert!(r["shadow_rays"][phase].as_u64().unwrap() > 0, "no shadow rays in {phase}: {r}");
         assert!(r["phases"][phase].as_f64().unwrap() > 0.0, "no time in {phase}: {r}");
     }
-    assert_eq!(r["bidir"]["pc"]["light_paths"].as_u64(), Some(500));
+    assert_eq!(r["options"]["pool"]["light_paths"].as_u64(), Some(500));
 }
 
 #[test]

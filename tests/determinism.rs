@@ -68,11 +68,11 @@ fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
     ] {
         for kind in [IntegratorKind::Pcbpt, IntegratorKind::Spcbpt] {
             let set = |o: &mut pcbpt::integrator::RenderOptions| {
-                o.bidir.pc.budget = BudgetMode::Auto;
-                o.bidir.pc.budget_smoothing = smoothing;
-                o.bidir.pc.budget_independence = independence;
-                o.bidir.pc.budget_model = model;
-                o.bidir.sp.training_iterations = 2;
+                o.method.budget_mut().mode = BudgetMode::Auto;
+                o.method.budget_mut().smoothing = smoothing;
+                o.method.budget_mut().independence = independence;
+                o.method.budget_mut().model = model;
+                o.method.spcbpt_mut().sp.training_iterations = 2;
             };
             let one = render_with(&scene, kind, 6, 42, 1, &set);
             let two = render_with(&scene, kind, 6, 42, 2, &set);

@@ -25,35 +25,35 @@ fn methods() -> Vec<(String, RenderOptions)> {
     // Each MIS option with the connections it weighs (no budget), and the defaults (a budget).
     for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(Pcbpt);
-        o.bidir.pc.mis = mis;
-        o.bidir.pc.light_paths = 200;
-        o.bidir.pc.stride = 8;
-        o.bidir.pc.budget = BudgetMode::Off;
+        o.method.pcbpt_mut().pc.mis = mis;
+        o.method.pool_mut().light_paths = 200;
+        o.method.pcbpt_mut().pc.stride = 8;
+        o.method.budget_mut().mode = BudgetMode::Off;
         out.push((format!("Pcbpt {mis:?}"), o));
         let mut o = options(Spcbpt);
-        o.bidir.sp.mis = mis;
-        o.bidir.pc.light_paths = 200;
-        o.bidir.sp.eye_subspaces = 32;
-        o.bidir.sp.light_subspaces = 64;
-        o.bidir.pc.budget = BudgetMode::Off;
+        o.method.spcbpt_mut().sp.mis = mis;
+        o.method.pool_mut().light_paths = 200;
+        o.method.spcbpt_mut().sp.eye_subspaces = 32;
+        o.method.spcbpt_mut().sp.light_subspaces = 64;
+        o.method.budget_mut().mode = BudgetMode::Off;
         out.push((format!("Spcbpt {mis:?}"), o.clone()));
         // SPCBPT's own count option.
         if mis == PcMis::Resampling {
-            o.bidir.sp.mis = PcMis::Subspace;
+            o.method.spcbpt_mut().sp.mis = PcMis::Subspace;
             out.push(("Spcbpt Subspace".into(), o));
         }
     }
     out.push(("Pcbpt, defaults".into(), options(Pcbpt)));
     out.push(("Spcbpt, defaults".into(), options(Spcbpt)));
     let mut o = options(Pssmlt);
-    o.mlt.bootstrap = 20_000;
+    o.method.chain_mut().bootstrap = 20_000;
     out.push(("Pssmlt".into(), o));
     // MEMLT with its direct-light pass (the path tracer's), and with the direct light in
     // the chains, so that every path length is the chains' own.
     for direct in [16, -1] {
         let mut o = options(Memlt);
-        o.mlt.bootstrap = 20_000;
-        o.mlt.direct_samples = direct;
+        o.method.chain_mut().bootstrap = 20_000;
+        o.method.memlt_mut().direct_samples = direct;
         out.push((if direct > 0 { "Memlt".into() } else { "Memlt, direct light in the chains".into() }, o));
     }
     out

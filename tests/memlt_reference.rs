@@ -14,7 +14,7 @@ use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutpu
 use pcbpt::scene::Scene;
 
 fn memlt(scene: &Scene, spp: u32, seed: u64, direct_samples: i32) -> RenderOutput {
-    memlt_with(scene, spp, seed, &|o| o.mlt.direct_samples = direct_samples)
+    memlt_with(scene, spp, seed, &|o| o.method.memlt_mut().direct_samples = direct_samples)
 }
 
 fn memlt_with(scene: &Scene, spp: u32, seed: u64, set: &dyn Fn(&mut RenderOptions)) -> RenderOutput {
@@ -22,7 +22,7 @@ fn memlt_with(scene: &Scene, spp: u32, seed: u64, set: &dyn Fn(&mut RenderOption
 }
 
 fn check(scene: &Scene, reference_name: &str, ref_noise: f64, spp: u32, direct_samples: i32, what: &str) {
-    check_with(scene, reference_name, ref_noise, spp, &|o| o.mlt.direct_samples = direct_samples, what);
+    check_with(scene, reference_name, ref_noise, spp, &|o| o.method.memlt_mut().direct_samples = direct_samples, what);
 }
 
 fn check_with(
@@ -64,7 +64,7 @@ fn memlt_cornell_ply() {
 fn memlt_cornell_ply_single_stage() {
     // The chains' target the plain luminance (two-stage Metropolis off).
     let what = "cornell-ply, MEMLT in one stage, 2 × 64 spp";
-    check_with(&cornell_ply(), CORNELL, 8.0e-5, 64, &|o| o.mlt.two_stage = false, what);
+    check_with(&cornell_ply(), CORNELL, 8.0e-5, 64, &|o| *o.method.two_stage_mut() = false, what);
 }
 
 #[test]
@@ -139,7 +139,7 @@ fn memlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
         let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
         o.seed = seed;
         o.threads = threads;
-        o.mlt.bootstrap = 5000;
+        o.method.chain_mut().bootstrap = 5000;
         integrator::render(&scene, &o).unwrap()
     };
     let bits = |o: &RenderOutput| o.image.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
@@ -188,7 +188,7 @@ fn memlt_balances_its_direct_light_under_a_time_budget() {
     // Without the balance, or with a budget of mutations, the pass takes its 16 samples.
     let off = |o: &mut RenderOptions| {
         o.budget = Budget::Time(1.0);
-        o.mlt.direct_balance = false;
+        o.method.memlt_mut().direct_balance = false;
     };
     for out in [memlt_with(&scene, 0, 1, &off), memlt(&scene, 1, 1, 16)] {
         let s = out.stats.memlt.as_ref().unwrap();
@@ -200,29 +200,29 @@ fn memlt_balances_its_direct_light_under_a_time_budget() {
 fn memlt_refuses_options_that_leave_no_chain() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "16"), ("resy", "16")], Backend::Embree);
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));
-    o.mlt.bidirectional_mutation = false;
-    o.mlt.lens_perturbation = false;
-    o.mlt.caustic_perturbation = false;
-    o.mlt.multichain_perturbation = false;
-    o.mlt.light_hit_perturbation = false;
-    o.mlt.manifold_perturbation = false;
+    o.method.memlt_mut().bidirectional_mutation = false;
+    o.method.memlt_mut().lens_perturbation = false;
+    o.method.memlt_mut().caustic_perturbation = false;
+    o.method.memlt_mut().multichain_perturbation = false;
+    o.method.memlt_mut().light_hit_perturbation = false;
+    o.method.memlt_mut().manifold_perturbation = false;
     let e = integrator::render(&scene, &o).err().expect("no mutation must be refused").to_string();
     assert!(e.contains("at least one mutation"), "{e}");
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));
-    o.mlt.lambda = 0.0;
+    o.method.memlt_mut().lambda = 0.0;
     let e = integrator::render(&scene, &o).err().expect("λ = 0 must be refused").to_string();
     assert!(e.contains("--lambda"), "{e}");
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1));
-    o.mlt.theta_diff = -1.0;
+    o.method.memlt_mut().theta_diff = -1.0;
     let e = integrator::render(&scene, &o).err().expect("a negative θ_diff must be refused").to_string();
     assert!(e.contains("--theta-diff"), "{e}");
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Time(1.0));
-    o.mlt.bootstrap_fraction = 1.0;
+    o.method.memlt_mut().bootstrap_fraction = 1.0;
     let e = integrator::render(&scene, &o).err().expect("the whole time on the bootstrap must be refused").to_string();
     assert!(e.contains("--bootstrap-fraction"), "{e}");
     for kind in [IntegratorKind::Memlt, IntegratorKind::Pssmlt] {
         let mut o = RenderOptions::new(kind, Budget::Spp(1));
-        o.mlt.chains = 0;
+        o.method.chain_mut().chains = 0;
         let e = integrator::render(&scene, &o).err().expect("no chain must be refused").to_string();
         assert!(e.contains("--chains"), "{kind:?}: {e}");
     }
@@ -234,15 +234,15 @@ fn memlt_bootstrap_takes_its_share_of_a_time_budget() {
     // has passed: more than one batch of a small `--bootstrap` in a quarter of a second.
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "16"), ("resy", "16")], Backend::Embree);
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Time(1.0));
-    o.mlt.bootstrap = 1000;
-    o.mlt.bootstrap_fraction = 0.25;
+    o.method.chain_mut().bootstrap = 1000;
+    o.method.memlt_mut().bootstrap_fraction = 0.25;
     o.threads = 2;
     let out = integrator::render(&scene, &o).unwrap();
     let s = out.stats.memlt.as_ref().unwrap();
     assert!(s.bootstrap_samples > 1000 && s.bootstrap_samples.is_multiple_of(1000), "{} samples", s.bootstrap_samples);
     assert!(s.bootstrap_seconds >= 0.25 && s.normalisation > 0.0, "{} s", s.bootstrap_seconds);
     // Two-stage Metropolis' first stage has the first half of that time, in batches too.
-    assert!(o.mlt.two_stage);
+    assert!(*o.method.two_stage_mut());
     let n = s.first_stage_samples;
     assert!(n > 1000 && n.is_multiple_of(1000), "{n} first-stage samples");
 }
@@ -257,14 +257,14 @@ fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
     o.seed = 3;
     o.threads = 2;
-    o.mlt.direct_samples = -1;
-    o.mlt.chains = 1;
-    o.mlt.bidirectional_mutation = false;
-    o.mlt.lens_perturbation = false;
-    o.mlt.caustic_perturbation = false;
-    o.mlt.manifold_perturbation = false;
-    o.mlt.light_hit_perturbation = false;
-    o.mlt.independent_mutation = Some(false);
+    o.method.memlt_mut().direct_samples = -1;
+    o.method.chain_mut().chains = 1;
+    o.method.memlt_mut().bidirectional_mutation = false;
+    o.method.memlt_mut().lens_perturbation = false;
+    o.method.memlt_mut().caustic_perturbation = false;
+    o.method.memlt_mut().manifold_perturbation = false;
+    o.method.memlt_mut().light_hit_perturbation = false;
+    o.method.memlt_mut().independent_mutation = Some(false);
     let out = integrator::render(&scene, &o).unwrap();
     let stay = out.stats.memlt.as_ref().unwrap().longest_stay.unwrap();
     assert_eq!(stay.mutations, out.width as u64 * out.height as u64 * 4);

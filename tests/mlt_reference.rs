@@ -45,7 +45,7 @@ fn pssmlt_veach_ajar_two_stage() {
     let scene = veach_ajar();
     let reference = reference("veach-ajar.exr");
     let run = |seed| {
-        let out = render_with(&scene, IntegratorKind::Pssmlt, 64, seed, 2, &|o| o.mlt.two_stage = true);
+        let out = render_with(&scene, IntegratorKind::Pssmlt, 64, seed, 2, &|o| *o.method.two_stage_mut() = true);
         assert!(out.stats.mlt.unwrap().first_stage_samples > 0);
         image(out)
     };
@@ -82,8 +82,8 @@ fn pssmlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
         let mut o = RenderOptions::new(IntegratorKind::Pssmlt, Budget::Spp(4));
         o.seed = seed;
         o.threads = threads;
-        o.mlt.bootstrap = 5000;
-        o.mlt.base = base;
+        o.method.chain_mut().bootstrap = 5000;
+        o.method.pssmlt_mut().base = base;
         integrator::render(&scene, &o).unwrap()
     };
     use pcbpt::integrator::mlt::MltBase;
@@ -112,7 +112,7 @@ fn pssmlt_measures_its_longest_stay_against_the_image() {
     let mut o = RenderOptions::new(IntegratorKind::Pssmlt, Budget::Spp(3000));
     o.seed = 4;
     o.threads = 2;
-    o.mlt.chains = 1;
+    o.method.chain_mut().chains = 1;
     let out = integrator::render(&scene, &o).unwrap();
     let stay = out.stats.mlt.unwrap().longest_stay.unwrap();
     assert_eq!(stay.mutations, 3000);

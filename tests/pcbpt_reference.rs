@@ -41,7 +41,7 @@ mod common;
 
 use common::*;
 use pcbpt::image_io::Image;
-use pcbpt::integrator::bidir::budget::BudgetMode;
+use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetOptions};
 use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
@@ -49,12 +49,18 @@ use pcbpt::scene::Scene;
 fn render(scene: &Scene, spp: u32, opts: &PcOptions, seed: u64) -> Image {
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(spp));
     o.seed = seed;
-    o.bidir.pc = opts.clone();
+    o.method.pcbpt_mut().pc = opts.clone();
     image(integrator::render(scene, &o).unwrap())
 }
 
 fn check(case: &Case, spp: u32, mis: PcMis, distance_term: DistanceTerm, sampling: PcSampling) {
-    let opts = PcOptions { mis, distance_term, sampling, budget: BudgetMode::Off, ..PcOptions::default() };
+    let opts = PcOptions {
+        mis,
+        distance_term,
+        sampling,
+        budget: BudgetOptions { mode: BudgetMode::Off, ..BudgetOptions::default() },
+        ..PcOptions::default()
+    };
     let scene = case.scene();
     let a = render(&scene, spp, &opts, 1);
     let b = render(&scene, spp, &opts, 2);
@@ -137,7 +143,12 @@ fn paired_mean_ratio(a: &PcOptions, b: &PcOptions, spp: u32, seeds: std::ops::Ra
 /// A weight that lost or gained a strategy's share would move the ratio by far more than the
 /// 0.5% allowed.
 fn check_pairs(distance_term: DistanceTerm, mis: PcMis) {
-    let uniform = PcOptions { mis: PcMis::Uniform, distance_term, budget: BudgetMode::Off, ..PcOptions::default() };
+    let uniform = PcOptions {
+        mis: PcMis::Uniform,
+        distance_term,
+        budget: BudgetOptions { mode: BudgetMode::Off, ..BudgetOptions::default() },
+        ..PcOptions::default()
+    };
     let other = PcOptions { mis, ..uniform.clone() };
     let (ratio, se) = paired_mean_ratio(&uniform, &other, 64, 1000..1040);
     println!("veach-ajar 80×45, {distance_term:?}, 40 pairs × 64 spp: {mis:?} / uniform = {ratio:.5} ± {se:.5}");

@@ -31,7 +31,7 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
     };
     let pcbpt = |f: &dyn Fn(&mut RenderOptions)| {
         with(Pcbpt, &|o| {
-            o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+            o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
             f(o)
         })
     };
@@ -39,32 +39,32 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
         ("path", base(Path)),
         ("lighttrace", base(Lighttrace)),
         ("bdpt", base(Bdpt)),
-        ("bdpt_balance", with(Bdpt, &|o| o.bidir.heuristic = Heuristic::Balance)),
+        ("bdpt_balance", with(Bdpt, &|o| *o.method.heuristic_mut().unwrap() = Heuristic::Balance)),
         ("bdpt_layers", with(Bdpt, &|o| o.strategy_images = true)),
-        ("eorr_running_mean", with(Eorr, &|o| o.bidir.eorr_pilot_spp = 0)),
+        ("eorr_running_mean", with(Eorr, &|o| o.method.eorr_mut().pilot_spp = 0)),
         ("eorr", base(Eorr)),
         ("lvc", base(Lvc)),
-        ("lvc_3_connections", with(Lvc, &|o| o.bidir.lvc_connections = 3)),
+        ("lvc_3_connections", with(Lvc, &|o| o.method.lvc_mut().connections = 3)),
         // PCBPT's options with the fixed plan (`--pc-budget off`), then its defaults (the
         // budget, which changes the plan after iteration 2 of these 5).
         ("pcbpt", pcbpt(&|_| {})),
-        ("pcbpt_uniform", pcbpt(&|o| o.bidir.pc.mis = PcMis::Uniform)),
-        ("pcbpt_resampling", pcbpt(&|o| o.bidir.pc.mis = PcMis::Resampling)),
+        ("pcbpt_uniform", pcbpt(&|o| o.method.pcbpt_mut().pc.mis = PcMis::Uniform)),
+        ("pcbpt_resampling", pcbpt(&|o| o.method.pcbpt_mut().pc.mis = PcMis::Resampling)),
         (
             "pcbpt_cmf_printed",
             pcbpt(&|o| {
-                o.bidir.pc.sampling = PcSampling::Cmf;
-                o.bidir.pc.distance_term = DistanceTerm::Printed;
+                o.method.pcbpt_mut().pc.sampling = PcSampling::Cmf;
+                o.method.pcbpt_mut().pc.distance_term = DistanceTerm::Printed;
             }),
         ),
         ("pcbpt_layers", pcbpt(&|o| o.strategy_images = true)),
         ("pcbpt_budget", base(Pcbpt)),
-        ("pssmlt", with(Pssmlt, &|o| o.mlt.bootstrap = 2000)),
+        ("pssmlt", with(Pssmlt, &|o| o.method.chain_mut().bootstrap = 2000)),
         (
             "pssmlt_path",
             with(Pssmlt, &|o| {
-                o.mlt.bootstrap = 2000;
-                o.mlt.base = MltBase::Path;
+                o.method.chain_mut().bootstrap = 2000;
+                o.method.pssmlt_mut().base = MltBase::Path;
             }),
         ),
     ]

@@ -25,9 +25,9 @@ use pcbpt::scene::Scene;
 fn render(scene: &Scene, spp: u32, opts: &SpOptions, seed: u64) -> Image {
     let mut o = RenderOptions::new(IntegratorKind::Spcbpt, Budget::Spp(spp));
     o.seed = seed;
-    o.bidir.sp = opts.clone();
+    o.method.spcbpt_mut().sp = opts.clone();
     // The subspace connections themselves (`tests/budget_reference.rs` has the budget).
-    o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+    o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
     image(integrator::render(scene, &o).unwrap())
 }
 

@@ -147,27 +147,27 @@ fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
     // Each MIS option with the connections it weighs (no budget), and the defaults (a budget).
     for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(IntegratorKind::Pcbpt, 16);
-        o.bidir.pc.mis = mis;
-        o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+        o.method.pcbpt_mut().pc.mis = mis;
+        o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
         methods.push(("pcbpt", o));
         let mut o = options(IntegratorKind::Spcbpt, 16);
-        o.bidir.sp.mis = mis;
-        o.bidir.pc.budget = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+        o.method.spcbpt_mut().sp.mis = mis;
+        o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
         methods.push(("spcbpt", o));
     }
     methods.push(("pcbpt, defaults", options(IntegratorKind::Pcbpt, 16)));
     methods.push(("spcbpt, defaults", options(IntegratorKind::Spcbpt, 16)));
     let mut o = options(IntegratorKind::Pssmlt, 32);
-    o.mlt.bootstrap = 20_000;
+    o.method.chain_mut().bootstrap = 20_000;
     methods.push(("pssmlt", o));
     let mean = |img: &pcbpt::image_io::Image| img.pixels.iter().map(|p| (p.x + p.y + p.z) as f64).sum::<f64>();
     let mut failures = Vec::new();
-    for (name, o) in methods {
+    for (name, mut o) in methods {
         let img = image(pcbpt::integrator::render(&scene, &o).unwrap());
         let ratio = mean(&img) / mean(&reference);
         let name = match name {
-            "pcbpt" => format!("pcbpt {:?}", o.bidir.pc.mis),
-            "spcbpt" => format!("spcbpt {:?}", o.bidir.sp.mis),
+            "pcbpt" => format!("pcbpt {:?}", o.method.pcbpt_mut().pc.mis),
+            "spcbpt" => format!("spcbpt {:?}", o.method.spcbpt_mut().sp.mis),
             _ => name.to_string(),
         };
         eprintln!("sunsky, {name}: mean ratio {ratio:.4}");

@@ -43,86 +43,30 @@ pub enum MltBase {
     Path,
 }
 
-/// Options of the Metropolis integrator.
-#[derive(Clone, Debug, Serialize)]
-pub struct MltOptions {
-    pub large_step_prob: f32,
-    /// Independent samples that estimate the normalisation `b` and seed the chains.
+/// What every Markov-chain integrator (PSSMLT, MEMLT) reads: the bootstrap, the chains and
+/// two-stage Metropolis' first stage.
+#[derive(Clone, Debug, Serialize, clap::Args)]
+pub struct ChainOptions {
+    /// Independent samples for the normalisation and the chains' start states.
+    #[arg(long, default_value_t = ChainOptions::default().bootstrap)]
     pub bootstrap: usize,
-    pub base: MltBase,
-    /// MEMLT: samples per pixel of a separate direct-lighting estimate by the path tracer
-    /// (16 by default, as Mitsuba 0.6: paths of one edge, and of two through a rough
-    /// vertex), the chains rendering the others; -1 leaves every path to the chains.
-    pub direct_samples: i32,
-    /// MEMLT with a time budget: the direct-light pass goes on past `direct_samples` for the
-    /// share of the time that balances its noise against the chains' (`direct_balance.rs`).
-    pub direct_balance: bool,
-    /// MEMLT beside a direct-light pass: samples per pixel, in stratified cells, of a
-    /// specular pass that renders the paths through Dirac lobes alone (the light seen in
-    /// mirrors and through glass); 0 leaves them to the chains.
-    pub specular_samples: u32,
-    /// MEMLT with a time budget: the bootstrap goes on in batches of `bootstrap` samples
-    /// until this fraction of the time is spent (the image's brightness is its estimate).
-    pub bootstrap_fraction: f64,
-    /// MEMLT: which mutations the chains use (Mitsuba 0.6's switches): the bidirectional
-    /// mutation, Veach's lens, caustic and multi-chain perturbations, and the manifold
-    /// perturbation (without it, Veach's MLT); and, beyond Mitsuba 0.6, the independent
-    /// mutation (a whole new path: Kelemen's large step in path space).
-    pub bidirectional_mutation: bool,
-    pub lens_perturbation: bool,
-    pub caustic_perturbation: bool,
-    pub multichain_perturbation: bool,
-    /// MEMLT: the multi-chain perturbation's re-trace on to the light, for paths whose light
-    /// end no shadow ray joins (a caustic or a small light seen through glass; not Mitsuba
-    /// 0.6's).
-    pub light_hit_perturbation: bool,
-    pub manifold_perturbation: bool,
-    /// `None`: `auto`, on where `--bootstrap` camera walks to the first light find at least
-    /// 1.5% of their light in paths that only such a walk makes
-    /// (`memlt::independent_mutation_on`).
-    pub independent_mutation: Option<bool>,
-    /// MEMLT: the share of the independent mutation's lengths and splits drawn as the start
-    /// paths' generator draws them (the rest in proportion to what each found among the
-    /// start-path candidates; 1: all as the start paths').
-    pub independent_defensive: f64,
-    /// MEMLT: the share of the learned generator's draws (the independent mutation's and the
-    /// learned start paths') that are camera walks to the first light they find, which make
-    /// a path of any length (the rest draw a length and a split first).
-    pub independent_camera_walks: f64,
-    /// MEMLT: the chains' start paths are drawn from a second set of candidates, made by the
-    /// independent mutation's learned generator (whose weights spread less), instead of the
-    /// first set, made by lengths `∝ 2^-k` and uniform splits (on by default: less relMSE on
-    /// `glass-caustic` and `veach-ajar`, BENCHMARKS.md).
-    pub learned_starts: bool,
-    /// MEMLT: how much sharper than the current direction's scattering density the manifold
-    /// perturbation's von Mises–Fisher lobe is (its peak density is that density times
-    /// `λ²`; an area light's point moved by the perturbation gets a Gaussian whose peak is
-    /// the point's density times `λ²`).
-    pub lambda: f64,
-    /// MEMLT: the half-vector change (degrees) against which the manifold perturbation
-    /// judges a glossy lobe: the wider the lobe against it, the more often the vertex is
-    /// treated as diffuse rather than specular (0: glossy vertices are never specular).
-    pub theta_diff: f64,
     /// Markov chains, each started from a bootstrap path drawn in proportion to its
-    /// contribution, all run for the same number of mutations (independent of the
-    /// number of threads).
+    /// contribution (the image does not depend on the thread count).
+    #[arg(long, default_value_t = ChainOptions::default().chains)]
     pub chains: usize,
-    /// Two-stage Metropolis ([`super::two_stage`]): the chains sample paths in proportion
-    /// to their luminance over a first stage's estimate of the image at their film position.
-    /// Off in [`MltOptions::default`] (PSSMLT, whose scalar contribution the contract fixes
-    /// as the luminance), on for MEMLT ([`MltOptions::for_integrator`]).
-    pub two_stage: bool,
-    /// Pixels per side of the first stage's cells (Mitsuba 0.6's `firstStageSizeReduction`).
+    /// Two-stage Metropolis: pixels per side of the first stage's cells (Mitsuba 0.6's
+    /// `firstStageSizeReduction`).
+    #[arg(long, default_value_t = ChainOptions::default().first_stage_reduction)]
     pub first_stage_reduction: u32,
 }
 
-impl MltOptions {
-    /// The defaults for `integrator`: [`MltOptions::default`], with two-stage Metropolis
-    /// for MEMLT (measured in BENCHMARKS.md, "Two-stage Metropolis").
-    pub fn for_integrator(integrator: super::IntegratorKind) -> MltOptions {
-        MltOptions { two_stage: integrator == super::IntegratorKind::Memlt, ..MltOptions::default() }
+impl Default for ChainOptions {
+    fn default() -> ChainOptions {
+        ChainOptions { bootstrap: 100_000, chains: 64, first_stage_reduction: 16 }
     }
+}
 
+impl ChainOptions {
     /// Refuses no bootstrap sample or no chain (PSSMLT and MEMLT alike).
     pub fn check_counts(&self) -> Result<(), crate::error::Error> {
         use crate::error::Error;
@@ -139,31 +83,36 @@ impl MltOptions {
     }
 }
 
-impl Default for MltOptions {
-    fn default() -> MltOptions {
-        MltOptions {
+/// Options of PSSMLT (`--integrator pssmlt`).
+#[derive(Clone, Debug, Serialize, clap::Args)]
+pub struct PssmltOptions {
+    /// MIS heuristic of the bidirectional estimator the chains drive.
+    #[arg(long, value_enum, default_value_t = crate::integrator::bidir::mis::Heuristic::default())]
+    pub heuristic: crate::integrator::bidir::mis::Heuristic,
+    /// Probability of a large step.
+    #[arg(long, default_value_t = PssmltOptions::default().large_step_prob)]
+    pub large_step_prob: f32,
+    /// The estimator the Markov chains drive.
+    #[arg(long = "mlt-path-integrator", value_enum, default_value_t = PssmltOptions::default().base)]
+    pub base: MltBase,
+    #[command(flatten)]
+    pub chain: ChainOptions,
+    /// Two-stage Metropolis (Mitsuba 0.6's `twoStage`, [`super::two_stage`]): a first stage of
+    /// BDPT samples estimates the image at a reduced resolution, and the chains sample paths
+    /// in proportion to their luminance over it. Off for PSSMLT, whose scalar contribution
+    /// the contract fixes as the luminance.
+    #[arg(long, default_value_t = PssmltOptions::default().two_stage, action = clap::ArgAction::Set)]
+    pub two_stage: bool,
+}
+
+impl Default for PssmltOptions {
+    fn default() -> PssmltOptions {
+        PssmltOptions {
+            heuristic: Default::default(),
             large_step_prob: 0.3,
-            bootstrap: 100_000,
             base: MltBase::Bdpt,
-            direct_samples: 16,
-            direct_balance: true,
-            specular_samples: 0,
-            bootstrap_fraction: 0.1,
-            bidirectional_mutation: true,
-            lens_perturbation: true,
-            caustic_perturbation: true,
-            multichain_perturbation: true,
-            light_hit_perturbation: true,
-            independent_mutation: None,
-            independent_defensive: 0.2,
-            independent_camera_walks: 0.5,
-            learned_starts: true,
-            manifold_perturbation: true,
-            lambda: 50.0,
-            theta_diff: 5.0,
-            chains: 64,
+            chain: ChainOptions::default(),
             two_stage: false,
-            first_stage_reduction: 16,
         }
     }
 }
@@ -439,22 +388,22 @@ const CHAIN_STREAM: u64 = 0x6368_6169;
 pub fn render(
     scene: &Scene,
     opts: &RenderOptions,
+    mo: &PssmltOptions,
     iterations: Option<std::ops::Range<u32>>,
 ) -> Result<RenderOutput, crate::error::Error> {
-    let mo = &opts.mlt;
     if !(mo.large_step_prob > 0.0 && mo.large_step_prob <= 1.0) {
         return Err(crate::error::Error::Usage(format!(
             "--large-step-prob must be in (0, 1], got {}",
             mo.large_step_prob
         )));
     }
-    mo.check_counts()?;
+    mo.chain.check_counts()?;
     if mo.base == MltBase::Bdpt {
         super::bidir::bdpt::check_lights(scene, "pssmlt").map_err(crate::error::Error::Usage)?;
     }
     let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
-    let ev = evaluator(scene, opts, mo.base);
+    let ev = evaluator(scene, mo.heuristic, mo.base);
     let (w, h) = (scene.film.width, scene.film.height);
     let pixels = w as u64 * h as u64;
     let start = Instant::now();
@@ -475,7 +424,8 @@ pub fn render(
     let mut counters = Counters::default();
     let (importance, first_stage_samples) = if mo.two_stage {
         let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];
-        let (map, n, c) = first_stage(scene, opts, &pool, mo.bootstrap, ChainPaths::ALL, start, 0.0, &render_key);
+        let (map, n, c) =
+            first_stage(scene, opts, &pool, (mo.heuristic, &mo.chain), ChainPaths::ALL, start, 0.0, &render_key);
         counters += c;
         (map, n)
     } else {
@@ -484,7 +434,7 @@ pub fn render(
     let importance = importance.as_ref();
     // Bootstrap: independent samples estimate b and give the chains their start states.
     let (weights, luminances, c) =
-        bootstrap(&pool, &ev, mo.bootstrap, mo.large_step_prob, ChainPaths::ALL, importance, &key);
+        bootstrap(&pool, &ev, mo.chain.bootstrap, mo.large_step_prob, ChainPaths::ALL, importance, &key);
     counters += c;
     // Two-stage Metropolis: the bootstrap's mean luminance, to which the image is scaled.
     let plain = importance.map(|_| mean_and_error(&luminances).0);
@@ -495,7 +445,7 @@ pub fn render(
         normalisation: b,
         bootstrap_normalisation: b,
         bootstrap_samples: weights.len() as u64,
-        chains: mo.chains,
+        chains: mo.chain.chains,
         first_stage_samples,
         bootstrap_seconds,
         ..Default::default()
@@ -511,7 +461,7 @@ pub fn render(
             Budget::Spp(spp) => spp as u64 * pixels,
             Budget::Time(_) => u64::MAX,
         };
-        let mut chains: Vec<Chain> = (0..mo.chains as u64)
+        let mut chains: Vec<Chain> = (0..mo.chain.chains as u64)
             .map(|i| {
                 let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
                 let (j, _) = dist.sample(pick.next_1d());
@@ -585,7 +535,6 @@ pub fn render(
     // Each mutation put the bootstrap's `b` (times the map there), so scaled, into the image.
     let b_there = b * s * importance.map_or(1.0, |m| m.pixel(longest.pixel) as f64);
     stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b_there, stats.mutations);
-    let bidir = (mo.base == MltBase::Bdpt).then(|| opts.bidir.clone());
     Ok(super::chains_output(
         scene,
         opts,
@@ -598,10 +547,7 @@ pub fn render(
         snapshots,
         interrupted,
         iterations,
-        |s| {
-            s.bidir = bidir;
-            s.mlt = Some(stats);
-        },
+        |s| s.mlt = Some(stats),
     ))
 }
 

@@ -7,6 +7,7 @@ pub mod manifold;
 pub mod memlt;
 pub mod mlt;
 pub mod path;
+pub mod registry;
 pub(crate) mod render_loop;
 pub mod stays;
 pub mod two_stage;
@@ -17,11 +18,11 @@ use crate::scene::Scene;
 use bidir::WalkLimits;
 use bidir::bdpt::{Bdpt, BdptRender};
 use bidir::eorr::Eorr;
-use bidir::mis::Heuristic;
-use bidir::pcbpt::{PcOptions, Pcbpt, PcbptRender};
+use bidir::pcbpt::{Pcbpt, PcbptRender};
 pub use bidir::pool::CONCENTRATION_DEPTHS;
 use bidir::pool::{Lvc, LvcRender};
-use bidir::spcbpt::{SpOptions, Spcbpt, SpcbptRender};
+use bidir::spcbpt::{Spcbpt, SpcbptRender};
+pub use registry::Method;
 use serde::Serialize;
 use std::ops::Range;
 use std::sync::Arc;
@@ -63,6 +64,27 @@ impl IntegratorKind {
             "mlt" => Some(IntegratorKind::Memlt),
             _ => None,
         }
+    }
+
+    /// The name `--integrator` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            IntegratorKind::Path => "path",
+            IntegratorKind::Lighttrace => "lighttrace",
+            IntegratorKind::Bdpt => "bdpt",
+            IntegratorKind::Eorr => "eorr",
+            IntegratorKind::Lvc => "lvc",
+            IntegratorKind::Pssmlt => "pssmlt",
+            IntegratorKind::Pcbpt => "pcbpt",
+            IntegratorKind::Spcbpt => "spcbpt",
+            IntegratorKind::Memlt => "memlt",
+        }
+    }
+
+    /// Whether the integrator samples with the bidirectional core's strategies (and reports
+    /// connections and light paths).
+    pub fn is_bidirectional(self) -> bool {
+        !matches!(self, IntegratorKind::Path | IntegratorKind::Pssmlt | IntegratorKind::Memlt)
     }
 }
 
@@ -137,42 +159,6 @@ impl std::ops::AddAssign for Counters {
     }
 }
 
-/// Options of the bidirectional integrators.
-#[derive(Clone, Debug, Serialize)]
-pub struct BidirOptions {
-    pub heuristic: Heuristic,
-    /// EORR: the roulette threshold as a fraction of the pixel's mean luminance.
-    pub eorr_fraction: f32,
-    /// EORR: the pixel means come from the first this many samples per pixel (0: from every
-    /// earlier pass, a running mean).
-    pub eorr_pilot_spp: u32,
-    /// LVC: light paths per iteration (0 = one per pixel).
-    pub lvc_light_paths: usize,
-    /// LVC: connections per camera vertex.
-    pub lvc_connections: u32,
-    /// Memory limit of a light pool, in MiB: settings whose pool would need more are refused.
-    pub max_pool_mb: usize,
-    /// PCBPT's options (the pool and the connections of SPCBPT too).
-    pub pc: PcOptions,
-    /// SPCBPT's options.
-    pub sp: SpOptions,
-}
-
-impl Default for BidirOptions {
-    fn default() -> BidirOptions {
-        BidirOptions {
-            heuristic: Heuristic::Power,
-            eorr_fraction: 0.1,
-            eorr_pilot_spp: 16,
-            lvc_light_paths: 0,
-            lvc_connections: 1,
-            max_pool_mb: 4096,
-            pc: PcOptions::default(),
-            sp: SpOptions::default(),
-        }
-    }
-}
-
 /// Wall time spent in each phase of the render loop.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct PhaseTimes {
@@ -219,7 +205,8 @@ pub enum Budget {
 
 #[derive(Clone)]
 pub struct RenderOptions {
-    pub integrator: IntegratorKind,
+    /// The integrator and its options.
+    pub method: Method,
     pub budget: Budget,
     pub seed: u64,
     /// Worker threads (0 = all cores).
@@ -228,8 +215,6 @@ pub struct RenderOptions {
     pub progress: bool,
     /// Set from outside (a signal handler) to stop after the current pass.
     pub stop: Option<Arc<AtomicBool>>,
-    pub bidir: BidirOptions,
-    pub mlt: mlt::MltOptions,
     /// Keep one image per strategy `(s,t)` (bidirectional integrators).
     pub strategy_images: bool,
     /// Wall-clock times (seconds, ascending) at which to keep a snapshot of the image: the
@@ -240,18 +225,20 @@ pub struct RenderOptions {
 impl RenderOptions {
     pub fn new(integrator: IntegratorKind, budget: Budget) -> RenderOptions {
         RenderOptions {
-            integrator,
+            method: Method::default_for(integrator),
             budget,
             seed: 0,
             threads: 0,
             tile_size: 32,
             progress: false,
             stop: None,
-            bidir: BidirOptions::default(),
-            mlt: mlt::MltOptions::for_integrator(integrator),
             strategy_images: false,
             checkpoints: Vec::new(),
         }
+    }
+
+    pub fn integrator(&self) -> IntegratorKind {
+        self.method.kind()
     }
 }
 
@@ -279,9 +266,8 @@ pub struct RenderStats {
     pub subspaces: Option<bidir::spcbpt::SubspaceStats>,
     /// The budget PCBPT or SPCBPT chose (`--pc-budget auto`).
     pub budget: Option<bidir::budget::BudgetStats>,
-    /// Options of the bidirectional integrators (when one ran).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub bidir: Option<BidirOptions>,
+    /// The integrator's options.
+    pub options: Method,
     /// Light-pool size of the last iteration: light paths and connectible vertices.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pool: Option<(usize, usize)>,
@@ -316,7 +302,7 @@ impl RenderStats {
     ) -> RenderStats {
         let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
         RenderStats {
-            integrator: opts.integrator,
+            integrator: opts.integrator(),
             backend: scene.accel.backend().to_string(),
             threads,
             width: scene.film.width,
@@ -332,7 +318,7 @@ impl RenderStats {
             cache: None,
             subspaces: None,
             budget: None,
-            bidir: None,
+            options: opts.method.clone(),
             pool: None,
             mlt: None,
             memlt: None,
@@ -546,50 +532,54 @@ pub fn render_iterations(
         hide_emitters: spec.hide_emitters,
         light_only,
     };
-    let kind = opts.integrator;
-    if !matches!(kind, IntegratorKind::Path | IntegratorKind::Pssmlt | IntegratorKind::Memlt) {
-        bidir::bdpt::check_lights(scene, &format!("{kind:?}").to_lowercase()).map_err(Error::Usage)?;
+    let kind = opts.integrator();
+    if kind.is_bidirectional() {
+        bidir::bdpt::check_lights(scene, kind.name()).map_err(Error::Usage)?;
     }
-    let b = &opts.bidir;
-    let heuristic = b.heuristic;
-    match kind {
-        IntegratorKind::Pssmlt => mlt::render(scene, opts, iterations),
-        IntegratorKind::Memlt => memlt::render(scene, opts, iterations),
-        IntegratorKind::Path => render_loop::run(scene, opts, path::PathTracer::new(spec), false, iterations),
-        IntegratorKind::Lighttrace | IntegratorKind::Bdpt => {
-            let method = BdptRender { bdpt: bdpt(kind == IntegratorKind::Lighttrace), heuristic };
+    match &opts.method {
+        Method::Pssmlt(o) => mlt::render(scene, opts, o, iterations),
+        Method::Memlt(o) => memlt::render(scene, opts, o, iterations),
+        Method::Path(_) => render_loop::run(scene, opts, path::PathTracer::new(spec), false, iterations),
+        Method::Lighttrace(_) => {
+            let method = BdptRender { bdpt: bdpt(true), heuristic: Default::default() };
             render_loop::run(scene, opts, method, true, iterations)
         }
-        IntegratorKind::Eorr => {
-            if b.eorr_pilot_spp == 0 && iterations.as_ref().is_some_and(|r| r.start > 0) {
+        Method::Bdpt(o) => {
+            let method = BdptRender { bdpt: bdpt(false), heuristic: o.heuristic };
+            render_loop::run(scene, opts, method, true, iterations)
+        }
+        Method::Eorr(o) => {
+            if o.pilot_spp == 0 && iterations.as_ref().is_some_and(|r| r.start > 0) {
                 return Err(Error::Usage(
                     "EORR's running-mean thresholds (--eorr-pilot-spp 0) depend on every earlier pass: render \
                      them in one process, or give the pilot a sample count"
                         .into(),
                 ));
             }
-            let method = Eorr::new(bdpt(false), heuristic, b.eorr_fraction, b.eorr_pilot_spp, scene);
+            if !(o.fraction >= 0.0 && o.fraction.is_finite()) {
+                return Err(Error::Usage(format!("--eorr-fraction must be a non-negative number, got {}", o.fraction)));
+            }
+            let method = Eorr::new(bdpt(false), o.heuristic, o.fraction, o.pilot_spp, scene);
             render_loop::run(scene, opts, method, true, iterations)
         }
-        IntegratorKind::Lvc => {
-            if b.lvc_connections == 0 {
-                return Err(Error::Usage("--lvc-connections must be at least 1".into()));
+        Method::Lvc(o) => {
+            if o.connections == 0 {
+                return Err(Error::Usage("--connections must be at least 1".into()));
             }
             let pixels = scene.film.width as usize * scene.film.height as usize;
-            let m = if b.lvc_light_paths == 0 { pixels } else { b.lvc_light_paths };
-            let lvc = Lvc { bdpt: bdpt(false), light_paths: m, connections: b.lvc_connections };
-            render_loop::run(scene, opts, LvcRender::new(lvc, heuristic, b.max_pool_mb), true, iterations)
+            let m = if o.light_paths == 0 { pixels } else { o.light_paths };
+            let lvc = Lvc { bdpt: bdpt(false), light_paths: m, connections: o.connections };
+            render_loop::run(scene, opts, LvcRender::new(lvc, o.heuristic, o.max_pool_mb), true, iterations)
         }
-        IntegratorKind::Pcbpt => {
-            b.pc.validate().map_err(Error::Usage)?;
-            let pc = Pcbpt { bdpt: bdpt(false), opts: b.pc.clone() };
-            render_loop::run(scene, opts, PcbptRender::new(pc, heuristic, b.max_pool_mb), true, iterations)
+        Method::Pcbpt(o) => {
+            o.pc.validate().map_err(Error::Usage)?;
+            let pc = Pcbpt { bdpt: bdpt(false), opts: o.pc.clone() };
+            render_loop::run(scene, opts, PcbptRender::new(pc, o.heuristic, o.pc.pool.max_pool_mb), true, iterations)
         }
-        IntegratorKind::Spcbpt => {
-            b.pc.validate().map_err(Error::Usage)?;
-            b.sp.validate().map_err(Error::Usage)?;
-            let sp = Spcbpt { bdpt: bdpt(false), pc: b.pc.clone(), opts: b.sp.clone() };
-            render_loop::run(scene, opts, SpcbptRender::new(sp, heuristic, b.max_pool_mb), true, iterations)
+        Method::Spcbpt(o) => {
+            o.sp.validate().map_err(Error::Usage)?;
+            let sp = Spcbpt { bdpt: bdpt(false), opts: o.sp.clone() };
+            render_loop::run(scene, opts, SpcbptRender::new(sp, o.heuristic, o.sp.pool.max_pool_mb), true, iterations)
         }
     }
 }

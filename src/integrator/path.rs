@@ -182,3 +182,8 @@ impl Iterative for PathTracer {
 
     fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 }
+
+/// Options of the path tracer (`--integrator path`): none of its own (its depths are the
+/// scene's and the command line's `--max-depth`, `--rr-depth`).
+#[derive(Clone, Debug, Default, serde::Serialize, clap::Args)]
+pub struct PathOptions {}

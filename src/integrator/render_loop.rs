@@ -434,7 +434,6 @@ pub(crate) fn run<M: Iterative>(
     let mut stats = RenderStats {
         passes,
         phases: work.phases,
-        bidir: bidirectional.then(|| opts.bidir.clone()),
         shadow_rays: work.shadow,
         iterations: Some(range.start..first),
         ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)

@@ -363,6 +363,18 @@ pub fn check_lights(scene: &Scene, integrator: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// Options of BDPT (`--integrator bdpt`).
+#[derive(Clone, Debug, Default, serde::Serialize, clap::Args)]
+pub struct BdptOptions {
+    /// MIS heuristic.
+    #[arg(long, value_enum, default_value_t = Heuristic::default())]
+    pub heuristic: Heuristic,
+}
+
+/// Options of light tracing (`--integrator lighttrace`): none of its own.
+#[derive(Clone, Debug, Default, serde::Serialize, clap::Args)]
+pub struct LighttraceOptions {}
+
 /// BDPT (or light tracing, `light_only`) in the render loop: no state between iterations.
 pub struct BdptRender {
     pub bdpt: Bdpt,

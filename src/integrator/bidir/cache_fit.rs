@@ -52,7 +52,7 @@ impl CacheFit<'_> {
         }
         if paths > 0 {
             // With a pool-vertex target, M would grow back past the count suggested.
-            let fixed = if self.opts.pool_vertices > 0 { " --pc-pool-vertices 0" } else { "" };
+            let fixed = if self.opts.pool.pool_vertices > 0 { " --pool-vertices 0" } else { "" };
             ways.push(format!("--pc-light-paths {paths}{fixed}"));
         }
         let need = self.size(s, d, m).2.ceil() as usize;

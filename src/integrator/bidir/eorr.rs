@@ -21,6 +21,27 @@ use crate::math::luminance;
 use crate::scene::Scene;
 use std::ops::Range;
 
+/// Options of EORR (`--integrator eorr`).
+#[derive(Clone, Debug, serde::Serialize, clap::Args)]
+pub struct EorrOptions {
+    /// MIS heuristic.
+    #[arg(long, value_enum, default_value_t = Heuristic::default())]
+    pub heuristic: Heuristic,
+    /// Russian-roulette threshold as a fraction of the pixel's mean luminance.
+    #[arg(long = "eorr-fraction", default_value_t = EorrOptions::default().fraction)]
+    pub fraction: f32,
+    /// The pixel means come from the first this many samples per pixel (0: from every
+    /// earlier pass, a running mean, which a render cut into chunks cannot use).
+    #[arg(long = "eorr-pilot-spp", default_value_t = EorrOptions::default().pilot_spp)]
+    pub pilot_spp: u32,
+}
+
+impl Default for EorrOptions {
+    fn default() -> EorrOptions {
+        EorrOptions { heuristic: Heuristic::default(), fraction: 0.1, pilot_spp: 16 }
+    }
+}
+
 /// EORR in the render loop.
 pub struct Eorr {
     pub bdpt: Bdpt,

@@ -17,12 +17,13 @@ pub const CAP: usize = 2 * super::MAX_VERTICES;
 pub const SHORT: usize = 16;
 
 /// The MIS heuristic.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Heuristic {
     /// β = 1.
     Balance,
     /// β = 2.
+    #[default]
     Power,
 }
 

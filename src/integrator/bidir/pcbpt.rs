@@ -31,9 +31,7 @@
 
 use super::Vertex;
 use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{
-    Budget, BudgetMode, BudgetModel, Independence, Operations, PRICES, Plan, SplatShares, TracedPool, pool_tile,
-};
+use super::budget::{Budget, BudgetOptions, Operations, PRICES, Plan, SplatShares, TracedPool, pool_tile};
 use super::cache_fit::CacheFit;
 use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use super::pool::{
@@ -97,73 +95,97 @@ pub enum PcSampling {
     Mixture,
 }
 
-/// Options of PCBPT.
-#[derive(Clone, Debug, Serialize)]
-pub struct PcOptions {
-    /// Light subpaths per iteration (`M`): the least; see `pool_vertices`.
+/// Options of PCBPT (`--integrator pcbpt`).
+#[derive(Clone, Debug, Default, Serialize, clap::Args)]
+pub struct PcbptOptions {
+    /// MIS heuristic.
+    #[arg(long, value_enum, default_value_t = Heuristic::default())]
+    pub heuristic: Heuristic,
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub pc: PcOptions,
+}
+
+/// The light pool and its connections, shared by PCBPT and SPCBPT: light paths per
+/// iteration (`M`), the pool's size and the connections per camera vertex (`N`).
+#[derive(Clone, Debug, Serialize, clap::Args)]
+pub struct PoolOptions {
+    /// Light paths per iteration (M), the least (see --pool-vertices).
+    #[arg(long = "light-paths", alias = "pc-light-paths", default_value_t = PoolOptions::default().light_paths)]
     pub light_paths: usize,
-    /// Light subpaths are added beyond `light_paths` until a pool holds about this many
-    /// vertices (the contract's "M such that V is a few thousand"), judged from the pilot
-    /// pool's vertices per path, and up to one per pixel; 0 keeps `light_paths` exactly.
-    /// Where most light paths miss what the camera sees (sky and sun outside a window), a
-    /// fixed `M` leaves a pool of a few hundred vertices that every pixel shares, and image
-    /// means spread by several percent from one render to the next.
+    /// Add light paths per iteration until a pool holds about this many vertices (judged on
+    /// a pilot pool), up to one per pixel; 0 keeps --light-paths exactly. Where most light
+    /// paths miss what the camera sees, a fixed M leaves a pool of a few hundred vertices
+    /// that every pixel shares.
+    #[arg(long = "pool-vertices", alias = "pc-pool-vertices", default_value_t = PoolOptions::default().pool_vertices)]
     pub pool_vertices: usize,
-    /// Connections per camera vertex (`N`).
+    /// Connections drawn per camera vertex (N; 0, with --budget off: none, the pool only
+    /// light traces). With --budget auto (the default), the number the budget is measured
+    /// with.
+    #[arg(long = "connections", alias = "pc-connections", default_value_t = PoolOptions::default().connections)]
     pub connections: u32,
-    /// One record pixel per `stride × stride` tile.
+    /// Memory limit of a light pool, in MiB: settings whose pool would need more are refused.
+    #[arg(long = "max-pool-mb", default_value_t = PoolOptions::default().max_pool_mb)]
+    pub max_pool_mb: usize,
+}
+
+impl Default for PoolOptions {
+    fn default() -> PoolOptions {
+        PoolOptions { light_paths: 500, pool_vertices: 2000, connections: 4, max_pool_mb: 4096 }
+    }
+}
+
+impl PoolOptions {
+    /// Checks the options, naming the one at fault.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.light_paths == 0 {
+            return Err("--light-paths must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// Options of PCBPT (contract §3–§5): its light pool, its cache of PMFs and how connections
+/// are drawn from it and counted by MIS, and its budget.
+#[derive(Clone, Debug, Serialize, clap::Args)]
+pub struct PcOptions {
+    #[command(flatten)]
+    pub pool: PoolOptions,
+    /// One cache record pixel per stride × stride tile.
+    #[arg(long = "pc-cache-stride", default_value_t = PcOptions::default().stride)]
     pub stride: u32,
-    /// Records per record pixel: camera vertices `z_1..z_D`.
+    /// Camera vertices per record pixel that become records (z_1..z_D).
+    #[arg(long = "pc-cache-depth", default_value_t = PcOptions::default().cache_depth)]
     pub cache_depth: u32,
-    /// Shadow rays in the target (`Vis`).
+    /// Shadow rays in the cache's target (Vis).
+    #[arg(long = "pc-visibility", default_value_t = PcOptions::default().visibility, action = clap::ArgAction::Set)]
     pub visibility: bool,
-    /// Weight of the uniform distribution in the blend (Eq. 2).
+    /// Weight of the uniform distribution blended into every lookup (Eq. 2).
+    #[arg(long = "pc-uniform-blend", default_value_t = PcOptions::default().uniform_blend)]
     pub uniform_blend: f32,
-    /// Records blended per lookup.
+    /// Nearest records blended per lookup.
+    #[arg(long = "pc-neighbours", default_value_t = PcOptions::default().neighbours)]
     pub neighbours: usize,
+    /// Distance term of the interpolation weights.
+    #[arg(long = "pc-distance-term", value_enum, default_value_t = PcOptions::default().distance_term)]
     pub distance_term: DistanceTerm,
+    /// MIS strategy counts of the probabilistic connections.
+    #[arg(long = "pc-mis", value_enum, default_value_t = PcOptions::default().mis)]
     pub mis: PcMis,
-    /// How draws invert the blended PMF.
+    /// How a draw inverts the blended PMF (the same distribution either way).
+    #[arg(long = "pc-sampling", value_enum, default_value_t = PcOptions::default().sampling)]
     pub sampling: PcSampling,
-    /// Memory limit of the cache (`records × V` floats), in MiB.
+    /// Memory limit of the cache (records × pool vertices floats), in MiB.
+    #[arg(long = "pc-max-cache-mb", default_value_t = PcOptions::default().max_cache_mb)]
     pub max_cache_mb: usize,
-    /// Whether connections and light tracing are budgeted from measured moments and costs
-    /// ([`super::budget`]; PCBPT and SPCBPT).
-    pub budget: BudgetMode,
-    /// Iterations measured before the budget is chosen.
-    pub budget_iterations: u32,
-    /// The share of the connections' predicted change of second moment between budgets
-    /// that counts ([`super::budget`]): 1 if the draws of a camera vertex were independent
-    /// samples, or measured from their spread ([`super::budget::Spread`]).
-    pub budget_independence: Independence,
-    /// Measured pixels each side whose means are averaged for the relMSE weights of the
-    /// budget's choice (0: each pixel's own mean).
-    pub budget_smoothing: u32,
-    /// How the budget predicts a candidate's variance.
-    pub budget_model: BudgetModel,
-    /// Samples per pixel the budget's choice plans for (`None`: the render's `--spp` but at
-    /// least [`super::budget::DEFAULT_HORIZON`], which `--time` takes; 0: no horizon, the expected
-    /// moments, [`super::budget::measure::typical`]).
-    pub budget_horizon: Option<u32>,
-    /// The least predicted efficiency gain over the measured plan for which the budget
-    /// leaves it (1: any gain): smaller gains are within the prediction's error
-    /// ([`super::budget`]).
-    pub budget_margin: f32,
-    /// Pixels whose moments are measured, at most about: those of every `k`-th row and
-    /// column, `k` the least that keeps them within this many.
-    pub budget_pixels: usize,
-    /// Whether each measured pixel's largest contribution counts at the horizon as rarely
-    /// as its value against the pixel's mean says ([`super::budget::Top::rarity`]), not as a
-    /// region the measured iterations found once.
-    pub budget_rarity: bool,
+    #[command(flatten)]
+    pub budget: BudgetOptions,
 }
 
 impl Default for PcOptions {
     fn default() -> PcOptions {
         PcOptions {
-            light_paths: 500,
-            pool_vertices: 2000,
-            connections: 4,
+            pool: PoolOptions::default(),
             stride: 64,
             cache_depth: 5,
             visibility: true,
@@ -173,15 +195,7 @@ impl Default for PcOptions {
             mis: PcMis::Harmonic,
             sampling: PcSampling::Mixture,
             max_cache_mb: 1024,
-            budget: BudgetMode::Auto,
-            budget_iterations: 2,
-            budget_independence: Independence::Fixed(0.35),
-            budget_smoothing: 2,
-            budget_model: BudgetModel::Realized,
-            budget_horizon: None,
-            budget_margin: 1.1,
-            budget_pixels: 16_384,
-            budget_rarity: true,
+            budget: BudgetOptions::default(),
         }
     }
 }
@@ -192,34 +206,8 @@ impl PcOptions {
         if self.mis == PcMis::Subspace {
             return Err("--pc-mis subspace counts SPCBPT's subspaces: it is an option of --sp-mis".into());
         }
-        if self.light_paths == 0 {
-            return Err("--pc-light-paths must be at least 1".into());
-        }
-        if self.connections == 0 && self.budget == BudgetMode::Auto {
-            return Err(
-                "--pc-connections 0 needs --pc-budget off: the budget (on by default) measures the connections it then chooses among".into(),
-            );
-        }
-        if let Some(f) = self.budget_independence.fixed()
-            && !(0.0..=1.0).contains(&f)
-        {
-            return Err(format!("--pc-budget-independence must be between 0 and 1, not {f}"));
-        }
-        if self.budget_smoothing > 64 {
-            return Err(format!("--pc-budget-smoothing must be at most 64, not {}", self.budget_smoothing));
-        }
-        if !(self.budget_margin >= 1.0 && self.budget_margin.is_finite()) {
-            return Err(format!(
-                "--pc-budget-margin must be at least 1 and finite (a predicted gain below 1 is a loss), not {}",
-                self.budget_margin
-            ));
-        }
-        if self.budget_pixels == 0 {
-            return Err("--pc-budget-pixels must be at least 1".into());
-        }
-        if self.budget_iterations < 2 {
-            return Err("--pc-budget-iterations must be at least 2 (the variance is measured across them)".into());
-        }
+        self.pool.validate()?;
+        self.budget.validate(self.pool.connections)?;
         if self.stride == 0 {
             return Err("--pc-cache-stride must be at least 1".into());
         }
@@ -332,7 +320,7 @@ impl<'a> PcCounts<'a> {
         concentration: &[f32; CONCENTRATION_DEPTHS],
         previous: Option<&'a Cache>,
     ) -> PcCounts<'a> {
-        let plan = Plan { connections: opts.connections, pool_paths: m, splat_paths: m };
+        let plan = Plan { connections: opts.pool.connections, pool_paths: m, splat_paths: m };
         PcCounts::for_plan(scene, opts, &plan, pixels, vbar, concentration, previous)
     }
 
@@ -504,7 +492,7 @@ impl PcbptRender {
             previous: None,
             pool_size: None,
             cache_stats: None,
-            light_paths: pc.opts.light_paths,
+            light_paths: pc.opts.pool.light_paths,
             budget: None,
             pc,
         }
@@ -555,11 +543,18 @@ impl Iterative for PcbptRender {
     /// against their memory limits.
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
         let o = &self.pc.opts;
-        let (pilot, _, _) =
-            LightPool::trace::<Counts>(ctx.scene, &self.pc.bdpt.limits, o.light_paths, ctx.seed, PILOT_ITERATION, None);
+        let (pilot, _, _) = LightPool::trace::<Counts>(
+            ctx.scene,
+            &self.pc.bdpt.limits,
+            o.pool.light_paths,
+            ctx.seed,
+            PILOT_ITERATION,
+            None,
+        );
         let (w, h) = (ctx.scene.film.width, ctx.scene.film.height);
-        let m = light_paths_for(o.light_paths, o.pool_vertices, pilot.mean_vertices(), w as usize * h as usize);
-        check_pool_memory(m, &pilot, self.max_pool_mb, "--pc-light-paths")?;
+        let m =
+            light_paths_for(o.pool.light_paths, o.pool.pool_vertices, pilot.mean_vertices(), w as usize * h as usize);
+        check_pool_memory(m, &pilot, self.max_pool_mb, "--light-paths")?;
         let fit = CacheFit { opts: o, light_paths: m, mean_vertices: pilot.mean_vertices() as f64, w, h };
         let (records, v, mb) = fit.size(o.stride, o.cache_depth, m);
         if mb > o.max_cache_mb as f64 {
@@ -573,9 +568,9 @@ impl Iterative for PcbptRender {
         self.vbar = pilot.mean_vertices();
         self.light_paths = m;
         // Iteration 0's counts have no measured concentration: the budget measures from 1.
-        let plan = Plan { connections: o.connections, pool_paths: m, splat_paths: m };
-        let window = 1..1 + o.budget_iterations;
-        self.budget = Some(Budget::new(o, PRICES, window, plan, w as usize, h as usize, ctx.planned_spp));
+        let plan = Plan { connections: o.pool.connections, pool_paths: m, splat_paths: m };
+        let window = 1..1 + o.budget.iterations;
+        self.budget = Some(Budget::new(&o.budget, PRICES, window, plan, w as usize, h as usize, ctx.planned_spp));
         Ok(())
     }
 
@@ -585,7 +580,7 @@ impl Iterative for PcbptRender {
 
     fn warmup(&self, first: u32) -> Warmup {
         let kappa = matches!(self.pc.opts.mis, PcMis::Harmonic | PcMis::Correlated);
-        Warmup::after_budget(self.pc.opts.budget, self.pc.opts.budget_iterations + 1, first, kappa)
+        Warmup::after_budget(self.pc.opts.budget.mode, self.pc.opts.budget.iterations + 1, first, kappa)
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<PcPass> {

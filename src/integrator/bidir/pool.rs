@@ -15,6 +15,7 @@ use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
+use serde::Serialize;
 use std::ops::Range;
 use std::time::Instant;
 
@@ -195,6 +196,29 @@ impl LightPool {
     /// Connectible vertices per light path (`V / M`).
     pub fn mean_vertices(&self) -> f32 {
         if self.paths == 0 { 0.0 } else { self.connectible.len() as f32 / self.paths as f32 }
+    }
+}
+
+/// Options of light-vertex-cache BDPT (`--integrator lvc`).
+#[derive(Clone, Debug, Serialize, clap::Args)]
+pub struct LvcOptions {
+    /// MIS heuristic.
+    #[arg(long, value_enum, default_value_t = Heuristic::default())]
+    pub heuristic: Heuristic,
+    /// Light paths per iteration (0 = one per pixel).
+    #[arg(long = "light-paths", alias = "lvc-light-paths", default_value_t = LvcOptions::default().light_paths)]
+    pub light_paths: usize,
+    /// Connections to pool vertices per camera vertex.
+    #[arg(long = "connections", alias = "lvc-connections", default_value_t = LvcOptions::default().connections)]
+    pub connections: u32,
+    /// Memory limit of the light pool, in MiB: settings whose pool would need more are refused.
+    #[arg(long = "max-pool-mb", default_value_t = LvcOptions::default().max_pool_mb)]
+    pub max_pool_mb: usize,
+}
+
+impl Default for LvcOptions {
+    fn default() -> LvcOptions {
+        LvcOptions { heuristic: Heuristic::default(), light_paths: 0, connections: 1, max_pool_mb: 4096 }
     }
 }
 

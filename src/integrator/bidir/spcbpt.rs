@@ -37,13 +37,13 @@
 
 use super::bdpt::{Bdpt, Connector, Scratch};
 use super::budget::{
-    Budget, BudgetMode, CameraSample, Operations, Plan, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES,
+    Budget, BudgetMode, BudgetOptions, CameraSample, Operations, Plan, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES,
     SPCBPT_SUBSPACE_PRICES, SplatShares, TileMoments, TracedPool, pool_tile,
 };
 use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use super::pc_cache::{Record, trace_records};
 use super::pcbpt::{
-    PcMis, PcOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
+    PcMis, PcOptions, PoolOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
 };
 use super::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
@@ -63,30 +63,56 @@ use serde::Serialize;
 use std::ops::Range;
 use std::time::Instant;
 
-/// Options of SPCBPT (the pool's light paths and the connections per camera vertex are
-/// PCBPT's `--pc-light-paths`, `--pc-pool-vertices` and `--pc-connections`).
-#[derive(Clone, Debug, Serialize)]
+/// Options of SPCBPT (`--integrator spcbpt`).
+#[derive(Clone, Debug, Default, Serialize, clap::Args)]
+pub struct SpcbptOptions {
+    /// MIS heuristic.
+    #[arg(long, value_enum, default_value_t = Heuristic::default())]
+    pub heuristic: Heuristic,
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub sp: SpOptions,
+}
+
+/// Options of SPCBPT: its light pool and connections (as PCBPT's), its subspaces and their
+/// matrix, the MIS counts of its connections, and the budget (PCBPT's).
+#[derive(Clone, Debug, Serialize, clap::Args)]
 pub struct SpOptions {
-    /// Eye subspaces (leaves of the eye tree).
+    #[command(flatten)]
+    pub pool: PoolOptions,
+    /// Eye subspaces (leaves of the k-d tree over camera vertices' positions and normals).
+    #[arg(long = "sp-eye-subspaces", default_value_t = SpOptions::default().eye_subspaces)]
     pub eye_subspaces: usize,
-    /// Light subspaces (leaves of the light tree).
+    /// Light subspaces (leaves of the k-d tree over light vertices).
+    #[arg(long = "sp-light-subspaces", default_value_t = SpOptions::default().light_subspaces)]
     pub light_subspaces: usize,
-    /// Iterations whose connections train `Γ` (0: `Γ` stays uniform).
+    /// Iterations whose connections train the subspace matrix Γ (0: it stays uniform).
+    #[arg(long = "sp-training-iterations", default_value_t = SpOptions::default().training_iterations)]
     pub training_iterations: u32,
-    /// Share of the uniform distribution mixed into every trained row of `Γ`.
+    /// Share of the uniform distribution mixed into each trained row of the matrix.
+    #[arg(long = "sp-uniform", default_value_t = SpOptions::default().uniform)]
     pub uniform: f32,
+    /// MIS strategy counts of the connections (as PCBPT's --pc-mis; resampling is the
+    /// selection density itself, subspace the same with the draw within a light subspace
+    /// taken as uniform).
+    #[arg(long = "sp-mis", value_enum, default_value_t = SpOptions::default().mis)]
     pub mis: PcMis,
     /// Memory limit of the matrix and the training samples, in MiB.
+    #[arg(long = "sp-max-mb", default_value_t = SpOptions::default().max_mb)]
     pub max_mb: usize,
-    /// Whether the budget measures the last training iterations (`true`) or the iterations
-    /// after them: measured while `Γ` is still learning, the choice comes that many
-    /// iterations sooner, and the training samples are the same.
+    /// Whether the budget measures the last training iterations (the choice comes that many
+    /// iterations sooner, and the training samples are the same) or the iterations after
+    /// them.
+    #[arg(long = "sp-budget-in-training", default_value_t = SpOptions::default().budget_in_training, action = clap::ArgAction::Set)]
     pub budget_in_training: bool,
+    #[command(flatten)]
+    pub budget: BudgetOptions,
 }
 
 impl Default for SpOptions {
     fn default() -> SpOptions {
         SpOptions {
+            pool: PoolOptions::default(),
             eye_subspaces: 64,
             light_subspaces: 64,
             training_iterations: 4,
@@ -94,6 +120,7 @@ impl Default for SpOptions {
             mis: PcMis::Subspace,
             max_mb: 1024,
             budget_in_training: true,
+            budget: BudgetOptions::default(),
         }
     }
 }
@@ -113,6 +140,8 @@ const SAMPLE_BYTES: f64 = std::mem::size_of::<TrainingSample>() as f64;
 impl SpOptions {
     /// Checks the options, naming the one at fault.
     pub fn validate(&self) -> Result<(), String> {
+        self.pool.validate()?;
+        self.budget.validate(self.pool.connections)?;
         if !(1..=65_536).contains(&self.eye_subspaces) {
             return Err(format!("--sp-eye-subspaces must be between 1 and 65536, not {}", self.eye_subspaces));
         }
@@ -587,8 +616,6 @@ fn training_stride(pixels: usize) -> usize {
 #[derive(Clone, Debug)]
 pub struct Spcbpt {
     pub bdpt: Bdpt,
-    /// The pool and connection options (light paths, pool vertices, connections).
-    pub pc: PcOptions,
     pub opts: SpOptions,
 }
 
@@ -624,7 +651,7 @@ impl SpcbptRender {
             model: None,
             measured: None,
             samples: Vec::new(),
-            light_paths: sp.pc.light_paths,
+            light_paths: sp.opts.pool.light_paths,
             stats: SubspaceStats::default(),
             pool_size: None,
             budget: None,
@@ -646,7 +673,7 @@ impl SpcbptRender {
     /// and the budget's window.
     fn state_end(&self) -> u32 {
         let o = &self.sp.opts;
-        match self.sp.pc.budget {
+        match self.sp.opts.budget.mode {
             BudgetMode::Off => o.training_iterations + 1,
             BudgetMode::Auto => (o.training_iterations + 1).max(self.budget().window.end),
         }
@@ -669,12 +696,13 @@ impl Iterative for SpcbptRender {
     /// from pilot vertices.
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
         let t = Instant::now();
-        let (pc, o) = (&self.sp.pc, &self.sp.opts);
+        let o = &self.sp.opts;
+        let pc = &o.pool;
         let (scene, limits) = (ctx.scene, &self.sp.bdpt.limits);
         let (pilot, _, _) = LightPool::trace::<Counts>(scene, limits, pc.light_paths, ctx.seed, PILOT_ITERATION, None);
         let (w, h) = (scene.film.width as usize, scene.film.height as usize);
         let m = light_paths_for(pc.light_paths, pc.pool_vertices, pilot.mean_vertices(), w * h);
-        check_pool_memory(m, &pilot, self.max_pool_mb, "--pc-light-paths")?;
+        check_pool_memory(m, &pilot, self.max_pool_mb, "--light-paths")?;
         // Training keeps at most one sample per connection of every camera vertex it watches.
         let per_iteration = (w * h).min(2 * TRAINING_PIXELS) as f64 * PILOT_DEPTH as f64 * pc.connections as f64;
         let samples_mb = per_iteration * o.training_iterations as f64 * SAMPLE_BYTES / (1024.0 * 1024.0);
@@ -693,7 +721,8 @@ impl Iterative for SpcbptRender {
             )));
         }
         // The trees: eye vertices of a grid of pixels, light vertices of a larger pilot pool.
-        let grid = PcOptions { stride: PILOT_STRIDE, cache_depth: PILOT_DEPTH, ..pc.clone() };
+        let grid =
+            PcOptions { stride: PILOT_STRIDE, cache_depth: PILOT_DEPTH, pool: pc.clone(), ..PcOptions::default() };
         let (records, _) = trace_records(scene, limits, &grid, ctx.seed, PILOT_ITERATION);
         let (light_pilot, _, _) =
             LightPool::trace::<Counts>(scene, limits, m * PILOT_POOLS, ctx.seed, PILOT_ITERATION - 1, None);
@@ -701,8 +730,8 @@ impl Iterative for SpcbptRender {
         self.light_paths = m;
         // The budget measures the last training iterations, or those after `Γ` is trained.
         let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
-        let window = budget_window(o, pc.budget_iterations);
-        self.budget = Some(Budget::new(pc, o.prices(), window, plan, w, h, ctx.planned_spp));
+        let window = budget_window(o, o.budget.iterations);
+        self.budget = Some(Budget::new(&o.budget, o.prices(), window, plan, w, h, ctx.planned_spp));
         let subspaces = self.model().sort_pool(scene, &pilot);
         self.measured =
             Some(Measured::of_pool(&subspaces, pilot.paths, pilot.mean_vertices(), [1.0; CONCENTRATION_DEPTHS]));

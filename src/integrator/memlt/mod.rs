@@ -105,10 +105,125 @@ fn suitable(scene: &Scene, x: &[Vertex], enabled: [bool; Mutator::ALL.len()]) ->
     ]
 }
 
+/// Options of MEMLT (`--integrator memlt`).
+#[derive(Clone, Debug, Serialize, clap::Args)]
+pub struct MemltOptions {
+    /// MIS heuristic of the BDPT bootstrap.
+    #[arg(long, value_enum, default_value_t = crate::integrator::bidir::mis::Heuristic::default())]
+    pub heuristic: crate::integrator::bidir::mis::Heuristic,
+    #[command(flatten)]
+    pub chain: super::mlt::ChainOptions,
+    /// Two-stage Metropolis (Mitsuba 0.6's `twoStage`): a first stage of BDPT samples
+    /// estimates the image at a reduced resolution, and the chains sample paths in
+    /// proportion to their luminance over it, so that dim pixels get as many mutations as
+    /// bright ones.
+    #[arg(long, default_value_t = MemltOptions::default().two_stage, action = clap::ArgAction::Set)]
+    pub two_stage: bool,
+    /// Samples per pixel of a separate direct-lighting estimate by the path tracer (paths of
+    /// one edge, and of two through a rough vertex; those through a Dirac lobe are the
+    /// chains'); -1 leaves every path to the Markov chains.
+    #[arg(long, default_value_t = MemltOptions::default().direct_samples, allow_negative_numbers = true)]
+    pub direct_samples: i32,
+    /// With --time: the direct-light pass goes on past --direct-samples for the share of the
+    /// time that balances its noise against the chains' (both measured, each from two
+    /// independent halves, a tenth into the chains' time; at most half of the time then left).
+    #[arg(long, default_value_t = MemltOptions::default().direct_balance, action = clap::ArgAction::Set)]
+    pub direct_balance: bool,
+    /// Beside the direct-light pass: samples per pixel, in stratified cells, of a specular
+    /// pass that renders the paths through Dirac lobes alone (the light seen in mirrors and
+    /// through glass); 0 leaves them to the chains.
+    #[arg(long, default_value_t = MemltOptions::default().specular_samples)]
+    pub specular_samples: u32,
+    /// With --time: the BDPT bootstrap goes on in batches of --bootstrap samples until this
+    /// fraction of the time is spent (`b`, the image's brightness, is its estimate).
+    #[arg(long, default_value_t = MemltOptions::default().bootstrap_fraction)]
+    pub bootstrap_fraction: f64,
+    /// The bidirectional mutation among the mutations.
+    #[arg(long, default_value_t = MemltOptions::default().bidirectional_mutation, action = clap::ArgAction::Set)]
+    pub bidirectional_mutation: bool,
+    /// Veach's lens perturbation among the mutations.
+    #[arg(long, default_value_t = MemltOptions::default().lens_perturbation, action = clap::ArgAction::Set)]
+    pub lens_perturbation: bool,
+    /// Veach's caustic perturbation among the mutations.
+    #[arg(long, default_value_t = MemltOptions::default().caustic_perturbation, action = clap::ArgAction::Set)]
+    pub caustic_perturbation: bool,
+    /// Veach's multi-chain perturbation among the mutations.
+    #[arg(long, default_value_t = MemltOptions::default().multichain_perturbation, action = clap::ArgAction::Set)]
+    pub multichain_perturbation: bool,
+    /// The multi-chain perturbation re-traced on to the light, for paths whose light end no
+    /// shadow ray joins (`L S+ D S+ E`: a caustic seen in glass; `L S+ E`); not Mitsuba 0.6's.
+    #[arg(long, default_value_t = MemltOptions::default().light_hit_perturbation, action = clap::ArgAction::Set)]
+    pub light_hit_perturbation: bool,
+    /// The manifold perturbation among the mutations (`false` gives Veach's MLT).
+    #[arg(long, default_value_t = MemltOptions::default().manifold_perturbation, action = clap::ArgAction::Set)]
+    pub manifold_perturbation: bool,
+    /// The independent mutation among the mutations (a whole new path from the
+    /// bidirectional generator, Kelemen's large step in path space; not Mitsuba 0.6's).
+    ///
+    /// Default `auto`: on where `--bootstrap` camera walks to the first light find at least
+    /// 1.5% of their light in paths that only such a walk makes (no edge takes a shadow ray:
+    /// a caustic seen in a glass ball at its rim), off elsewhere (the statistics print the
+    /// share and the choice).
+    #[arg(long, action = clap::ArgAction::Set)]
+    pub independent_mutation: Option<bool>,
+    /// The share of the independent mutation's path lengths and splits drawn as the start
+    /// paths' generator draws them (length ∝ 2^-k, split uniform); the rest follow what each
+    /// length and split found among the start-path candidates. 1: all uniform.
+    #[arg(long, default_value_t = MemltOptions::default().independent_defensive)]
+    pub independent_defensive: f64,
+    /// The share of the learned generator's draws (the independent mutation's and the
+    /// learned start paths') that are camera walks going on until they find a light, making
+    /// a path of any length, as a path tracer's sample does; the rest draw a length and a
+    /// split.
+    #[arg(long, default_value_t = MemltOptions::default().independent_camera_walks)]
+    pub independent_camera_walks: f64,
+    /// Draw the chains' start paths from a second set of candidates made by the learned
+    /// generator of the independent mutation (their weights spread less), instead of the
+    /// first set (lengths ∝ 2^-k, uniform splits).
+    #[arg(long, default_value_t = MemltOptions::default().learned_starts, action = clap::ArgAction::Set)]
+    pub learned_starts: bool,
+    /// The manifold perturbation's sharpness (its von Mises–Fisher lobe's peak density is the
+    /// current direction's scattering density times λ²; an area light's point moved by the
+    /// perturbation gets a Gaussian whose peak is the point's density times λ²).
+    #[arg(long, default_value_t = MemltOptions::default().lambda)]
+    pub lambda: f64,
+    /// The half-vector change, in degrees, against which the manifold perturbation judges a
+    /// glossy lobe (a lobe much wider than it is treated as diffuse, one much narrower as
+    /// specular; 0: glossy vertices are never treated as specular).
+    #[arg(long, default_value_t = MemltOptions::default().theta_diff)]
+    pub theta_diff: f64,
+}
+
+impl Default for MemltOptions {
+    fn default() -> MemltOptions {
+        MemltOptions {
+            heuristic: Default::default(),
+            chain: super::mlt::ChainOptions::default(),
+            two_stage: true,
+            direct_samples: 16,
+            direct_balance: true,
+            specular_samples: 0,
+            bootstrap_fraction: 0.1,
+            bidirectional_mutation: true,
+            lens_perturbation: true,
+            caustic_perturbation: true,
+            multichain_perturbation: true,
+            light_hit_perturbation: true,
+            manifold_perturbation: true,
+            independent_mutation: None,
+            independent_defensive: 0.2,
+            independent_camera_walks: 0.5,
+            learned_starts: true,
+            lambda: 50.0,
+            theta_diff: 5.0,
+        }
+    }
+}
+
 /// The mutators the options enable, in [`Mutator::ALL`]'s order, with the independent
 /// mutation as `independent` resolves `--independent-mutation auto`
 /// ([`independent_mutation_on`]).
-pub fn enabled(o: &super::mlt::MltOptions, independent: bool) -> [bool; Mutator::ALL.len()] {
+pub fn enabled(o: &MemltOptions, independent: bool) -> [bool; Mutator::ALL.len()] {
     [
         o.bidirectional_mutation,
         o.lens_perturbation,
@@ -481,22 +596,24 @@ const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
 /// the time has passed since `start`; the same samples' mean luminance and its standard
 /// error (with a first stage's map `b` is the mean of luminance over it); and the number of
 /// batches, with the work the samples took.
+#[allow(clippy::too_many_arguments)]
 fn normalisation(
     scene: &Scene,
     opts: &RenderOptions,
+    mo: &MemltOptions,
     pool: &rayon::ThreadPool,
     lengths: Lengths,
     start: Instant,
     importance: Option<&Importance>,
     key: Keys,
 ) -> ((f64, f64), (f64, f64), usize, Counters) {
-    let n = opts.mlt.bootstrap;
+    let n = mo.chain.bootstrap;
     let (mut sum, mut variance, mut counters) = ([0.0; 2], [0.0; 2], Counters::default());
-    let batches = super::mlt::bootstrap::in_batches(opts, start, opts.mlt.bootstrap_fraction, |batch| {
+    let batches = super::mlt::bootstrap::in_batches(opts, start, mo.bootstrap_fraction, |batch| {
         let offset = batch * n as u64;
         let (target, plain, c) = super::mlt::bootstrap::bdpt_normalisation(
             scene,
-            opts,
+            mo.heuristic,
             pool,
             n,
             lengths.chain_paths(),
@@ -592,37 +709,37 @@ fn balance(
 }
 
 /// Refuses MEMLT's options out of their ranges, and scenes it cannot render.
-fn check_options(scene: &Scene, opts: &RenderOptions) -> Result<(), crate::error::Error> {
+fn check_options(scene: &Scene, mo: &MemltOptions) -> Result<(), crate::error::Error> {
     use crate::error::Error;
-    opts.mlt.check_counts()?;
+    mo.chain.check_counts()?;
     super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
-    let direct = opts.mlt.direct_samples;
+    let direct = mo.direct_samples;
     if direct == 0 || direct < -1 {
         return Err(Error::Usage(format!(
             "--direct-samples must be a positive sample count or -1 (direct light in the chains), got {direct}"
         )));
     }
     // `auto` may leave the independent mutation off: it does not count here.
-    if !enabled(&opts.mlt, opts.mlt.independent_mutation.unwrap_or(false)).iter().any(|&e| e) {
+    if !enabled(mo, mo.independent_mutation.unwrap_or(false)).iter().any(|&e| e) {
         return Err(Error::Usage("memlt needs at least one mutation (all are switched off; `--independent-mutation auto` may leave that one off too)".into()));
     }
-    let fraction = opts.mlt.bootstrap_fraction;
+    let fraction = mo.bootstrap_fraction;
     if !(0.0..1.0).contains(&fraction) {
         return Err(Error::Usage(format!("--bootstrap-fraction must be at least 0 and below 1, got {fraction}")));
     }
-    let lambda = opts.mlt.lambda;
+    let lambda = mo.lambda;
     if !(lambda.is_finite() && lambda > 0.0) {
         return Err(Error::Usage(format!("--lambda must be a positive number, got {lambda}")));
     }
-    let defensive = opts.mlt.independent_defensive;
+    let defensive = mo.independent_defensive;
     if !(0.0..=1.0).contains(&defensive) {
         return Err(Error::Usage(format!("--independent-defensive must be a share from 0 to 1, got {defensive}")));
     }
-    let walks = opts.mlt.independent_camera_walks;
+    let walks = mo.independent_camera_walks;
     if !(0.0..=1.0).contains(&walks) {
         return Err(Error::Usage(format!("--independent-camera-walks must be a share from 0 to 1, got {walks}")));
     }
-    let theta_diff = opts.mlt.theta_diff;
+    let theta_diff = mo.theta_diff;
     if !(0.0..=180.0).contains(&theta_diff) {
         return Err(Error::Usage(format!("--theta-diff must be an angle from 0 to 180 degrees, got {theta_diff}")));
     }
@@ -635,19 +752,20 @@ fn check_options(scene: &Scene, opts: &RenderOptions) -> Result<(), crate::error
 pub fn render(
     scene: &Scene,
     opts: &RenderOptions,
+    mo: &MemltOptions,
     iterations: Option<std::ops::Range<u32>>,
 ) -> Result<RenderOutput, crate::error::Error> {
     use crate::error::Error;
-    check_options(scene, opts)?;
-    let n_boot = opts.mlt.bootstrap;
-    let direct = opts.mlt.direct_samples;
-    let defensive = opts.mlt.independent_defensive;
+    check_options(scene, mo)?;
+    let n_boot = mo.chain.bootstrap;
+    let direct = mo.direct_samples;
+    let defensive = mo.independent_defensive;
     let pool = super::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let mut lengths = lengths(scene);
     let dirac = scene.shapes.iter().any(|sh| scene.bsdfs[sh.bsdf].lobes(glam::Vec2::ZERO).any(|l| l.is_delta()));
     // The specular pass, beside the direct-light pass, where a surface has a Dirac lobe.
-    let specular = (direct > 0 && dirac).then_some(opts.mlt.specular_samples).filter(|&n| n > 0);
+    let specular = (direct > 0 && dirac).then_some(mo.specular_samples).filter(|&n| n > 0);
     if direct > 0 {
         // The chains start at three edges, so that no move proposes a path the direct pass
         // renders, but keep the two-edge paths through a Dirac lobe when no specular pass
@@ -676,8 +794,7 @@ pub fn render(
     // `--direct-balance` under a time budget the direct pass runs twice, so that its noise can
     // be measured, and may go on once the chains' is known.
     let mut counters = Counters::default();
-    let balanced =
-        opts.mlt.direct_balance && direct > 0 && iterations.is_none() && matches!(opts.budget, Budget::Time(_));
+    let balanced = mo.direct_balance && direct > 0 && iterations.is_none() && matches!(opts.budget, Budget::Time(_));
     let (mut light, c) = SeparateLight::render(scene, opts, &key, direct, balanced, specular)?;
     counters += c;
     let mut base = light.film();
@@ -702,11 +819,19 @@ pub fn render(
     // Two-stage Metropolis: the first stage takes the first half of the bootstrap's time;
     // its streams are the render's, not a chunk's, so that every chunk has the same map.
     let paths = lengths.chain_paths();
-    let (importance, first_stage_samples) = if opts.mlt.two_stage {
-        let fraction = opts.mlt.bootstrap_fraction / 2.0;
+    let (importance, first_stage_samples) = if mo.two_stage {
+        let fraction = mo.bootstrap_fraction / 2.0;
         let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];
-        let (map, n, c) =
-            super::mlt::bootstrap::first_stage(scene, opts, &pool, n_boot, paths, start, fraction, &render_key);
+        let (map, n, c) = super::mlt::bootstrap::first_stage(
+            scene,
+            opts,
+            &pool,
+            (mo.heuristic, &mo.chain),
+            paths,
+            start,
+            fraction,
+            &render_key,
+        );
         counters += c;
         (map, n)
     } else {
@@ -714,7 +839,7 @@ pub fn render(
     };
     let importance = importance.as_ref();
     let ((b, b_error), mean_luminance, boot_batches, c) =
-        normalisation(scene, opts, &pool, lengths, start, importance, &key);
+        normalisation(scene, opts, mo, &pool, lengths, start, importance, &key);
     counters += c;
     // The direct light's image, beside which two-stage Metropolis scales the chains' part.
     let mut rescale = importance.map(|_| (base.develop(), mean_luminance.0));
@@ -726,7 +851,7 @@ pub fn render(
     counters += c;
     // With `--independent-mutation auto`, camera walks to the first light measure the share
     // of their light in paths only such walks make (the split generator seldom makes those).
-    let walk_only = if opts.mlt.independent_mutation.is_none() {
+    let walk_only = if mo.independent_mutation.is_none() {
         let walks = Strategies::uniform(lengths).with_camera_walks(1.0);
         let (_, c, share) = candidates(scene, &pool, lengths, &walks, importance, n_boot, &|i| key(WALK_STREAM, i));
         counters += c;
@@ -735,10 +860,10 @@ pub fn render(
         0.0
     };
     // The camera walks are the learned generator's where the independent mutation runs.
-    let independent = independent_mutation_on(opts.mlt.independent_mutation, walk_only);
-    let walks = if independent { opts.mlt.independent_camera_walks } else { 0.0 };
+    let independent = independent_mutation_on(mo.independent_mutation, walk_only);
+    let walks = if independent { mo.independent_camera_walks } else { 0.0 };
     let strategies = Strategies::from_candidates(lengths, &first, defensive).with_camera_walks(walks);
-    let learned = opts.mlt.learned_starts;
+    let learned = mo.learned_starts;
     let (starts, start_stream) = if learned { (&strategies, LEARNED_SEED_STREAM) } else { (&uniform, SEED_STREAM) };
     let start_key = |i: u64| key(start_stream, i);
     let weights: Vec<f32> = if learned {
@@ -762,7 +887,7 @@ pub fn render(
         walk_only_share: walk_only,
         independent_mutation: independent,
         bootstrap_samples: (n_boot * boot_batches) as u64,
-        chains: opts.mlt.chains,
+        chains: mo.chain.chains,
         bootstrap_seconds,
         min_edges: lengths.min,
         max_edges: lengths.max,
@@ -778,9 +903,9 @@ pub fn render(
     let mut done = 0u64;
     let mut chains: Vec<Chain> = Vec::new();
     if b > 0.0 && seed_b > 0.0 && !interrupted {
-        let on = enabled(&opts.mlt, independent);
+        let on = enabled(mo, independent);
         let dist = Distribution1D::new(&weights);
-        for i in 0..opts.mlt.chains as u64 {
+        for i in 0..mo.chain.chains as u64 {
             // A start candidate in proportion to its weight, regenerated from its stream.
             let mut pick = Sampler::new(&key(CHAIN_STREAM, i));
             let (j, _) = dist.sample(pick.next_1d());
@@ -801,8 +926,8 @@ pub fn render(
             radii: lens::Radii::for_film(w, h),
             b: b as f32,
             enabled: on,
-            lambda: opts.mlt.lambda,
-            theta_diff: opts.mlt.theta_diff.to_radians(),
+            lambda: mo.lambda,
+            theta_diff: mo.theta_diff.to_radians(),
             importance,
             strategies: &strategies,
         };

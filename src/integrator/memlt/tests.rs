@@ -35,9 +35,10 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
 /// BDPT's estimate of the luminance of `paths` (the bootstrap's, `n` samples of stream
 /// `seed`), with its standard error.
 fn bootstrap_estimate(scene: &Scene, paths: ChainPaths, (seed, n): (u64, usize)) -> (f64, f64) {
-    let opts = RenderOptions::new(super::super::IntegratorKind::Memlt, Budget::Spp(1));
+    let heuristic = MemltOptions::default().heuristic;
     let pool = super::super::thread_pool(2).unwrap();
-    super::super::mlt::bootstrap::bdpt_normalisation(scene, &opts, &pool, n, paths, None, &|s, i| vec![seed, s, i]).0
+    super::super::mlt::bootstrap::bdpt_normalisation(scene, heuristic, &pool, n, paths, None, &|s, i| vec![seed, s, i])
+        .0
 }
 
 /// BDPT's estimate of the luminance of paths of at least `min` edges.

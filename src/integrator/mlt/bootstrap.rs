@@ -16,7 +16,7 @@ use super::super::bidir::mis::{Counts, Heuristic};
 use super::super::bidir::{Sink, Vertex, WalkLimits};
 use super::super::two_stage::{Grid, Importance};
 use super::super::{Budget, Counters, RenderOptions};
-use super::{MltBase, PrimarySampler};
+use super::{ChainOptions, MltBase, PrimarySampler};
 use crate::film::Splat;
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
@@ -261,14 +261,14 @@ pub(super) fn mean_and_error(xs: &[f32]) -> (f64, f64) {
 /// map); and the work the samples took.
 pub(crate) fn bdpt_normalisation(
     scene: &Scene,
-    opts: &RenderOptions,
+    heuristic: Heuristic,
     pool: &rayon::ThreadPool,
     n: usize,
     paths: ChainPaths,
     importance: Option<&Importance>,
     key: Keys,
 ) -> ((f64, f64), (f64, f64), Counters) {
-    let ev = evaluator(scene, opts, MltBase::Bdpt);
+    let ev = evaluator(scene, heuristic, MltBase::Bdpt);
     let (weights, luminances, counters) = bootstrap(pool, &ev, n, 1.0, paths, importance, key);
     let target = mean_and_error(&weights);
     let plain = if importance.is_some() { mean_and_error(&luminances) } else { target };
@@ -285,14 +285,15 @@ pub(crate) fn first_stage(
     scene: &Scene,
     opts: &RenderOptions,
     pool: &rayon::ThreadPool,
-    n: usize,
+    (heuristic, chain): (Heuristic, &ChainOptions),
     paths: ChainPaths,
     start: Instant,
     fraction: f64,
     key: Keys,
 ) -> (Option<Importance>, u64, Counters) {
-    let grid = Grid::new(scene.film.width, scene.film.height, opts.mlt.first_stage_reduction);
-    let ev = evaluator(scene, opts, MltBase::Bdpt);
+    let n = chain.bootstrap;
+    let grid = Grid::new(scene.film.width, scene.film.height, chain.first_stage_reduction);
+    let ev = evaluator(scene, heuristic, MltBase::Bdpt);
     let mut sums = vec![0.0f64; grid.len()];
     let mut counters = Counters::default();
     let batches = in_batches(opts, start, fraction, |batch| {
@@ -343,7 +344,7 @@ pub(crate) fn in_batches(opts: &RenderOptions, start: Instant, fraction: f64, mu
 }
 
 /// The estimator the chains drive, with the scene's depth limits.
-pub(super) fn evaluator<'a>(scene: &'a Scene, opts: &RenderOptions, base: MltBase) -> Evaluator<'a> {
+pub(super) fn evaluator<'a>(scene: &'a Scene, heuristic: Heuristic, base: MltBase) -> Evaluator<'a> {
     let spec = &scene.integrator;
     let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
     Evaluator {
@@ -356,7 +357,7 @@ pub(super) fn evaluator<'a>(scene: &'a Scene, opts: &RenderOptions, base: MltBas
             light_only: false,
         },
         path: super::super::path::PathTracer::new(spec),
-        heuristic: opts.bidir.heuristic,
+        heuristic,
     }
 }
 

@@ -34,11 +34,13 @@ fn two_stage_normalisation_is_the_image_over_the_map() {
     let plain = image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / pixels;
     let pool = super::super::thread_pool(2).unwrap();
     let key = |s: u64, i: u64| vec![17, s, i];
-    let ((b, e), (l, le), _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, ChainPaths::ALL, Some(&map), &key);
+    let ((b, e), (l, le), _) =
+        bdpt_normalisation(&scene, Default::default(), &pool, 400_000, ChainPaths::ALL, Some(&map), &key);
     // The image's own noise (2 048 spp) is far below the bootstrap's.
     assert!((b - over_map).abs() < 4.0 * e + 0.005 * over_map, "b' {b} ± {e} against the image's {over_map}");
     assert!((plain - over_map).abs() > 10.0 * e, "the map must matter here: {plain} against {over_map} ± {e}");
-    let ((b0, e0), same, _) = bdpt_normalisation(&scene, &opts, &pool, 400_000, ChainPaths::ALL, None, &key);
+    let ((b0, e0), same, _) =
+        bdpt_normalisation(&scene, Default::default(), &pool, 400_000, ChainPaths::ALL, None, &key);
     assert!((b0 - plain).abs() < 4.0 * e0 + 0.005 * plain, "b {b0} ± {e0} against the image's {plain}");
     assert_eq!(same, (b0, e0));
     // The same samples' plain mean luminance, beside b'.

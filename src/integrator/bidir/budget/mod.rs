@@ -83,7 +83,6 @@ use measure::{RealizedSums, Weighing, accumulate, own_moment, typical};
 
 use super::bdpt::{Bdpt, Connector};
 use super::mis::{Shares, StrategyCounts};
-use super::pcbpt::PcOptions;
 use super::pool::{LightPool, PoolPlan};
 use crate::film::{Splat, Tile};
 use crate::integrator::Counters;
@@ -177,6 +176,104 @@ pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 /// took path tracing on `veach-ajar` (from 32 on, four connections). The floor was measured
 /// against renders at 256.
 pub const DEFAULT_HORIZON: u32 = 256;
+
+/// The budget's options, shared by PCBPT and SPCBPT (`--budget*`; the `--pc-budget*` names
+/// are accepted too).
+#[derive(Clone, Debug, Serialize, clap::Args)]
+pub struct BudgetOptions {
+    /// Choose the connections per camera vertex (0-8) and the light paths that are light
+    /// traced from the second moments and costs of measured iterations (auto), or keep
+    /// --connections and the pool's light paths (off).
+    #[arg(id = "budget", long = "budget", alias = "pc-budget", value_enum, default_value_t = BudgetOptions::default().mode)]
+    pub mode: BudgetMode,
+    /// Iterations measured before the budget is chosen.
+    #[arg(id = "budget_iterations", long = "budget-iterations", alias = "pc-budget-iterations", default_value_t = BudgetOptions::default().iterations)]
+    pub iterations: u32,
+    /// The share of the connections' predicted change of second moment between budgets
+    /// that counts, 0 to 1 (1 if the draws of a camera vertex were independent), or
+    /// `measured` (from their spread about each camera vertex's mean).
+    #[arg(id = "budget_independence", long = "budget-independence", alias = "pc-budget-independence", default_value_t = BudgetOptions::default().independence)]
+    pub independence: Independence,
+    /// Measured pixels each side whose means are averaged for the relMSE weights of the
+    /// budget's choice (0: each pixel's own mean).
+    #[arg(id = "budget_smoothing", long = "budget-smoothing", alias = "pc-budget-smoothing", default_value_t = BudgetOptions::default().smoothing)]
+    pub smoothing: u32,
+    /// How the budget predicts a plan's variance: the change of the contributions' second
+    /// moments (moments), or each measured camera sample re-weighted as the plan would weigh
+    /// it, with its connections' spread (realized).
+    #[arg(id = "budget_model", long = "budget-model", alias = "pc-budget-model", value_enum, default_value_t = BudgetOptions::default().model)]
+    pub model: BudgetModel,
+    /// Samples per pixel the budget plans for (default: the render's --spp but at least
+    /// 256, which --time takes). A path that a plan would sample less than (measured
+    /// iterations / horizon) times as densely as the measured plan counts by its chance of
+    /// being found in the render, as the typical render shows it, not by its expected
+    /// variance; 0 counts every path by its expected variance.
+    #[arg(id = "budget_horizon", long = "budget-horizon", alias = "pc-budget-horizon")]
+    pub horizon: Option<u32>,
+    /// The least predicted efficiency gain over the measured plan for which the budget
+    /// leaves it (1: any gain; the predictions are within about a third of what renders
+    /// measure, so smaller gains are noise).
+    #[arg(id = "budget_margin", long = "budget-margin", alias = "pc-budget-margin", default_value_t = BudgetOptions::default().margin)]
+    pub margin: f32,
+    /// Pixels whose moments the budget measures, at most about (those of every k-th row and
+    /// column).
+    #[arg(id = "budget_pixels", long = "budget-pixels", alias = "pc-budget-pixels", default_value_t = BudgetOptions::default().pixels)]
+    pub pixels: usize,
+    /// Whether each measured pixel's largest contribution counts, at the horizon, as rarely
+    /// as its value against the pixel's mean says (false: as a region the measured
+    /// iterations found once, like every other sample).
+    #[arg(id = "budget_rarity", long = "budget-rarity", alias = "pc-budget-rarity", default_value_t = BudgetOptions::default().rarity, action = clap::ArgAction::Set)]
+    pub rarity: bool,
+}
+
+impl Default for BudgetOptions {
+    fn default() -> BudgetOptions {
+        BudgetOptions {
+            mode: BudgetMode::Auto,
+            iterations: 2,
+            independence: Independence::Fixed(0.35),
+            smoothing: 2,
+            model: BudgetModel::Realized,
+            horizon: None,
+            margin: 1.1,
+            pixels: 16_384,
+            rarity: true,
+        }
+    }
+}
+
+impl BudgetOptions {
+    /// Checks the options, naming the one at fault; `connections` are those the budget is
+    /// measured with.
+    pub fn validate(&self, connections: u32) -> Result<(), String> {
+        if connections == 0 && self.mode == BudgetMode::Auto {
+            return Err(
+                "--connections 0 needs --budget off: the budget (on by default) measures the connections it then chooses among".into(),
+            );
+        }
+        if let Some(f) = self.independence.fixed()
+            && !(0.0..=1.0).contains(&f)
+        {
+            return Err(format!("--budget-independence must be between 0 and 1, not {f}"));
+        }
+        if self.smoothing > 64 {
+            return Err(format!("--budget-smoothing must be at most 64, not {}", self.smoothing));
+        }
+        if !(self.margin >= 1.0 && self.margin.is_finite()) {
+            return Err(format!(
+                "--budget-margin must be at least 1 and finite (a predicted gain below 1 is a loss), not {}",
+                self.margin
+            ));
+        }
+        if self.pixels == 0 {
+            return Err("--budget-pixels must be at least 1".into());
+        }
+        if self.iterations < 2 {
+            return Err("--budget-iterations must be at least 2 (the variance is measured across them)".into());
+        }
+        Ok(())
+    }
+}
 
 /// What an iteration spends on the pool: connections per camera vertex, and light paths
 /// that form the pool and that splat.
@@ -414,7 +511,7 @@ impl Budget {
     /// a render of `planned_spp` samples per pixel (`None`: of `--time`; the horizon is at
     /// least [`DEFAULT_HORIZON`] unless given), pricing the integrator's operations by `prices`.
     pub fn new(
-        opts: &PcOptions,
+        opts: &BudgetOptions,
         prices: Prices,
         window: Range<u32>,
         plan: Plan,
@@ -422,13 +519,13 @@ impl Budget {
         height: usize,
         planned_spp: Option<u32>,
     ) -> Budget {
-        let mode = opts.budget;
-        let horizon = opts.budget_horizon.unwrap_or(planned_spp.unwrap_or(0).max(DEFAULT_HORIZON));
+        let mode = opts.mode;
+        let horizon = opts.horizon.unwrap_or(planned_spp.unwrap_or(0).max(DEFAULT_HORIZON));
         let floor = if horizon == 0 { 0.0 } else { (window.len() as f64 / horizon as f64).min(1.0) };
         let pixels = width * height;
         let candidates = if mode == BudgetMode::Auto { candidates(plan.pool_paths, pixels) } else { Vec::new() };
         let weighing = Weighing::new(&plan, &candidates, floor);
-        let every = (pixels as f64 / opts.budget_pixels.max(1) as f64).sqrt().ceil().max(1.0) as usize;
+        let every = (pixels as f64 / opts.pixels.max(1) as f64).sqrt().ceil().max(1.0) as usize;
         let mut budget = Budget {
             mode,
             window,
@@ -444,16 +541,16 @@ impl Budget {
             s2: Vec::new(),
             q: Vec::new(),
             realized: Vec::new(),
-            model: opts.budget_model,
+            model: opts.model,
             operations: Operations::default(),
             prices,
             iterations: 0,
             spread: Vec::new(),
             top: Vec::new(),
-            independence: opts.budget_independence.fixed().map(f64::from),
-            smoothing: opts.budget_smoothing as usize,
-            rarity: opts.budget_rarity,
-            stats: BudgetStats { horizon, margin: f64::from(opts.budget_margin), ..BudgetStats::default() },
+            independence: opts.independence.fixed().map(f64::from),
+            smoothing: opts.smoothing as usize,
+            rarity: opts.rarity,
+            stats: BudgetStats { horizon, margin: f64::from(opts.margin), ..BudgetStats::default() },
         };
         budget.stats.measured_pixels = budget.measured();
         budget
@@ -830,7 +927,7 @@ mod tests {
         let u = shares.unidirectional as f64;
         let counted = |v: f64, d: f64, floor: f64| (v * v / typical(d, floor), v * v * u / (d * typical(d, floor)));
         let recount = |rarity: bool| {
-            let opts = PcOptions { budget: BudgetMode::Auto, budget_rarity: rarity, ..PcOptions::default() };
+            let opts = BudgetOptions { mode: BudgetMode::Auto, rarity, ..BudgetOptions::default() };
             let mut b = Budget::new(&opts, PRICES, 1..3, plan, 5, 5, None);
             let (n, c, floor) = (b.measured(), b.candidates.len(), b.weighing.floor);
             b.iterations = 2;
@@ -892,11 +989,11 @@ mod tests {
     fn smoothed_means_average_the_measured_neighbours() {
         let plan = Plan { connections: 4, pool_paths: 8, splat_paths: 8 };
         for (w, h, r) in [(7, 5, 0), (7, 5, 1), (7, 5, 2), (4, 9, 3), (600, 400, 2)] {
-            let opts = PcOptions { budget: BudgetMode::Auto, budget_smoothing: r, ..PcOptions::default() };
+            let opts = BudgetOptions { mode: BudgetMode::Auto, smoothing: r, ..BudgetOptions::default() };
             let mut b = Budget::new(&opts, PRICES, 1..3, plan, w, h, None);
             let (gw, gh) = b.grid();
             assert_eq!(gw * gh, b.measured());
-            let most = opts.budget_pixels;
+            let most = opts.pixels;
             assert!(b.measured() <= most && (w * h > most) == (b.every > 1));
             b.iterations = 2;
             b.s1 = (0..gw * gh).map(|i| ((i * 7919) % 13) as f64).collect();
@@ -918,7 +1015,7 @@ mod tests {
             }
         }
         // Every measured pixel has an index of its own.
-        let opts = PcOptions { budget: BudgetMode::Auto, ..PcOptions::default() };
+        let opts = BudgetOptions { mode: BudgetMode::Auto, ..BudgetOptions::default() };
         let b = Budget::new(&opts, PRICES, 1..3, plan, 600, 400, None);
         let ids: std::collections::HashSet<usize> = (0..400)
             .flat_map(|y| (0..600).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))

@@ -7,7 +7,9 @@ use super::*;
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::integrator::Counters;
-use crate::integrator::bidir::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, trace_records};
+use crate::integrator::bidir::pcbpt::{
+    Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, PoolOptions, trace_records,
+};
 use crate::integrator::bidir::pool::LightPool;
 use crate::integrator::bidir::spcbpt::{Measured, Model, SpCounts, test_model};
 use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
@@ -339,7 +341,8 @@ fn check_variant(variant: Variant, seed: u64) {
     // Each `--pc-mis` option as the renderer sets it up, with V̄ = 3.1 and κ = 7.3 measured
     // by a previous iteration.
     let pc = |mis, previous, n: u32, m: usize| {
-        let opts = PcOptions { mis, connections: n, ..PcOptions::default() };
+        let opts =
+            PcOptions { mis, pool: PoolOptions { connections: n, ..PoolOptions::default() }, ..PcOptions::default() };
         // κ differs by camera depth.
         let kappa = std::array::from_fn(|k| 7.3 / (1.0 + k as f32));
         PcCounts::for_iteration(&scene, &opts, m, 48.0 * 40.0, 3.1, &kappa, previous)

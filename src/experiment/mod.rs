@@ -11,9 +11,7 @@ use crate::accel::Backend;
 use crate::compare;
 use crate::error::{Error, Result};
 use crate::image_io::{self, Image};
-use crate::integrator::bidir::budget::Independence;
-use crate::integrator::mlt::MltBase;
-use crate::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput};
+use crate::integrator::{self, Budget, IntegratorKind, Method, RenderOptions, RenderOutput, registry};
 use crate::math::Rgb;
 use crate::scene::{LoadOptions, Scene};
 use serde::Deserialize;
@@ -84,65 +82,18 @@ fn resolution<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Opt
 const PEERS: [&str; 5] =
     ["mitsuba", "luxcore-path", "luxcore-bidir", "luxcore-path-metropolis", "luxcore-bidir-metropolis"];
 
+/// A method: a name, an integrator (or a peer renderer) and the integrator's options, keyed
+/// by their command-line names with underscores (`pc_cache_stride = 32` for
+/// `--pc-cache-stride 32`), read by the same options struct as the command line.
 #[derive(Debug, Deserialize, Clone)]
-#[serde(deny_unknown_fields)]
 pub struct MethodEntry {
     pub name: String,
     pub integrator: String,
     #[serde(default = "default_backend")]
     pub backend: String,
-    pub heuristic: Option<String>,
-    pub eorr_fraction: Option<f32>,
-    pub lvc_light_paths: Option<usize>,
-    pub lvc_connections: Option<u32>,
-    pub large_step_prob: Option<f32>,
-    pub bootstrap: Option<usize>,
-    pub mlt_path_integrator: Option<String>,
-    pub direct_samples: Option<i32>,
-    pub direct_balance: Option<bool>,
-    pub specular_samples: Option<u32>,
-    pub bootstrap_fraction: Option<f64>,
-    pub manifold_perturbation: Option<bool>,
-    pub bidirectional_mutation: Option<bool>,
-    pub lens_perturbation: Option<bool>,
-    pub caustic_perturbation: Option<bool>,
-    pub multichain_perturbation: Option<bool>,
-    pub light_hit_perturbation: Option<bool>,
-    pub independent_mutation: Option<bool>,
-    pub independent_defensive: Option<f64>,
-    pub independent_camera_walks: Option<f64>,
-    pub learned_starts: Option<bool>,
-    pub lambda: Option<f64>,
-    pub theta_diff: Option<f64>,
-    pub chains: Option<usize>,
-    pub two_stage: Option<bool>,
-    pub first_stage_reduction: Option<u32>,
-    pub pc_light_paths: Option<usize>,
-    pub pc_pool_vertices: Option<usize>,
-    pub pc_connections: Option<u32>,
-    pub pc_cache_stride: Option<u32>,
-    pub pc_cache_depth: Option<u32>,
-    pub pc_visibility: Option<bool>,
-    pub pc_uniform_blend: Option<f32>,
-    pub pc_neighbours: Option<usize>,
-    pub pc_distance_term: Option<String>,
-    pub pc_mis: Option<String>,
-    pub pc_sampling: Option<String>,
-    pub pc_budget: Option<String>,
-    pub pc_budget_iterations: Option<u32>,
-    pub pc_budget_independence: Option<Independence>,
-    pub pc_budget_smoothing: Option<u32>,
-    pub pc_budget_model: Option<String>,
-    pub pc_budget_horizon: Option<u32>,
-    pub pc_budget_margin: Option<f32>,
-    pub pc_budget_pixels: Option<usize>,
-    pub pc_budget_rarity: Option<bool>,
-    pub sp_eye_subspaces: Option<usize>,
-    pub sp_light_subspaces: Option<usize>,
-    pub sp_training_iterations: Option<u32>,
-    pub sp_uniform: Option<f32>,
-    pub sp_mis: Option<String>,
-    pub sp_budget_in_training: Option<bool>,
+    /// The integrator's options.
+    #[serde(flatten)]
+    pub options: toml::Table,
 }
 
 fn default_backend() -> String {
@@ -205,6 +156,9 @@ impl ExperimentFile {
         }
         for m in &f.method {
             if PEERS.contains(&m.integrator.as_str()) {
+                if let Some(k) = m.options.keys().next() {
+                    return Err(usage(path, format!("method {}: a peer renderer takes no option (`{k}`)", m.name)));
+                }
                 if m.integrator.starts_with("luxcore")
                     && let Some(s) = f.scene.iter().find(|s| s.luxcore_scene.is_none())
                 {
@@ -212,7 +166,7 @@ impl ExperimentFile {
                 }
                 continue;
             }
-            value_enum::<IntegratorKind>(path, "integrator", &m.integrator)?;
+            method(path, m)?;
             value_enum::<Backend>(path, "backend", &m.backend)?;
         }
         let named = |n: &str| f.method.iter().any(|m| m.name == n);
@@ -243,130 +197,48 @@ impl ExperimentFile {
     }
 }
 
+/// The command-line arguments a method's options stand for (`key = value` as `--key value`).
+fn option_args(file: &Path, m: &MethodEntry) -> Result<Vec<(String, String)>> {
+    m.options
+        .iter()
+        .map(|(k, v)| {
+            let value = match v {
+                toml::Value::String(s) => s.clone(),
+                toml::Value::Integer(i) => i.to_string(),
+                toml::Value::Float(x) => x.to_string(),
+                toml::Value::Boolean(b) => b.to_string(),
+                _ => return Err(usage(file, format!("method {}: `{k}` must be a string, number or boolean", m.name))),
+            };
+            Ok((k.clone(), value))
+        })
+        .collect()
+}
+
+/// The integrator and its options of method `m`, read by the integrator's options struct
+/// (the command line's): a key another integrator reads, or none does, is an error naming it.
+fn method(file: &Path, m: &MethodEntry) -> Result<Method> {
+    let kind: IntegratorKind = value_enum(file, "integrator", &m.integrator)?;
+    let mut args = Vec::new();
+    for (k, v) in option_args(file, m)? {
+        let flag = format!("--{}", k.replace('_', "-"));
+        let known = registry::options_command(kind)
+            .get_arguments()
+            .any(|a| a.get_long() == Some(&flag[2..]) || a.get_all_aliases().is_some_and(|v| v.contains(&&flag[2..])));
+        if !known {
+            let why = registry::not_an_option_of(&flag, kind);
+            return Err(usage(file, format!("method {}: `{k}`: {why}", m.name)));
+        }
+        args.push(flag);
+        args.push(v);
+    }
+    registry::parse_options(kind, &args).map_err(|e| usage(file, format!("method {}: {e}", m.name)))
+}
+
 fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usize) -> Result<RenderOptions> {
     let mut o = RenderOptions::new(value_enum(file, "integrator", &m.integrator)?, budget);
+    o.method = method(file, m)?;
     o.seed = seed;
     o.threads = threads;
-    if let Some(h) = &m.heuristic {
-        o.bidir.heuristic = value_enum(file, "heuristic", h)?;
-    }
-    if let Some(x) = m.eorr_fraction {
-        o.bidir.eorr_fraction = x;
-    }
-    if let Some(x) = m.lvc_light_paths {
-        o.bidir.lvc_light_paths = x;
-    }
-    if let Some(x) = m.lvc_connections {
-        o.bidir.lvc_connections = x;
-    }
-    if let Some(x) = m.large_step_prob {
-        o.mlt.large_step_prob = x;
-    }
-    if let Some(x) = m.bootstrap {
-        o.mlt.bootstrap = x;
-    }
-    if let Some(x) = m.direct_samples {
-        o.mlt.direct_samples = x;
-    }
-    if let Some(x) = m.direct_balance {
-        o.mlt.direct_balance = x;
-    }
-    if let Some(x) = m.specular_samples {
-        o.mlt.specular_samples = x;
-    }
-    if let Some(x) = m.bootstrap_fraction {
-        o.mlt.bootstrap_fraction = x;
-    }
-    if let Some(x) = m.manifold_perturbation {
-        o.mlt.manifold_perturbation = x;
-    }
-    if let Some(x) = m.bidirectional_mutation {
-        o.mlt.bidirectional_mutation = x;
-    }
-    if let Some(x) = m.lens_perturbation {
-        o.mlt.lens_perturbation = x;
-    }
-    if let Some(x) = m.caustic_perturbation {
-        o.mlt.caustic_perturbation = x;
-    }
-    if let Some(x) = m.multichain_perturbation {
-        o.mlt.multichain_perturbation = x;
-    }
-    if let Some(x) = m.light_hit_perturbation {
-        o.mlt.light_hit_perturbation = x;
-    }
-    if let Some(x) = m.independent_mutation {
-        o.mlt.independent_mutation = Some(x);
-    }
-    if let Some(x) = m.independent_defensive {
-        o.mlt.independent_defensive = x;
-    }
-    if let Some(x) = m.independent_camera_walks {
-        o.mlt.independent_camera_walks = x;
-    }
-    if let Some(x) = m.learned_starts {
-        o.mlt.learned_starts = x;
-    }
-    if let Some(x) = m.lambda {
-        o.mlt.lambda = x;
-    }
-    if let Some(x) = m.theta_diff {
-        o.mlt.theta_diff = x;
-    }
-    if let Some(x) = m.two_stage {
-        o.mlt.two_stage = x;
-    }
-    if let Some(x) = m.first_stage_reduction {
-        o.mlt.first_stage_reduction = x;
-    }
-    if let Some(x) = m.chains {
-        o.mlt.chains = x;
-    }
-    if let Some(b) = &m.mlt_path_integrator {
-        o.mlt.base = value_enum::<MltBase>(file, "mlt_path_integrator", b)?;
-    }
-    let pc = &mut o.bidir.pc;
-    pc.light_paths = m.pc_light_paths.unwrap_or(pc.light_paths);
-    pc.pool_vertices = m.pc_pool_vertices.unwrap_or(pc.pool_vertices);
-    pc.connections = m.pc_connections.unwrap_or(pc.connections);
-    pc.stride = m.pc_cache_stride.unwrap_or(pc.stride);
-    pc.cache_depth = m.pc_cache_depth.unwrap_or(pc.cache_depth);
-    pc.visibility = m.pc_visibility.unwrap_or(pc.visibility);
-    pc.uniform_blend = m.pc_uniform_blend.unwrap_or(pc.uniform_blend);
-    pc.neighbours = m.pc_neighbours.unwrap_or(pc.neighbours);
-    if let Some(t) = &m.pc_distance_term {
-        pc.distance_term = value_enum(file, "pc_distance_term", t)?;
-    }
-    if let Some(x) = &m.pc_mis {
-        pc.mis = value_enum(file, "pc_mis", x)?;
-    }
-    if let Some(x) = &m.pc_sampling {
-        pc.sampling = value_enum(file, "pc_sampling", x)?;
-    }
-    if let Some(x) = &m.pc_budget {
-        pc.budget = value_enum(file, "pc_budget", x)?;
-    }
-    pc.budget_iterations = m.pc_budget_iterations.unwrap_or(pc.budget_iterations);
-    pc.budget_independence = m.pc_budget_independence.unwrap_or(pc.budget_independence);
-    pc.budget_smoothing = m.pc_budget_smoothing.unwrap_or(pc.budget_smoothing);
-    pc.budget_horizon = m.pc_budget_horizon.or(pc.budget_horizon);
-    pc.budget_margin = m.pc_budget_margin.unwrap_or(pc.budget_margin);
-    pc.budget_pixels = m.pc_budget_pixels.unwrap_or(pc.budget_pixels);
-    pc.budget_rarity = m.pc_budget_rarity.unwrap_or(pc.budget_rarity);
-    if let Some(x) = &m.pc_budget_model {
-        pc.budget_model = value_enum(file, "pc_budget_model", x)?;
-    }
-    pc.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
-    let sp = &mut o.bidir.sp;
-    sp.eye_subspaces = m.sp_eye_subspaces.unwrap_or(sp.eye_subspaces);
-    sp.light_subspaces = m.sp_light_subspaces.unwrap_or(sp.light_subspaces);
-    sp.training_iterations = m.sp_training_iterations.unwrap_or(sp.training_iterations);
-    sp.uniform = m.sp_uniform.unwrap_or(sp.uniform);
-    sp.budget_in_training = m.sp_budget_in_training.unwrap_or(sp.budget_in_training);
-    if let Some(x) = &m.sp_mis {
-        sp.mis = value_enum(file, "sp_mis", x)?;
-    }
-    sp.validate().map_err(|e| usage(file, format!("method {}: {e}", m.name)))?;
     Ok(o)
 }
 

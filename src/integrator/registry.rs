@@ -1,0 +1,289 @@
+//! The integrators in one table: each one's name ([`IntegratorKind`]), its options type (one
+//! struct, read alike by the command line, experiment files and the library) and its
+//! defaults. [`Method`] is an integrator with its options, what a render is given.
+
+use super::IntegratorKind;
+use super::bidir::bdpt::{BdptOptions, LighttraceOptions};
+use super::bidir::budget::BudgetOptions;
+use super::bidir::eorr::EorrOptions;
+use super::bidir::mis::Heuristic;
+use super::bidir::pcbpt::{PcbptOptions, PoolOptions};
+use super::bidir::pool::LvcOptions;
+use super::bidir::spcbpt::SpcbptOptions;
+use super::memlt::MemltOptions;
+use super::mlt::{ChainOptions, PssmltOptions};
+use super::path::PathOptions;
+use serde::Serialize;
+
+/// An integrator and its options (serialized as the options alone).
+#[derive(Clone, Debug, Serialize)]
+#[serde(untagged)]
+pub enum Method {
+    Path(PathOptions),
+    Lighttrace(LighttraceOptions),
+    Bdpt(BdptOptions),
+    Eorr(EorrOptions),
+    Lvc(LvcOptions),
+    Pssmlt(PssmltOptions),
+    Pcbpt(PcbptOptions),
+    Spcbpt(SpcbptOptions),
+    Memlt(MemltOptions),
+}
+
+/// One integrator's entry in [`INTEGRATORS`].
+pub struct Registration {
+    pub kind: IntegratorKind,
+    /// Adds the integrator's options to a command (their flags, help and defaults).
+    pub args: fn(clap::Command) -> clap::Command,
+    /// Reads the integrator's options from arguments parsed by a command `args` made.
+    pub parse: fn(&clap::ArgMatches) -> Result<Method, clap::Error>,
+    /// The integrator with its default options.
+    pub default: fn() -> Method,
+}
+
+macro_rules! registration {
+    ($variant:ident, $options:ty) => {
+        Registration {
+            kind: IntegratorKind::$variant,
+            args: <$options as clap::Args>::augment_args,
+            parse: |m| <$options as clap::FromArgMatches>::from_arg_matches(m).map(Method::$variant),
+            default: || Method::$variant(<$options>::default()),
+        }
+    };
+}
+
+/// Every integrator, in the order `--help` lists them.
+pub static INTEGRATORS: [Registration; 9] = [
+    registration!(Path, PathOptions),
+    registration!(Lighttrace, LighttraceOptions),
+    registration!(Bdpt, BdptOptions),
+    registration!(Eorr, EorrOptions),
+    registration!(Lvc, LvcOptions),
+    registration!(Pssmlt, PssmltOptions),
+    registration!(Pcbpt, PcbptOptions),
+    registration!(Spcbpt, SpcbptOptions),
+    registration!(Memlt, MemltOptions),
+];
+
+/// The registration of `kind`.
+pub fn registration(kind: IntegratorKind) -> &'static Registration {
+    INTEGRATORS.iter().find(|r| r.kind == kind).expect("every integrator is registered")
+}
+
+/// A command whose arguments are `kind`'s options alone (no binary name).
+pub fn options_command(kind: IntegratorKind) -> clap::Command {
+    (registration(kind).args)(clap::Command::new(kind.name()).no_binary_name(true))
+}
+
+/// The integrators whose options include the flag `--long` (an option's name or alias).
+pub fn readers(long: &str) -> Vec<IntegratorKind> {
+    INTEGRATORS
+        .iter()
+        .filter(|r| {
+            options_command(r.kind)
+                .get_arguments()
+                .any(|a| a.get_long() == Some(long) || a.get_all_aliases().is_some_and(|v| v.contains(&long)))
+        })
+        .map(|r| r.kind)
+        .collect()
+}
+
+/// What to say of `flag` (`--name`), an option `kind` does not read: the integrators that
+/// read it, or that none does.
+pub fn not_an_option_of(flag: &str, kind: IntegratorKind) -> String {
+    let readers = readers(flag.trim_start_matches('-'));
+    let names: Vec<&str> = readers.iter().map(|k| k.name()).collect();
+    match names.as_slice() {
+        [] => format!("{flag} is not an option of any integrator"),
+        [one] => format!("{flag} is an option of {one}, not of {}", kind.name()),
+        more => format!("{flag} is an option of {}, not of {}", more.join(", "), kind.name()),
+    }
+}
+
+/// `kind`'s options from command-line arguments (`--name value`, …); an argument that is not
+/// one of them is an error naming the integrators it belongs to.
+pub fn parse_options(kind: IntegratorKind, args: &[String]) -> Result<Method, String> {
+    let err = |e: clap::Error| {
+        use clap::error::{ContextKind, ContextValue, ErrorKind};
+        if e.kind() == ErrorKind::UnknownArgument
+            && let Some(ContextValue::String(flag)) = e.get(ContextKind::InvalidArg)
+        {
+            let flag = flag.split('=').next().unwrap_or(flag);
+            return not_an_option_of(flag, kind);
+        }
+        let text = e.to_string();
+        let first = text.lines().next().unwrap_or_default();
+        first.trim_start_matches("error: ").to_string()
+    };
+    let matches = options_command(kind).try_get_matches_from(args).map_err(err)?;
+    (registration(kind).parse)(&matches).map_err(err)
+}
+
+/// The panic of an accessor asked for options the method does not have (a caller's error).
+fn not_the(what: &str, m: &Method) -> ! {
+    panic!("{what} asked of a {:?} render", m.kind())
+}
+
+impl Method {
+    /// `kind` with its default options.
+    pub fn default_for(kind: IntegratorKind) -> Method {
+        (registration(kind).default)()
+    }
+
+    pub fn kind(&self) -> IntegratorKind {
+        match self {
+            Method::Path(_) => IntegratorKind::Path,
+            Method::Lighttrace(_) => IntegratorKind::Lighttrace,
+            Method::Bdpt(_) => IntegratorKind::Bdpt,
+            Method::Eorr(_) => IntegratorKind::Eorr,
+            Method::Lvc(_) => IntegratorKind::Lvc,
+            Method::Pssmlt(_) => IntegratorKind::Pssmlt,
+            Method::Pcbpt(_) => IntegratorKind::Pcbpt,
+            Method::Spcbpt(_) => IntegratorKind::Spcbpt,
+            Method::Memlt(_) => IntegratorKind::Memlt,
+        }
+    }
+
+    /// The MIS heuristic, for the integrators that weigh strategies.
+    pub fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        match self {
+            Method::Path(_) | Method::Lighttrace(_) => None,
+            Method::Bdpt(o) => Some(&mut o.heuristic),
+            Method::Eorr(o) => Some(&mut o.heuristic),
+            Method::Lvc(o) => Some(&mut o.heuristic),
+            Method::Pssmlt(o) => Some(&mut o.heuristic),
+            Method::Pcbpt(o) => Some(&mut o.heuristic),
+            Method::Spcbpt(o) => Some(&mut o.heuristic),
+            Method::Memlt(o) => Some(&mut o.heuristic),
+        }
+    }
+
+    /// PCBPT's options. Panics for another integrator.
+    pub fn pcbpt_mut(&mut self) -> &mut PcbptOptions {
+        match self {
+            Method::Pcbpt(o) => o,
+            m => not_the("PCBPT's options", m),
+        }
+    }
+
+    /// SPCBPT's options. Panics for another integrator.
+    pub fn spcbpt_mut(&mut self) -> &mut SpcbptOptions {
+        match self {
+            Method::Spcbpt(o) => o,
+            m => not_the("SPCBPT's options", m),
+        }
+    }
+
+    /// PSSMLT's options. Panics for another integrator.
+    pub fn pssmlt_mut(&mut self) -> &mut PssmltOptions {
+        match self {
+            Method::Pssmlt(o) => o,
+            m => not_the("PSSMLT's options", m),
+        }
+    }
+
+    /// MEMLT's options. Panics for another integrator.
+    pub fn memlt_mut(&mut self) -> &mut MemltOptions {
+        match self {
+            Method::Memlt(o) => o,
+            m => not_the("MEMLT's options", m),
+        }
+    }
+
+    /// EORR's options. Panics for another integrator.
+    pub fn eorr_mut(&mut self) -> &mut EorrOptions {
+        match self {
+            Method::Eorr(o) => o,
+            m => not_the("EORR's options", m),
+        }
+    }
+
+    /// LVC's options. Panics for another integrator.
+    pub fn lvc_mut(&mut self) -> &mut LvcOptions {
+        match self {
+            Method::Lvc(o) => o,
+            m => not_the("LVC's options", m),
+        }
+    }
+
+    /// The light pool of PCBPT or SPCBPT. Panics for another integrator.
+    pub fn pool_mut(&mut self) -> &mut PoolOptions {
+        match self {
+            Method::Pcbpt(o) => &mut o.pc.pool,
+            Method::Spcbpt(o) => &mut o.sp.pool,
+            m => not_the("a light pool's options", m),
+        }
+    }
+
+    /// The budget of PCBPT or SPCBPT. Panics for another integrator.
+    pub fn budget_mut(&mut self) -> &mut BudgetOptions {
+        match self {
+            Method::Pcbpt(o) => &mut o.pc.budget,
+            Method::Spcbpt(o) => &mut o.sp.budget,
+            m => not_the("the budget's options", m),
+        }
+    }
+
+    /// The chains of PSSMLT or MEMLT. Panics for another integrator.
+    pub fn chain_mut(&mut self) -> &mut ChainOptions {
+        match self {
+            Method::Pssmlt(o) => &mut o.chain,
+            Method::Memlt(o) => &mut o.chain,
+            m => not_the("Markov chains' options", m),
+        }
+    }
+
+    /// Whether PSSMLT or MEMLT runs two-stage Metropolis. Panics for another integrator.
+    pub fn two_stage_mut(&mut self) -> &mut bool {
+        match self {
+            Method::Pssmlt(o) => &mut o.two_stage,
+            Method::Memlt(o) => &mut o.two_stage,
+            m => not_the("two-stage Metropolis", m),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::ValueEnum;
+
+    /// Every integrator of `--integrator` is registered once, and its options parse from
+    /// an empty command line to its defaults.
+    #[test]
+    fn every_integrator_is_registered_once_with_defaults() {
+        for kind in IntegratorKind::value_variants() {
+            assert_eq!(INTEGRATORS.iter().filter(|r| r.kind == *kind).count(), 1, "{kind:?}");
+            let r = registration(*kind);
+            let cmd = (r.args)(clap::Command::new("test").no_binary_name(true));
+            let m = cmd.try_get_matches_from(Vec::<String>::new()).unwrap();
+            let parsed = (r.parse)(&m).unwrap();
+            assert_eq!(parsed.kind(), *kind);
+            let (a, b) = (serde_json::to_value(&parsed).unwrap(), serde_json::to_value((r.default)()).unwrap());
+            assert_eq!(a, b, "{kind:?}: the command line's defaults are not the options' Default");
+        }
+    }
+
+    /// An option of another integrator is refused, naming the integrators that read it;
+    /// one of none is refused as such; a value that does not parse names the option.
+    #[test]
+    fn options_of_other_integrators_are_refused_by_name() {
+        let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let e = parse_options(IntegratorKind::Bdpt, &args(&["--pc-cache-stride", "8"])).unwrap_err();
+        assert_eq!(e, "--pc-cache-stride is an option of pcbpt, not of bdpt");
+        let e = parse_options(IntegratorKind::Bdpt, &args(&["--connections", "8"])).unwrap_err();
+        assert_eq!(e, "--connections is an option of lvc, pcbpt, spcbpt, not of bdpt");
+        let e = parse_options(IntegratorKind::Path, &args(&["--heuristic=balance"])).unwrap_err();
+        assert!(e.starts_with("--heuristic is an option of bdpt, eorr, lvc, pssmlt, pcbpt, spcbpt, memlt"), "{e}");
+        let e = parse_options(IntegratorKind::Pcbpt, &args(&["--no-such-option", "1"])).unwrap_err();
+        assert_eq!(e, "--no-such-option is not an option of any integrator");
+        let e = parse_options(IntegratorKind::Pcbpt, &args(&["--pc-mis", "sideways"])).unwrap_err();
+        assert!(e.contains("sideways") && e.contains("--pc-mis"), "{e}");
+        // The old names of shared options still read them.
+        let Method::Spcbpt(o) = parse_options(IntegratorKind::Spcbpt, &args(&["--pc-connections", "2"])).unwrap()
+        else {
+            panic!("not SPCBPT")
+        };
+        assert_eq!(o.sp.pool.connections, 2);
+    }
+}
