@@ -650,3 +650,77 @@ fn a_file_integrator_this_renderer_lacks_needs_one_from_the_command_line() {
     let (other, _) = render(&write("path1.xml", &depth(1)), "path1.exr");
     assert_ne!(image, other);
 }
+
+#[test]
+fn an_option_of_another_integrator_is_an_error_naming_the_integrators_that_read_it() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("x.exr");
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let s = scene.to_str().unwrap();
+    let o = out.to_str().unwrap();
+    for (args, says) in [
+        (
+            vec!["--integrator", "bdpt", "--pc-connections", "8"],
+            "--pc-connections is an option of pcbpt, spcbpt, not of bdpt",
+        ),
+        (vec!["--integrator=lvc", "--sp-uniform=0.5"], "--sp-uniform is an option of spcbpt, not of lvc"),
+        (
+            vec!["--integrator", "memlt", "--large-step-prob", "0.5"],
+            "--large-step-prob is an option of pssmlt, not of memlt",
+        ),
+        // Without --integrator, the scene's integrator (the path tracer) decides.
+        (vec!["--eorr-fraction", "0.2"], "--eorr-fraction is an option of eorr, not of path (the scene's integrator"),
+    ] {
+        let r = pcbpt(&[&["render", s, "--spp", "1", "-D", "resx=8", "-D", "resy=8", "-o", o][..], &args[..]].concat());
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says) && !err.contains("panicked") && !out.exists(), "{args:?}: {err}");
+    }
+    // The integrator's own options are taken, under their new and their old names.
+    for args in
+        [vec!["--integrator", "pcbpt", "--connections", "2"], vec!["--integrator", "pcbpt", "--pc-connections", "2"]]
+    {
+        let r = pcbpt(
+            &[&["render", s, "--spp", "1", "-D", "resx=8", "-D", "resy=8", "--quiet", "-o", o][..], &args[..]].concat(),
+        );
+        assert!(r.status.success(), "{args:?}: {}", String::from_utf8_lossy(&r.stderr));
+        std::fs::remove_file(&out).unwrap();
+    }
+}
+
+#[test]
+fn integrator_help_lists_that_integrators_options_only() {
+    let help = |kind: &str| {
+        let r = pcbpt(&["render", "--integrator", kind, "--help"]);
+        assert!(r.status.success());
+        String::from_utf8_lossy(&r.stdout).into_owned()
+    };
+    let bdpt = help("bdpt");
+    assert!(bdpt.contains("Options of bdpt") && bdpt.contains("--heuristic") && bdpt.contains("--spp"), "{bdpt}");
+    assert!(!bdpt.contains("--pc-cache-stride") && !bdpt.contains("--budget"), "{bdpt}");
+    let pcbpt_help = help("pcbpt");
+    assert!(pcbpt_help.contains("--pc-cache-stride") && pcbpt_help.contains("--budget-margin"), "{pcbpt_help}");
+    assert!(!pcbpt_help.contains("--sp-uniform") && !pcbpt_help.contains("--lambda"), "{pcbpt_help}");
+    let path = help("path");
+    assert!(!path.contains("--heuristic") && path.contains("--max-depth"), "{path}");
+    // Without an integrator, the help names where each one's options are listed.
+    let r = pcbpt(&["render", "--help"]);
+    let all = String::from_utf8_lossy(&r.stdout);
+    assert!(all.contains("--integrator NAME --help") && !all.contains("--pc-cache-stride"), "{all}");
+}
+
+/// docs/cli.md is what `pcbpt cli-reference` prints from the options' own documentation:
+/// this fails when an option changes and the file is not regenerated
+/// (`cargo run --release -- cli-reference > docs/cli.md`).
+#[test]
+fn the_command_line_reference_is_current() {
+    let r = pcbpt(&["cli-reference"]);
+    assert!(r.status.success());
+    let generated = String::from_utf8(r.stdout).unwrap();
+    let file = std::fs::read_to_string(root().join("docs/cli.md")).unwrap();
+    assert!(generated.contains("`--pc-cache-stride`") && generated.contains("### `--integrator memlt`"));
+    assert!(
+        generated == file,
+        "docs/cli.md is stale: regenerate it with `cargo run --release -- cli-reference > docs/cli.md`"
+    );
+}

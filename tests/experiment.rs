@@ -174,3 +174,98 @@ integrator = "bdpt"
     let e = experiment::run(&f, None, true).unwrap_err().to_string();
     assert!(e.contains("fixed-film.toml:6") && e.contains("40 by 24"), "{e}");
 }
+
+#[test]
+fn method_options_are_the_integrators_and_seed_lists_are_checked() {
+    let d = tempfile::tempdir().unwrap();
+    let scene = "[[scene]]\nname = \"x\"\nfile = \"SCENE\"\nreference = \"r.exr\"";
+    // An option another integrator reads, one no integrator reads, a value that does not parse.
+    for (file, option, says) in [
+        (
+            "other.toml",
+            "pc_cache_stride = 8",
+            "`pc_cache_stride`: --pc-cache-stride is an option of pcbpt, not of path",
+        ),
+        (
+            "none.toml",
+            "pc_cache_strides = 8",
+            "`pc_cache_strides`: --pc-cache-strides is not an option of any integrator",
+        ),
+        ("value.toml", "pc_mis = \"sideways\"", "sideways"),
+    ] {
+        let body = format!(
+            "time = 1\n{scene}\n[[method]]\nname = \"m\"\nintegrator = \"{}\"\n{option}",
+            if file == "value.toml" { "pcbpt" } else { "path" }
+        );
+        let f = write(d.path(), file, &body);
+        let e = experiment::run(&f, None, true).unwrap_err().to_string();
+        assert!(e.contains(file) && e.contains("method m") && e.contains(says), "{e}");
+    }
+    // Malformed seed lists name the key and the line; `seed` with `seeds` is refused.
+    for (file, seeds, says) in [
+        ("empty.toml", "seeds = []", "no seed"),
+        ("twice.toml", "seeds = [1, 2, 1]", "seed 1 twice"),
+        ("range.toml", "seeds = \"1-9\"", "not a range"),
+        ("kind.toml", "seeds = 9", "a list of seeds"),
+    ] {
+        let f = write(d.path(), file, &format!("time = 1\n{seeds}\n{scene}"));
+        let e = experiment::run(&f, None, true).unwrap_err().to_string();
+        assert!(e.contains(&format!("{file}:5")) && e.contains(says), "{e}");
+    }
+    let f = write(d.path(), "both-seeds.toml", &format!("time = 1\nseed = 1\nseeds = [1, 2]\n{scene}"));
+    let e = experiment::run(&f, None, true).unwrap_err().to_string();
+    assert!(e.contains("both-seeds.toml") && e.contains("not both"), "{e}");
+}
+
+#[test]
+fn a_suite_over_seeds_writes_each_seed_and_a_summary() {
+    let d = tempfile::tempdir().unwrap();
+    let reference = d.path().join("ref.exr");
+    let scene = root().join("scenes/cornell-box/scene.xml");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pcbpt"))
+        .args(["render", scene.to_str().unwrap(), "-D", "resx=24", "-D", "resy=24", "--integrator", "bdpt"])
+        .args(["--spp", "64", "--quiet", "-o", reference.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let f = write(
+        d.path(),
+        "seeds.toml",
+        &format!(
+            "spp = 2\nseeds = \"3..=5\"\n[[scene]]\nname = \"cornell\"\nfile = \"SCENE\"\ndefines = {{ resx = \"24\", resy = \"24\" }}\nreference = \"{}\"",
+            reference.display()
+        ),
+    );
+    let results = experiment::run(&f, None, true).unwrap();
+    assert_eq!(results.len(), 6);
+    let out = d.path().join("seeds");
+    for seed in [3, 4, 5] {
+        assert!(out.join(format!("seed-{seed}/results.md")).exists());
+        assert!(out.join(format!("seed-{seed}/cornell_bdpt.exr")).exists());
+    }
+    // Different seeds, different images; the summary's relMSE means are the runs' own.
+    let a = std::fs::read(out.join("seed-3/cornell_path.exr")).unwrap();
+    let b = std::fs::read(out.join("seed-4/cornell_path.exr")).unwrap();
+    assert_ne!(a, b);
+    let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    let path: Vec<f64> = results.iter().filter(|r| r.method == "path").map(|r| r.relmse).collect();
+    let mean = path.iter().sum::<f64>() / 3.0;
+    assert!(summary.contains("summary over 3 seeds (3, 4, 5)"), "{summary}");
+    assert!(summary.contains(&format!("| cornell | path | 3 | {mean:.5} |")), "{summary}");
+    assert!(summary.contains("| cornell | path | 3 |") && summary.contains("| 1.000 | 1.000 | 0 of 3 |"), "{summary}");
+}
+
+/// Every suite in experiments/ reads: its keys, its seeds and every method's options (an
+/// option renamed or moved to another integrator would fail here, not at the end of a run).
+#[test]
+fn every_suite_in_experiments_loads() {
+    let mut n = 0;
+    for entry in std::fs::read_dir(root().join("experiments")).unwrap() {
+        let p = entry.unwrap().path();
+        if p.extension().is_some_and(|e| e == "toml") {
+            experiment::ExperimentFile::load(&p).unwrap_or_else(|e| panic!("{e}"));
+            n += 1;
+        }
+    }
+    assert!(n >= 30, "{n} suites");
+}

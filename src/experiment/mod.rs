@@ -19,6 +19,9 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+mod seeds;
+pub use seeds::Seeds;
+
 /// An experiment file.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -38,8 +41,11 @@ pub struct ExperimentFile {
     pub checkpoints: usize,
     /// The method the speed-up column compares against (default: the first).
     pub baseline: Option<String>,
-    #[serde(default)]
-    pub seed: u64,
+    /// The seed of every run, or:
+    pub seed: Option<u64>,
+    /// the seeds each run is rendered with (`[1, 2, 3]` or `"1..=9"`): each seed's results
+    /// land in `seed-N/` of the output folder, and `summary.md` summarises across them.
+    pub seeds: Option<Seeds>,
     pub scene: Vec<SceneEntry>,
     pub method: Vec<MethodEntry>,
 }
@@ -134,6 +140,11 @@ fn value_enum<T: clap::ValueEnum>(file: &Path, what: &str, s: &str) -> Result<T>
 }
 
 impl ExperimentFile {
+    /// The method the speed-ups and ratios compare against.
+    pub fn baseline(&self) -> String {
+        self.baseline.clone().unwrap_or_else(|| self.method[0].name.clone())
+    }
+
     pub fn load(path: &Path) -> Result<ExperimentFile> {
         let text = std::fs::read_to_string(path).map_err(|e| usage(path, format!("cannot read: {e}")))?;
         let f: ExperimentFile = toml::from_str(&text).map_err(|e| {
@@ -143,6 +154,9 @@ impl ExperimentFile {
                 None => usage(path, e.message()),
             }
         })?;
+        if f.seed.is_some() && f.seeds.is_some() {
+            return Err(usage(path, "give `seed` (one seed) or `seeds` (a list or range), not both"));
+        }
         if f.time.is_some() == f.spp.is_some() {
             return Err(usage(path, "give exactly one of `time` (seconds per run) and `spp`"));
         }
@@ -253,7 +267,29 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
             None => base.join(path.file_stem().unwrap_or_default()),
         },
     };
-    std::fs::create_dir_all(&out).map_err(|e| Error::Output { path: out.clone(), msg: e.to_string() })?;
+    let baseline = f.baseline();
+    let Some(seeds) = &f.seeds else {
+        return run_seed(path, &f, f.seed.unwrap_or(0), &out, quiet);
+    };
+    let mut runs = Vec::new();
+    for &seed in &seeds.0 {
+        if !quiet {
+            eprintln!("seed {seed}");
+        }
+        runs.push((seed, run_seed(path, &f, seed, &out.join(format!("seed-{seed}")), quiet)?));
+    }
+    let text = seeds::summary(f.name.as_deref().unwrap_or("experiment"), &runs, &baseline);
+    image_io::write_text(&out.join("summary.md"), &text)?;
+    if !quiet {
+        eprint!("{text}");
+    }
+    Ok(runs.into_iter().flat_map(|(_, r)| r).collect())
+}
+
+/// Runs every method on every scene with `seed` and writes the outputs into `out`.
+fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool) -> Result<Vec<RunResult>> {
+    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    std::fs::create_dir_all(out).map_err(|e| Error::Output { path: out.to_path_buf(), msg: e.to_string() })?;
     let budget = match (f.time, f.spp) {
         (Some(t), _) => Budget::Time(t),
         (_, Some(s)) => Budget::Spp(s),
@@ -303,7 +339,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
             (None, Some(m), Some(t)) => {
                 let me = f.method.iter().find(|x| &x.name == m).expect("checked on load");
                 let scene = &scenes[&me.backend];
-                let o = options(path, me, Budget::Time(t), f.seed ^ 0x0005_eed0_f7ef, f.threads)?;
+                let o = options(path, me, Budget::Time(t), seed ^ 0x0005_eed0_f7ef, f.threads)?;
                 if !quiet {
                     eprintln!("{}: reference by {} for {t} s", s.name, me.name);
                 }
@@ -321,7 +357,8 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                     return Err(usage(path, format!("peer method {} needs a `time` budget", m.name)));
                 };
                 let exr = out.join(format!("{}_{}.exr", s.name, m.name));
-                let Some(peer) = run_peer(&base, s, m, t, &f, &exr, (reference.width, reference.height), quiet)? else {
+                let Some(peer) = run_peer(&base, s, m, t, (f, seed), &exr, (reference.width, reference.height), quiet)?
+                else {
                     continue;
                 };
                 let metrics = compare::metrics(&reference, &peer.image)?;
@@ -347,7 +384,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
                 continue;
             }
             let scene = &scenes[&m.backend];
-            let mut o = options(path, m, budget, f.seed, f.threads)?;
+            let mut o = options(path, m, budget, seed, f.threads)?;
             o.checkpoints = checkpoints.clone();
             let r: RenderOutput = integrator::render(scene, &o)?;
             let img = Image::new(r.width, r.height, r.image.clone());
@@ -384,7 +421,7 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
         }
         plot(&out.join(format!("convergence_{}.svg", s.name)), &s.name, results.iter().filter(|r| r.scene == s.name))?;
     }
-    let baseline = f.baseline.clone().unwrap_or_else(|| f.method[0].name.clone());
+    let baseline = f.baseline();
     image_io::write_text(
         &out.join("results.md"),
         &table(f.name.as_deref().unwrap_or("experiment"), &results, &baseline),
@@ -408,7 +445,7 @@ fn run_peer(
     s: &SceneEntry,
     m: &MethodEntry,
     time: f64,
-    f: &ExperimentFile,
+    (f, seed): (&ExperimentFile, u64),
     exr: &Path,
     size: (u32, u32),
     quiet: bool,
@@ -424,7 +461,7 @@ fn run_peer(
     let mut cmd = std::process::Command::new("python3");
     cmd.arg(&script)
         .args(["--renderer", &m.integrator, "--time", &time.to_string(), "--threads", &f.threads.to_string()])
-        .args(["--width", &size.0.to_string(), "--height", &size.1.to_string(), "--seed", &f.seed.to_string()])
+        .args(["--width", &size.0.to_string(), "--height", &size.1.to_string(), "--seed", &seed.to_string()])
         .arg("--scene")
         .arg(&scene)
         .arg("--out")
