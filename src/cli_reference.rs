@@ -88,7 +88,7 @@ fn value(a: &clap::Arg) -> String {
     }
     let possible: Vec<String> = a.get_possible_values().iter().map(|v| v.get_name().to_string()).collect();
     if !possible.is_empty() {
-        return cell(&possible.join(" \\| "));
+        return cell(&possible.join(" | "));
     }
     let names: Vec<String> = a.get_value_names().unwrap_or_default().iter().map(|v| v.to_string()).collect();
     match names.as_slice() {

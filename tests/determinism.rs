@@ -72,7 +72,9 @@ fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
                 o.method.budget_mut().smoothing = smoothing;
                 o.method.budget_mut().independence = independence;
                 o.method.budget_mut().model = model;
-                o.method.spcbpt_mut().sp.training_iterations = 2;
+                if let pcbpt::integrator::Method::Spcbpt(s) = &mut o.method {
+                    s.sp.training_iterations = 2;
+                }
             };
             let one = render_with(&scene, kind, 6, 42, 1, &set);
             let two = render_with(&scene, kind, 6, 42, 2, &set);

@@ -187,16 +187,16 @@ pub struct BudgetOptions {
     #[arg(id = "budget", long = "budget", alias = "pc-budget", value_enum, default_value_t = BudgetOptions::default().mode)]
     pub mode: BudgetMode,
     /// Iterations measured before the budget is chosen.
-    #[arg(id = "budget_iterations", long = "budget-iterations", alias = "pc-budget-iterations", default_value_t = BudgetOptions::default().iterations)]
+    #[arg(id = "budget_iterations", value_name = "N", long = "budget-iterations", alias = "pc-budget-iterations", default_value_t = BudgetOptions::default().iterations)]
     pub iterations: u32,
     /// The share of the connections' predicted change of second moment between budgets
     /// that counts, 0 to 1 (1 if the draws of a camera vertex were independent), or
     /// `measured` (from their spread about each camera vertex's mean).
-    #[arg(id = "budget_independence", long = "budget-independence", alias = "pc-budget-independence", default_value_t = BudgetOptions::default().independence)]
+    #[arg(id = "budget_independence", value_name = "SHARE", long = "budget-independence", alias = "pc-budget-independence", default_value_t = BudgetOptions::default().independence)]
     pub independence: Independence,
     /// Measured pixels each side whose means are averaged for the relMSE weights of the
     /// budget's choice (0: each pixel's own mean).
-    #[arg(id = "budget_smoothing", long = "budget-smoothing", alias = "pc-budget-smoothing", default_value_t = BudgetOptions::default().smoothing)]
+    #[arg(id = "budget_smoothing", value_name = "PIXELS", long = "budget-smoothing", alias = "pc-budget-smoothing", default_value_t = BudgetOptions::default().smoothing)]
     pub smoothing: u32,
     /// How the budget predicts a plan's variance: the change of the contributions' second
     /// moments (moments), or each measured camera sample re-weighted as the plan would weigh
@@ -208,16 +208,16 @@ pub struct BudgetOptions {
     /// iterations / horizon) times as densely as the measured plan counts by its chance of
     /// being found in the render, as the typical render shows it, not by its expected
     /// variance; 0 counts every path by its expected variance.
-    #[arg(id = "budget_horizon", long = "budget-horizon", alias = "pc-budget-horizon")]
+    #[arg(id = "budget_horizon", value_name = "SPP", long = "budget-horizon", alias = "pc-budget-horizon")]
     pub horizon: Option<u32>,
     /// The least predicted efficiency gain over the measured plan for which the budget
     /// leaves it (1: any gain; the predictions are within about a third of what renders
     /// measure, so smaller gains are noise).
-    #[arg(id = "budget_margin", long = "budget-margin", alias = "pc-budget-margin", default_value_t = BudgetOptions::default().margin)]
+    #[arg(id = "budget_margin", value_name = "GAIN", long = "budget-margin", alias = "pc-budget-margin", default_value_t = BudgetOptions::default().margin)]
     pub margin: f32,
     /// Pixels whose moments the budget measures, at most about (those of every k-th row and
     /// column).
-    #[arg(id = "budget_pixels", long = "budget-pixels", alias = "pc-budget-pixels", default_value_t = BudgetOptions::default().pixels)]
+    #[arg(id = "budget_pixels", value_name = "PIXELS", long = "budget-pixels", alias = "pc-budget-pixels", default_value_t = BudgetOptions::default().pixels)]
     pub pixels: usize,
     /// Whether each measured pixel's largest contribution counts, at the horizon, as rarely
     /// as its value against the pixel's mean says (false: as a region the measured
