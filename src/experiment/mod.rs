@@ -235,9 +235,7 @@ fn method(file: &Path, m: &MethodEntry) -> Result<Method> {
     let mut args = Vec::new();
     for (k, v) in option_args(file, m)? {
         let flag = format!("--{}", k.replace('_', "-"));
-        let known = registry::options_command(kind)
-            .get_arguments()
-            .any(|a| a.get_long() == Some(&flag[2..]) || a.get_all_aliases().is_some_and(|v| v.contains(&&flag[2..])));
+        let known = registry::reads(kind, &flag[2..]);
         if !known {
             let why = registry::not_an_option_of(&flag, kind);
             return Err(usage(file, format!("method {}: `{k}`: {why}", m.name)));

@@ -75,17 +75,16 @@ pub fn options_command(kind: IntegratorKind) -> clap::Command {
     (registration(kind).args)(clap::Command::new(kind.name()).no_binary_name(true))
 }
 
-/// The integrators whose options include the flag `--long` (an option's name or alias).
+/// Whether `kind`'s options include the flag `--long` (an option's name or alias).
+pub fn reads(kind: IntegratorKind, long: &str) -> bool {
+    options_command(kind)
+        .get_arguments()
+        .any(|a| a.get_long() == Some(long) || a.get_all_aliases().is_some_and(|v| v.contains(&long)))
+}
+
+/// The integrators whose options include the flag `--long`.
 pub fn readers(long: &str) -> Vec<IntegratorKind> {
-    INTEGRATORS
-        .iter()
-        .filter(|r| {
-            options_command(r.kind)
-                .get_arguments()
-                .any(|a| a.get_long() == Some(long) || a.get_all_aliases().is_some_and(|v| v.contains(&long)))
-        })
-        .map(|r| r.kind)
-        .collect()
+    INTEGRATORS.iter().map(|r| r.kind).filter(|&k| reads(k, long)).collect()
 }
 
 /// What to say of `flag` (`--name`), an option `kind` does not read: the integrators that
