@@ -24,5 +24,6 @@ pub mod partial;
 pub mod sampling;
 pub mod scene;
 pub mod texture;
+pub mod workers;
 
 pub use error::{Error, Result};

@@ -688,7 +688,7 @@ fn print_first_stage(samples: u64, mean_luminance: f64) {
 
 /// The summary's line on a Metropolis render's longest stay of a chain around one pixel, and
 /// a warning when that stay carries most of the light in the pixels around it.
-fn print_longest_stay(integrator: &str, stay: Option<&pcbpt::integrator::stays::LongestStay>) {
+fn print_longest_stay(integrator: &str, stay: Option<&pcbpt::integrator::metropolis::stays::LongestStay>) {
     let Some(l) = stay else { return };
     let [x, y] = l.pixel;
     eprintln!(

@@ -13,7 +13,7 @@ mod common;
 
 use common::*;
 use pcbpt::image_io::Image;
-use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetModel};
+use pcbpt::integrator::budget::{BudgetMode, BudgetModel};
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
 
@@ -120,7 +120,7 @@ fn pcbpt_budget_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
 /// connections.
 #[test]
 fn short_renders_plan_for_the_default_horizon_and_keep_veach_ajars_connections() {
-    use pcbpt::integrator::bidir::budget::DEFAULT_HORIZON;
+    use pcbpt::integrator::budget::DEFAULT_HORIZON;
     let scene = veach_ajar("160", "90");
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(8));
     o.seed = 1;
@@ -186,7 +186,7 @@ fn spcbpt_measures_its_last_training_iterations() {
         o.method.spcbpt_mut().sp.budget_in_training = in_training;
         integrator::render(&scene, &o).unwrap()
     };
-    let training = pcbpt::integrator::bidir::spcbpt::SpOptions::default().training_iterations;
+    let training = pcbpt::integrator::spcbpt::SpOptions::default().training_iterations;
     assert_eq!(training, 4);
     let chosen = |spp: u32, in_training: bool| run(spp, BudgetMode::Auto, in_training).stats.budget.is_some();
     assert!(chosen(training, true), "no choice after the training iterations");

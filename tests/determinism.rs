@@ -58,7 +58,7 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
 /// the same plan, and the same image, whatever the number of threads.
 #[test]
 fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
-    use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetModel, Independence};
+    use pcbpt::integrator::budget::{BudgetMode, BudgetModel, Independence};
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     // The defaults, smoothed means with the measured independence, and the realized model.
     for (smoothing, independence, model) in [
@@ -81,7 +81,7 @@ fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
             let (a, b) = (one.stats.budget.as_ref().unwrap(), two.stats.budget.as_ref().unwrap());
             assert!(a.chosen.is_some() && a.chosen == b.chosen, "{kind:?}: {a:?} against {b:?}");
             assert_eq!(a.independence.to_bits(), b.independence.to_bits(), "{kind:?}");
-            let bits = |s: &pcbpt::integrator::bidir::budget::BudgetStats| -> Vec<(u64, u64)> {
+            let bits = |s: &pcbpt::integrator::budget::BudgetStats| -> Vec<(u64, u64)> {
                 s.predictions.iter().map(|(m, r)| (m.to_bits(), r.to_bits())).collect()
             };
             assert_eq!(bits(a), bits(b), "{kind:?}: predictions differ between 1 and 2 threads");

@@ -12,8 +12,8 @@ mod common;
 use common::*;
 use glam::Vec3;
 use pcbpt::accel::Backend;
-use pcbpt::integrator::bidir::budget::BudgetMode;
-use pcbpt::integrator::bidir::pcbpt::PcMis;
+use pcbpt::integrator::budget::BudgetMode;
+use pcbpt::integrator::pcbpt::PcMis;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
 

@@ -86,7 +86,7 @@ fn pssmlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
         o.method.pssmlt_mut().base = base;
         integrator::render(&scene, &o).unwrap()
     };
-    use pcbpt::integrator::mlt::MltBase;
+    use pcbpt::integrator::metropolis::MltBase;
     for base in [MltBase::Bdpt, MltBase::Path] {
         let a = run(7, 2, base);
         let bits = |o: &RenderOutput| o.image.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();

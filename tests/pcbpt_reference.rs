@@ -41,8 +41,8 @@ mod common;
 
 use common::*;
 use pcbpt::image_io::Image;
-use pcbpt::integrator::bidir::budget::{BudgetMode, BudgetOptions};
-use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
+use pcbpt::integrator::budget::{BudgetMode, BudgetOptions};
+use pcbpt::integrator::pcbpt::{DistanceTerm, PcMis, PcOptions, PcSampling};
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
 

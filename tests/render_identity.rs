@@ -10,8 +10,8 @@ mod common;
 use common::*;
 use pcbpt::accel::Backend;
 use pcbpt::integrator::bidir::mis::Heuristic;
-use pcbpt::integrator::bidir::pcbpt::{DistanceTerm, PcMis, PcSampling};
-use pcbpt::integrator::mlt::MltBase;
+use pcbpt::integrator::metropolis::MltBase;
+use pcbpt::integrator::pcbpt::{DistanceTerm, PcMis, PcSampling};
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 
 /// Every integrator with each of its options that changes what the loop does.
@@ -31,7 +31,7 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
     };
     let pcbpt = |f: &dyn Fn(&mut RenderOptions)| {
         with(Pcbpt, &|o| {
-            o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+            o.method.budget_mut().mode = pcbpt::integrator::budget::BudgetMode::Off;
             f(o)
         })
     };

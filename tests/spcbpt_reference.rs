@@ -17,8 +17,8 @@ mod common;
 
 use common::*;
 use pcbpt::image_io::Image;
-use pcbpt::integrator::bidir::pcbpt::PcMis;
-use pcbpt::integrator::bidir::spcbpt::SpOptions;
+use pcbpt::integrator::pcbpt::PcMis;
+use pcbpt::integrator::spcbpt::SpOptions;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
 use pcbpt::scene::Scene;
 
@@ -27,7 +27,7 @@ fn render(scene: &Scene, spp: u32, opts: &SpOptions, seed: u64) -> Image {
     o.seed = seed;
     o.method.spcbpt_mut().sp = opts.clone();
     // The subspace connections themselves (`tests/budget_reference.rs` has the budget).
-    o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+    o.method.budget_mut().mode = pcbpt::integrator::budget::BudgetMode::Off;
     image(integrator::render(scene, &o).unwrap())
 }
 

@@ -129,7 +129,7 @@ fn mitsuba_06_names_and_frame() {
 
 #[test]
 fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
-    use pcbpt::integrator::bidir::pcbpt::PcMis;
+    use pcbpt::integrator::pcbpt::PcMis;
     use pcbpt::integrator::{Budget, RenderOptions};
     let scene = load_at(&root().join("scenes/sunsky/scene.xml"), &[], None, pcbpt::accel::Backend::Embree);
     let reference = reference("sunsky.exr");
@@ -148,11 +148,11 @@ fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
     for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(IntegratorKind::Pcbpt, 16);
         o.method.pcbpt_mut().pc.mis = mis;
-        o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+        o.method.budget_mut().mode = pcbpt::integrator::budget::BudgetMode::Off;
         methods.push(("pcbpt", o));
         let mut o = options(IntegratorKind::Spcbpt, 16);
         o.method.spcbpt_mut().sp.mis = mis;
-        o.method.budget_mut().mode = pcbpt::integrator::bidir::budget::BudgetMode::Off;
+        o.method.budget_mut().mode = pcbpt::integrator::budget::BudgetMode::Off;
         methods.push(("spcbpt", o));
     }
     methods.push(("pcbpt, defaults", options(IntegratorKind::Pcbpt, 16)));

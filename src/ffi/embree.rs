@@ -7,7 +7,9 @@
 //! [`EmbreeScene`] and the geometries release their Embree handles on `Drop`. Errors that
 //! Embree reports through the device error callback are collected and returned as
 //! [`AccelError::Embree`]; nothing aborts.
-use crate::accel::{AccelError, BuildOptions, BuildQuality, BvhLayout, Cutout, Cutouts, Geometry, Hit, Ray, keeps_hit};
+use crate::accel::query::{
+    AccelError, BuildOptions, BuildQuality, BvhLayout, Cutout, Cutouts, Geometry, Hit, Ray, keeps_hit,
+};
 use std::ffi::{CStr, c_char, c_void};
 use std::ptr;
 use std::sync::{Arc, Mutex};
@@ -27,8 +29,8 @@ mod ffi {
 
 /// Sets the calling thread's SSE control register to flush denormals to zero and treat
 /// denormal inputs as zero (FTZ/DAZ), as Embree recommends for its traversal kernels.
-/// Renders call it once per tile on the worker thread; results change only for values
-/// below 1e-38.
+/// A render's worker threads call it once, when they start ([`crate::workers::render_pool`]);
+/// results change only for values below 1e-38.
 #[inline]
 pub fn set_flush_denormals() {
     #[cfg(target_arch = "x86_64")]

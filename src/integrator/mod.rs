@@ -3,27 +3,31 @@
 //! sample per pixel, [`mlt`]'s and [`memlt`]'s own for the Markov chains.
 
 pub mod bidir;
+pub mod budget;
+pub mod eorr;
+pub mod lvc;
 pub mod manifold;
 pub mod memlt;
-pub mod mlt;
+pub mod metropolis;
 pub mod path;
+pub mod pcbpt;
+pub mod pssmlt;
 pub mod registry;
 pub(crate) mod render_loop;
-pub mod stays;
-pub mod two_stage;
+pub mod spcbpt;
 
 use crate::film::Film;
 use crate::math::Rgb;
 use crate::scene::Scene;
 use bidir::WalkLimits;
 use bidir::bdpt::{Bdpt, BdptRender};
-use bidir::eorr::Eorr;
-use bidir::pcbpt::{Pcbpt, PcbptRender};
 pub use bidir::pool::CONCENTRATION_DEPTHS;
-use bidir::pool::{Lvc, LvcRender};
-use bidir::spcbpt::{Spcbpt, SpcbptRender};
+use eorr::Eorr;
+use lvc::{Lvc, LvcRender};
+use pcbpt::{Pcbpt, PcbptRender};
 pub use registry::Method;
 use serde::Serialize;
+use spcbpt::{Spcbpt, SpcbptRender};
 use std::ops::Range;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -263,9 +267,9 @@ pub struct RenderStats {
     pub cache: Option<CacheStats>,
     /// SPCBPT's subspaces and matrix (when SPCBPT ran).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub subspaces: Option<bidir::spcbpt::SubspaceStats>,
+    pub subspaces: Option<spcbpt::SubspaceStats>,
     /// The budget PCBPT or SPCBPT chose (`--pc-budget auto`).
-    pub budget: Option<bidir::budget::BudgetStats>,
+    pub budget: Option<budget::BudgetStats>,
     /// The integrator's options.
     pub options: Method,
     /// Light-pool size of the last iteration: light paths and connectible vertices.
@@ -273,7 +277,7 @@ pub struct RenderStats {
     pub pool: Option<(usize, usize)>,
     /// Metropolis statistics (PSSMLT).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub mlt: Option<mlt::MltStats>,
+    pub mlt: Option<pssmlt::MltStats>,
     /// Path-space Metropolis statistics (MEMLT).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub memlt: Option<memlt::MemltStats>,
@@ -327,135 +331,6 @@ impl RenderStats {
             iterations: None,
         }
     }
-}
-
-/// Where a run of Markov chains stops, and what it starts from: `done` mutations of an
-/// earlier run of the same chains (whose splats `into` holds), and a time (seconds since
-/// the render's start) before the budget's, if any.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct ChainSpan {
-    pub done: u64,
-    pub until: Option<f64>,
-}
-
-/// What a run of Markov chains did: the mutations done (with the span's earlier ones),
-/// whether the render was interrupted, and the groups' films (their splats, already added
-/// to `into`) with the number of chains in each.
-pub(crate) struct ChainRun {
-    pub done: u64,
-    pub interrupted: bool,
-    pub groups: Vec<(Film, usize)>,
-}
-
-/// Runs Markov chains for the budget: `total` mutations (or the time budget, or the span's
-/// end) in rounds of about one mutation per pixel, every chain running `step` the same
-/// number of times per round, so that time budgets and Ctrl-C are checked regularly. The
-/// chains are split into one contiguous group per worker thread (at least two groups, so
-/// that two independent halves of the chains can be compared), each group's steps splatting
-/// into a film of its own: a chain's steps do not depend on the group it is in, and the
-/// films' sums are exact, so the image does not depend on the number of threads. After each
-/// round the snapshots due are developed by `develop(chains, film)`, `film` being `into`
-/// with the splats so far (and the mutations done as its light paths); at the end the
-/// splats are added to `into`.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn run_chains<C: Send>(
-    pool: &rayon::ThreadPool,
-    opts: &RenderOptions,
-    start: std::time::Instant,
-    pixels: u64,
-    total: u64,
-    span: ChainSpan,
-    chains: &mut [C],
-    into: &mut Film,
-    step: impl Fn(&mut C, &mut Film) + Sync,
-    snapshots: &mut Vec<Snapshot>,
-    develop: impl Fn(&[C], Film) -> Vec<Rgb>,
-) -> ChainRun {
-    use rayon::prelude::*;
-    let count = chains.len() as u64;
-    if count == 0 {
-        return ChainRun { done: span.done, interrupted: false, groups: Vec::new() };
-    }
-    let mut films = vec![Film::new(into.width, into.height, into.filter); pool.current_num_threads().max(2)];
-    let per_group = chains.len().div_ceil(films.len());
-    let per_round = pixels.div_ceil(count);
-    let (mut done, mut interrupted) = (span.done, false);
-    while done < total {
-        let n = per_round.min((total - done).div_ceil(count));
-        pool.install(|| {
-            chains.par_chunks_mut(per_group).zip(films.par_iter_mut()).with_max_len(1).for_each(|(group, film)| {
-                crate::accel::embree::set_flush_denormals();
-                for ch in group {
-                    for _ in 0..n {
-                        step(ch, film);
-                    }
-                }
-            })
-        });
-        done += n * count;
-        if !opts.checkpoints.is_empty() {
-            let elapsed = start.elapsed().as_secs_f64();
-            take_snapshots(&opts.checkpoints, snapshots, elapsed, (done / pixels) as u32, || {
-                let mut f = into.clone();
-                f.add_splat_films(&films);
-                f.light_paths = done;
-                develop(chains, f)
-            });
-        }
-        if opts.stop.as_ref().is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst)) {
-            interrupted = true;
-            break;
-        }
-        let elapsed = start.elapsed().as_secs_f64();
-        if let Budget::Time(t) = opts.budget
-            && elapsed >= t
-        {
-            break;
-        }
-        if span.until.is_some_and(|u| elapsed >= u) {
-            break;
-        }
-    }
-    into.add_splat_films(&films);
-    let sizes = chains.chunks(per_group).map(|g| g.len());
-    ChainRun { done, interrupted, groups: films.into_iter().zip(sizes).collect() }
-}
-
-/// The output of a Markov-chain render (PSSMLT, MEMLT): its statistics, with the
-/// iterations (mutations per pixel) it rendered and what `set` adds, and its image.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn chains_output(
-    scene: &Scene,
-    opts: &RenderOptions,
-    threads: usize,
-    counters: Counters,
-    seconds: f64,
-    spp: u32,
-    film: Film,
-    image: Vec<Rgb>,
-    snapshots: Vec<Snapshot>,
-    interrupted: bool,
-    iterations: Option<Range<u32>>,
-    set: impl FnOnce(&mut RenderStats),
-) -> RenderOutput {
-    let mut stats = RenderStats {
-        iterations: match opts.budget {
-            Budget::Spp(spp) => Some(iterations.unwrap_or(0..spp)),
-            Budget::Time(_) => None,
-        },
-        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
-    };
-    set(&mut stats);
-    let (width, height) = (scene.film.width, scene.film.height);
-    RenderOutput { image, strategy_images: Vec::new(), snapshots, width, height, stats, film: Some(film) }
-}
-
-/// A worker pool of `threads` threads (0 = all cores).
-pub(crate) fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, crate::error::Error> {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| crate::error::Error::Usage(format!("cannot start {threads} threads: {e}")))
 }
 
 /// The image as it stood at a checkpoint.
@@ -537,7 +412,7 @@ pub fn render_iterations(
         bidir::bdpt::check_lights(scene, kind.name()).map_err(Error::Usage)?;
     }
     match &opts.method {
-        Method::Pssmlt(o) => mlt::render(scene, opts, o, iterations),
+        Method::Pssmlt(o) => pssmlt::render(scene, opts, o, iterations),
         Method::Memlt(o) => memlt::render(scene, opts, o, iterations),
         Method::Path(_) => render_loop::run(scene, opts, path::PathTracer::new(spec), false, iterations),
         Method::Lighttrace(_) => {

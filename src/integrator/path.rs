@@ -2,11 +2,11 @@
 //! per vertex, MIS by the power heuristic between BSDF and light sampling, Russian roulette
 //! from `rr_depth` on, and Mitsuba's `max_depth` (segments from the camera; -1 unlimited).
 
-use super::Counters;
-use super::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
+use crate::integrator::Counters;
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::math::{Rgb, max_component};
 use crate::sampling::{Random, power_heuristic};
 use crate::scene::{IntegratorSpec, Scene};

@@ -2,17 +2,18 @@
 //! struct, read alike by the command line, experiment files and the library) and its
 //! defaults. [`Method`] is an integrator with its options, what a render is given.
 
-use super::IntegratorKind;
-use super::bidir::bdpt::{BdptOptions, LighttraceOptions};
-use super::bidir::budget::BudgetOptions;
-use super::bidir::eorr::EorrOptions;
-use super::bidir::mis::Heuristic;
-use super::bidir::pcbpt::{PcbptOptions, PoolOptions};
-use super::bidir::pool::LvcOptions;
-use super::bidir::spcbpt::SpcbptOptions;
-use super::memlt::MemltOptions;
-use super::mlt::{ChainOptions, PssmltOptions};
-use super::path::PathOptions;
+use crate::integrator::IntegratorKind;
+use crate::integrator::bidir::bdpt::{BdptOptions, LighttraceOptions};
+use crate::integrator::bidir::mis::Heuristic;
+use crate::integrator::budget::BudgetOptions;
+use crate::integrator::eorr::EorrOptions;
+use crate::integrator::lvc::LvcOptions;
+use crate::integrator::memlt::MemltOptions;
+use crate::integrator::metropolis::ChainOptions;
+use crate::integrator::path::PathOptions;
+use crate::integrator::pcbpt::{PcbptOptions, PoolOptions};
+use crate::integrator::pssmlt::PssmltOptions;
+use crate::integrator::spcbpt::SpcbptOptions;
 use serde::Serialize;
 
 /// An integrator and its options (serialized as the options alone).

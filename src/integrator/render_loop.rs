@@ -22,11 +22,11 @@
 //! Light-tracing contributions (`t = 1`) are splatted: each tile (and each part of a light
 //! pool) collects its splats in a list, and the lists are added to the film in order.
 
-use super::{
-    Budget, Counters, PhaseRays, PhaseTimes, RenderOptions, RenderOutput, RenderStats, take_snapshots, thread_pool,
-};
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
+use crate::integrator::{
+    Budget, Counters, PhaseRays, PhaseTimes, RenderOptions, RenderOutput, RenderStats, take_snapshots,
+};
 use crate::math::Rgb;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -76,28 +76,6 @@ pub(crate) struct Warmup {
 impl Warmup {
     pub fn new(iterations: Range<u32>, tiles: bool) -> Warmup {
         Warmup { ranges: vec![(iterations, tiles)] }
-    }
-
-    /// The warm-up of a pool integrator whose budget ([`super::bidir::budget`]) is measured
-    /// in iterations before `window_end` (with `BudgetMode::Auto`) and whose counts take
-    /// the previous iteration's state (its camera pass too with `previous_tiles`): those
-    /// iterations, with their camera passes, then iteration `first - 1`.
-    pub fn after_budget(
-        mode: super::bidir::budget::BudgetMode,
-        window_end: u32,
-        first: u32,
-        previous_tiles: bool,
-    ) -> Warmup {
-        let previous = first.saturating_sub(1)..first;
-        if mode == super::bidir::budget::BudgetMode::Off {
-            return Warmup::new(previous, previous_tiles);
-        }
-        let measured = 0..first.min(window_end);
-        let mut ranges = vec![(measured.clone(), true)];
-        if previous.start >= measured.end {
-            ranges.push((previous, previous_tiles));
-        }
-        Warmup { ranges }
     }
 }
 
@@ -153,7 +131,7 @@ pub(crate) struct PixelSink<'a> {
     splats: &'a mut Vec<Splat>,
 }
 
-impl super::bidir::Sink for PixelSink<'_> {
+impl crate::integrator::bidir::Sink for PixelSink<'_> {
     #[inline]
     fn add(&mut self, s: usize, t: usize, value: Rgb) {
         self.l += value;
@@ -203,7 +181,6 @@ pub(crate) fn sample_tile_in(
     mut sample: impl FnMut(Vec2, &mut Sampler, &mut PixelSink, &mut Counters) -> bool,
 ) -> TileResult {
     let n = strata.map_or(0, |spp| (spp as f64).sqrt() as u32);
-    crate::accel::embree::set_flush_denormals();
     let layers = if ctx.layers { STRATEGY_LAYERS } else { 0 };
     let mut block = ImageBlock::with_layers(tile, ctx.scene.film.filter, layers);
     let mut counters = Counters::default();
@@ -296,7 +273,7 @@ pub(crate) fn run<M: Iterative>(
     bidirectional: bool,
     iterations: Option<Range<u32>>,
 ) -> Result<RenderOutput, Error> {
-    let pool = thread_pool(opts.threads)?;
+    let pool = crate::workers::render_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let (w, h) = (scene.film.width, scene.film.height);
     let layers = opts.strategy_images && bidirectional;

@@ -77,7 +77,7 @@ impl Scene {
         if options.threads == 0 {
             return load();
         }
-        crate::integrator::thread_pool(options.threads)?.install(load)
+        crate::workers::pool(options.threads)?.install(load)
     }
 
     fn from_document(doc: Document, path: &Path, options: &LoadOptions, start: Instant) -> Result<Scene> {

@@ -3,13 +3,13 @@
 //! `(s,t)`), and BDPT with efficiency-optimised Russian roulette on connections (EORR,
 //! contract §4).
 
-use super::mis::{Counts, Heuristic, StrategyCounts, mis_shares_with, mis_weight_with};
-use super::{
-    Connection, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
-};
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
 use crate::integrator::Counters;
+use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_shares_with, mis_weight_with};
+use crate::integrator::bidir::{
+    Connection, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
+};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
@@ -131,7 +131,7 @@ impl<C: StrategyCounts> Connector<'_, C> {
             y0.infinite = true;
             y0.connectible = false;
             y0.pdf_fwd = y0.pdf_light_origin(scene);
-            let light_end = End { f: Rgb::ZERO, pdf_fwd: super::disk_pdf(scene), pdf_rev: 0.0 };
+            let light_end = End { f: Rgb::ZERO, pdf_fwd: crate::integrator::bidir::disk_pdf(scene), pdf_rev: 0.0 };
             (y0, Connection { w: -ls.wi, dist2: 1.0, inv_dist2: 1.0, light_end, camera_end })
         } else {
             let y0 = Vertex::light(l, ls.p, ls.n, Vec2::ZERO, Rgb::ONE, light_origin_pdf(scene, l));

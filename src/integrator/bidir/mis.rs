@@ -8,11 +8,11 @@
 //! `n(s',t')` times per camera sample (the strategy count, 1 in BDPT); the weight of
 //! strategy `s` is `(n_s p_s)^β / Σ_{s'} (n_{s'} p_{s'})^β`, β = 1 (balance) or 2 (power).
 
-use super::{Connection, Vertex, VertexKind, nee_ratio};
+use crate::integrator::bidir::{Connection, Vertex, VertexKind, nee_ratio};
 use crate::scene::Scene;
 
-/// Room for two subpaths of [`super::MAX_VERTICES`].
-pub const CAP: usize = 2 * super::MAX_VERTICES;
+/// Room for two subpaths of [`crate::integrator::bidir::MAX_VERTICES`].
+pub const CAP: usize = 2 * crate::integrator::bidir::MAX_VERTICES;
 /// Paths up to this many vertices use a small array.
 pub const SHORT: usize = 16;
 
@@ -462,7 +462,7 @@ impl Shares {
     /// the density the sample was drawn with: the camera path's own and light tracing's
     /// shares times `r`. Whatever the counts, a sample of the weighted contribution `v` then
     /// estimates `∫ f² / Σ n'_k p_k` by `v² / combined(a, c)` (the counts `n'` of a budget
-    /// with drawn counts, [`super::budget::measure`]); with the MIS counts' shares it would
+    /// with drawn counts, [`crate::integrator::budget::measure`]); with the MIS counts' shares it would
     /// estimate `r` times as much for a connection that drew its vertex `r` times less often
     /// than MIS assumed (SPCBPT's harmonic counts on `staircase2`: path tracing predicted at
     /// 2.9–4.2 times the plan's variance, against 1.6–2.5 with its exact counts). `r = 1`

@@ -1,5 +1,5 @@
-//! The bidirectional core shared by light tracing, BDPT, EORR, light-vertex-cache BDPT and
-//! (later) PCBPT and Metropolis: path vertices with area-measure densities, one random walk
+//! The bidirectional core shared by light tracing, BDPT, EORR, light-vertex-cache BDPT,
+//! PCBPT, SPCBPT and the Metropolis integrators: path vertices with area-measure densities, one random walk
 //! for both subpaths, the connection terms, and MIS weights by the ratio walk ([`mis`]).
 //!
 //! Notation follows pbrt-v4 and the contract: light vertices `y_0..y_{s-1}` (`y_0` on an
@@ -8,19 +8,12 @@
 //! by its own walk, `pdf_rev` the density had it been generated from the other end.
 
 pub mod bdpt;
-pub mod budget;
-pub mod cache_fit;
-pub mod eorr;
 pub mod mis;
-pub mod pc_cache;
-pub mod pcbpt;
 pub mod pool;
-pub mod spcbpt;
-pub mod subspace;
 
-use super::Counters;
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
+use crate::integrator::Counters;
 use crate::math::{Frame, Rgb, max_component, offset_origin};
 use crate::sampling::Random;
 use crate::scene::Scene;

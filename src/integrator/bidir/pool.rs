@@ -1,23 +1,19 @@
-//! Light pools shared by every pixel of an iteration, and light-vertex-cache BDPT on them
-//! (Davidovic et al. 2014; contract §5): `M` light subpaths per iteration, light tracing
-//! (`t = 1`) from all of them, and `N` connections per camera vertex to pool vertices chosen
-//! uniformly — PCBPT without its cached PMFs.
+//! Light pools shared by every pixel of an iteration (contract §5), and the camera pass of
+//! the integrators that connect to them (LVC, PCBPT, SPCBPT): BDPT's `s = 0` and `s = 1`
+//! strategies at every camera vertex and connections to pool vertices that a
+//! [`PoolSelection`] picks.
 
-use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::SplatShares;
-use super::mis::{Counts, Heuristic, Shares, StrategyCounts};
-use super::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
 use crate::error::Error;
-use crate::film::{Splat, Tile};
-use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
-use crate::integrator::{Counters, RenderStats};
+use crate::film::Splat;
+use crate::integrator::Counters;
+use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
+use crate::integrator::bidir::mis::{Shares, StrategyCounts};
+use crate::integrator::bidir::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
+use crate::integrator::render_loop::TileResult;
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
-use serde::Serialize;
-use std::ops::Range;
-use std::time::Instant;
 
 /// Camera depths the concentration of pool draws is measured for: `z_1 .. z_15` each, deeper
 /// vertices together.
@@ -47,6 +43,14 @@ pub struct LightPool {
     pub connectible: Vec<u32>,
     /// Number of light subpaths traced (`M`).
     pub paths: usize,
+}
+
+/// A light-tracing splat's luminance and MIS shares.
+#[derive(Clone, Copy, Debug)]
+pub struct SplatShares {
+    pub pos: Vec2,
+    pub value: f32,
+    pub shares: Shares,
 }
 
 /// Collects splats (pool light tracing has no pixel of its own), and with `shares` each
@@ -133,7 +137,6 @@ impl LightPool {
         let chunks: Vec<(Chunk, Vec<SplatShares>)> = (0..paths.div_ceil(CHUNK))
             .into_par_iter()
             .map(|c| {
-                crate::accel::embree::set_flush_denormals();
                 let mut verts = Vec::new();
                 let mut lens = Vec::new();
                 let mut splats = Vec::new();
@@ -199,59 +202,6 @@ impl LightPool {
     }
 }
 
-/// Options of light-vertex-cache BDPT (`--integrator lvc`).
-#[derive(Clone, Debug, Serialize, clap::Args)]
-pub struct LvcOptions {
-    /// MIS heuristic.
-    #[arg(long, value_enum, default_value_t = Heuristic::default())]
-    pub heuristic: Heuristic,
-    /// Light paths per iteration (0 = one per pixel).
-    #[arg(long = "light-paths", alias = "lvc-light-paths", default_value_t = LvcOptions::default().light_paths)]
-    pub light_paths: usize,
-    /// Connections to pool vertices per camera vertex.
-    #[arg(long = "connections", alias = "lvc-connections", default_value_t = LvcOptions::default().connections)]
-    pub connections: u32,
-    /// Memory limit of the light pool, in MiB: settings whose pool would need more are refused.
-    #[arg(long = "max-pool-mb", default_value_t = LvcOptions::default().max_pool_mb)]
-    pub max_pool_mb: usize,
-}
-
-impl Default for LvcOptions {
-    fn default() -> LvcOptions {
-        LvcOptions { heuristic: Heuristic::default(), light_paths: 0, connections: 1, max_pool_mb: 4096 }
-    }
-}
-
-/// Light-vertex-cache BDPT: BDPT's `s = 0` and `s = 1` strategies per camera vertex, and
-/// `N` connections to uniformly chosen pool vertices, `F = (1/N) Σ w C(v, z) V / M`.
-#[derive(Clone, Debug)]
-pub struct Lvc {
-    pub bdpt: Bdpt,
-    /// Light paths per iteration (`M`).
-    pub light_paths: usize,
-    /// Connections per camera vertex (`N`).
-    pub connections: u32,
-}
-
-impl Lvc {
-    #[allow(clippy::too_many_arguments)]
-    pub fn sample<R: Random, C: StrategyCounts>(
-        &self,
-        conn: &Connector<C>,
-        pool: &LightPool,
-        pos: Vec2,
-        rng: &mut R,
-        scratch: &mut Scratch,
-        sink: &mut impl Sink,
-        counters: &mut Counters,
-    ) {
-        let v = pool.connectible.len();
-        let select = Uniform { v, scale: v as f32 / (pool.paths.max(1) as f32 * self.connections as f32) };
-        let pass = PoolPass { bdpt: &self.bdpt, connections: self.connections, conn, pool };
-        pass.sample(&select, pos, rng, scratch, sink, counters);
-    }
-}
-
 /// How a pool integrator picks the pool vertices a camera vertex connects to.
 pub trait PoolSelection {
     /// What the draws of one camera vertex share.
@@ -284,35 +234,11 @@ pub fn draw_one_by_one<P: PoolSelection + ?Sized, R: Random>(
     }
 }
 
-/// Uniform selection over the pool's `v` vertices (LVC): each draw weighs `V / (N M)`.
-struct Uniform {
-    v: usize,
-    scale: f32,
-}
-
-impl PoolSelection for Uniform {
-    type Lookup = ();
-
-    fn lookup(&self, _z: &Vertex) {}
-
-    #[inline]
-    fn draw<R: Random>(&self, _: &(), _k: u32, _n: u32, rng: &mut R) -> Option<(usize, f32)> {
-        Some((((rng.next_1d() * self.v as f32) as usize).min(self.v - 1), self.scale))
-    }
-}
-
 /// A [`PoolPass`] with its selection and scratch, as one camera sample at a time.
 pub(crate) struct PoolSampler<'a, C, P> {
     pub pass: PoolPass<'a, C>,
     pub select: &'a P,
     pub scratch: Scratch,
-}
-
-impl<C: StrategyCounts, P: PoolSelection> super::budget::CameraSample for PoolSampler<'_, C, P> {
-    #[inline]
-    fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl Sink, counters: &mut Counters) {
-        self.pass.sample(self.select, pos, rng, &mut self.scratch, sink, counters);
-    }
 }
 
 /// The camera pass of the pool integrators: per camera sample, BDPT's `s = 0` and `s = 1`
@@ -418,80 +344,4 @@ pub(crate) fn check_pool_memory(m: usize, pilot: &LightPool, max_pool_mb: usize,
         )));
     }
     Ok(())
-}
-
-/// LVC in the render loop: one pool per iteration; the strategy counts use `V̄` of the
-/// previous iteration's pool (of a pilot pool before the first), so a chunk that starts at
-/// iteration `A` re-traces pool `A - 1`.
-pub struct LvcRender {
-    pub lvc: Lvc,
-    pub heuristic: Heuristic,
-    pub max_pool_mb: usize,
-    vbar: f32,
-    pool_size: Option<(usize, usize)>,
-}
-
-impl LvcRender {
-    pub fn new(lvc: Lvc, heuristic: Heuristic, max_pool_mb: usize) -> LvcRender {
-        LvcRender { lvc, heuristic, max_pool_mb, vbar: 0.0, pool_size: None }
-    }
-
-    fn counts(&self, scene: &Scene) -> Counts {
-        let pixels = scene.film.width as f32 * scene.film.height as f32;
-        Counts::Pool {
-            light_trace: self.lvc.light_paths as f32 / pixels,
-            connect: if self.vbar > 0.0 { self.lvc.connections as f32 / self.vbar } else { 0.0 },
-        }
-    }
-}
-
-impl Iterative for LvcRender {
-    type Pass = LightPool;
-
-    fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
-        let (m, limits) = (self.lvc.light_paths, &self.lvc.bdpt.limits);
-        let (pilot, _, _) = LightPool::trace::<Counts>(ctx.scene, limits, m, ctx.seed, PILOT_ITERATION, None);
-        check_pool_memory(m, &pilot, self.max_pool_mb, "--lvc-light-paths")?;
-        self.vbar = pilot.mean_vertices();
-        Ok(())
-    }
-
-    fn pass_end(&self, first: u32, _: u32) -> u32 {
-        first + 1
-    }
-
-    fn warmup(&self, first: u32) -> Warmup {
-        Warmup::new(first.saturating_sub(1)..first, false)
-    }
-
-    fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<LightPool> {
-        let t = Instant::now();
-        let counts = self.counts(ctx.scene);
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
-        let splat = keep.then_some((&conn, &self.lvc.bdpt, ctx.layers));
-        let (pool, splats, counters) =
-            LightPool::trace(ctx.scene, &self.lvc.bdpt.limits, self.lvc.light_paths, ctx.seed, first as u64, splat);
-        work.phases.light_pool += t.elapsed().as_secs_f64();
-        work.shadow.light_pool += counters.shadow_rays;
-        Prepared { pass: pool, splats, counters, splat_paths: None }
-    }
-
-    fn render_tile(&self, ctx: &Ctx, pool: &LightPool, tile: Tile, first: u32, count: u32) -> TileResult {
-        let counts = self.counts(ctx.scene);
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
-        let mut scratch = Scratch::default();
-        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-            self.lvc.sample(&conn, pool, pos, rng, &mut scratch, sink, counters);
-            true
-        })
-    }
-
-    fn finish(&mut self, _: &Ctx, pool: LightPool, _: Range<u32>, _: &[TileResult]) {
-        self.vbar = pool.mean_vertices();
-        self.pool_size = Some((pool.paths, pool.connectible.len()));
-    }
-
-    fn report(&self, stats: &mut RenderStats) {
-        stats.pool = self.pool_size;
-    }
 }

@@ -1,6 +1,6 @@
 //! The manifold's tests: the Jacobian against finite differences, walks through reflections and refractions, and the densities against walked and reversed chains.
 
-use super::*;
+use crate::integrator::manifold::*;
 use crate::sampling::Sampler;
 
 fn rand3(rng: &mut Sampler) -> DVec3 {

@@ -14,10 +14,10 @@
 //! its reverse. The proposal density sums over every split that could have produced the
 //! new stretch ([`stretch_density`]).
 
-use super::path::{Measured, contribution, regenerate, stretch_density};
 use crate::integrator::Counters;
 use crate::integrator::bidir::Vertex;
-use crate::integrator::mlt::bootstrap::ChainPaths;
+use crate::integrator::memlt::path::{Measured, contribution, regenerate, stretch_density};
+use crate::integrator::metropolis::bootstrap::ChainPaths;
 use crate::sampling::Random;
 use crate::scene::Scene;
 
@@ -30,7 +30,7 @@ pub struct Lengths {
     /// rough vertex: the chains' two-edge paths are those through a Dirac lobe alone.
     pub direct_separate: bool,
     /// A specular pass renders the paths whose every scattering vertex was left through a
-    /// Dirac lobe ([`super::specular_pass`]): the chains' paths have a rough vertex.
+    /// Dirac lobe ([`crate::integrator::memlt::specular_pass`]): the chains' paths have a rough vertex.
     pub specular_separate: bool,
 }
 

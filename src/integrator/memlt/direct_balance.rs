@@ -66,7 +66,7 @@ pub fn extra_direct_seconds(direct: f64, chains: f64, rest: f64, v_direct: f64, 
 }
 
 /// The chains' two halves, developed: the first half of the groups' films (a run's
-/// [`super::super::ChainRun::groups`]) against the rest, each over its own chains' share
+/// [`crate::integrator::metropolis::ChainRun::groups`]) against the rest, each over its own chains' share
 /// of the `done` mutations of `chains` chains, with its chain count; `None` with fewer than
 /// two groups.
 pub fn chain_halves(groups: &[(Film, usize)], done: u64, chains: usize) -> Option<[(Vec<Rgb>, f64); 2]> {

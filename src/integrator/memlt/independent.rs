@@ -1,11 +1,11 @@
 //! The independent mutation of MEMLT: a whole new path from the bidirectional generator
-//! ([`super::independent_path`]: a length and a split into light and camera walks drawn from
+//! ([`crate::integrator::memlt::independent_path`]: a length and a split into light and camera walks drawn from
 //! [`Strategies`], every vertex new), proposed whatever the current path is. Not one of
 //! Mitsuba 0.6's mutations (`--independent-mutation`): it is the path-space form of Kelemen's
 //! large step, which lets a chain move between regions of the image that its local moves
 //! join only rarely (a caustic seen directly and through a glass ball, say) in proportion to
 //! their brightness. Its densities are the generator's: `T(x → y) = p(y)`, `T(y → x) =
-//! p(x)`, with `p` the generator's density of a whole path ([`super::whole_path_density`]),
+//! p(x)`, with `p` the generator's density of a whole path ([`crate::integrator::memlt::whole_path_density`]),
 //! the mixture over every length and split of its walks' densities.
 //!
 //! An independent proposal is accepted with probability `min(1, w(y) / w(x))`, `w = f / p`:
@@ -27,9 +27,9 @@
 //! density adds the share times the walk's density (the camera-only split's, for a path with
 //! no interior vertex on an emitter).
 
-use super::bidirectional::{Lengths, Proposal};
 use crate::integrator::Counters;
 use crate::integrator::bidir::Vertex;
+use crate::integrator::memlt::bidirectional::{Lengths, Proposal};
 use crate::sampling::Random;
 use crate::scene::Scene;
 
@@ -45,7 +45,7 @@ pub struct Strategies {
     length: Vec<f64>,
     /// For each length, the probability of each split given it; `None`: uniform over `0..=k`.
     split: Option<Vec<Vec<f64>>>,
-    /// The share of draws that are camera walks to the first light ([`super::path::camera_walk_to_light`]);
+    /// The share of draws that are camera walks to the first light ([`crate::integrator::memlt::path::camera_walk_to_light`]);
     /// the lengths and splits above share the rest.
     camera_walks: f64,
 }
@@ -53,7 +53,8 @@ pub struct Strategies {
 impl Strategies {
     /// Lengths `∝ 2^-(k - min)`, splits uniform: the start paths' generator.
     pub fn uniform(lengths: Lengths) -> Self {
-        let length = (lengths.min..=lengths.max).map(|k| super::seed_length_pmf(lengths, k)).collect();
+        let length =
+            (lengths.min..=lengths.max).map(|k| crate::integrator::memlt::seed_length_pmf(lengths, k)).collect();
         Strategies { min: lengths.min, length, split: None, camera_walks: 0.0 }
     }
 
@@ -184,6 +185,11 @@ pub fn propose(
     rng: &mut impl Random,
     c: &mut Counters,
 ) -> Option<Proposal> {
-    let (path, measured, forward) = super::independent_path(scene, lengths, strategies, rng, c)?;
-    Some(Proposal { path, measured, forward, backward: super::whole_path_density(scene, strategies, x) })
+    let (path, measured, forward) = crate::integrator::memlt::independent_path(scene, lengths, strategies, rng, c)?;
+    Some(Proposal {
+        path,
+        measured,
+        forward,
+        backward: crate::integrator::memlt::whole_path_density(scene, strategies, x),
+    })
 }

@@ -39,7 +39,7 @@
 //! its frame (the offset manifold of its constraint): followed from `a` by
 //! [`manifold::scatter_about`], walked between `b` and `c` by the walk's re-traces.
 //!
-//! Densities are in the convention of the walks of [`super::path`] (each vertex reached
+//! Densities are in the convention of the walks of [`crate::integrator::memlt::path`] (each vertex reached
 //! along a ray has area density `|cos| / d²` per unit solid angle behind it, the Dirac lobes'
 //! coefficients left to `f`). From `a` to `b` they are those of a walk in the direction of
 //! travel; from `b` to `c` those of a walk continuing past `b` whose direction at `b` is the
@@ -51,16 +51,16 @@
 //! the half-vectors to the positions is triangular along the direction of travel, and from
 //! `b` to `c` the chain's `dω_b / dA_c` is that of the whole offset chain.
 
-use super::bidirectional::Proposal;
-use super::path::{
-    area_factor, as_light, connectible, contribution, hittable_light, join, lobe_pdf, pdf_from_light, ray_from,
-    reflects, retrace, settle_sky, sky_vertex, surface_vertex,
-};
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf};
 use crate::integrator::manifold::{self, Half, Scatter, TracedChain};
+use crate::integrator::memlt::bidirectional::Proposal;
+use crate::integrator::memlt::path::{
+    area_factor, as_light, connectible, contribution, hittable_light, join, lobe_pdf, pdf_from_light, ray_from,
+    reflects, retrace, settle_sky, sky_vertex, surface_vertex,
+};
 use crate::math::Frame;
 use crate::sampling::{Random, square_to_gaussian_2d, square_to_gaussian_2d_pdf, square_to_von_mises_fisher};
 use crate::scene::Scene;

@@ -23,7 +23,7 @@
 //! Every kind of light the renderer has may light the scene: lights at infinity enter a
 //! path as a vertex in their direction ([`path`]).
 //!
-//! By default the chains run two-stage Metropolis ([`super::two_stage`]): their target is
+//! By default the chains run two-stage Metropolis ([`crate::integrator::metropolis::two_stage`]): their target is
 //! the luminance over a first stage's map of the image, `b` the mean of that, the start
 //! paths drawn in proportion to it, and the chains' part of the image is finally scaled to
 //! the bootstrap's plain mean luminance. `--two-stage false` gives the plain luminance.
@@ -39,12 +39,12 @@ pub mod path;
 pub mod separate_light;
 pub mod specular_pass;
 
-use super::mlt::bootstrap::Keys;
-use super::stays::{LongestStay, Stay, Stays, near, pixel_of};
-use super::two_stage::Importance;
-use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
 use crate::integrator::bidir::Vertex;
+use crate::integrator::metropolis::bootstrap::Keys;
+use crate::integrator::metropolis::stays::{LongestStay, Stay, Stays, near, pixel_of};
+use crate::integrator::metropolis::two_stage::Importance;
+use crate::integrator::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
 use crate::scene::Scene;
@@ -112,7 +112,7 @@ pub struct MemltOptions {
     #[arg(long, value_enum, default_value_t = crate::integrator::bidir::mis::Heuristic::default())]
     pub heuristic: crate::integrator::bidir::mis::Heuristic,
     #[command(flatten)]
-    pub chain: super::mlt::ChainOptions,
+    pub chain: crate::integrator::metropolis::ChainOptions,
     /// Two-stage Metropolis (Mitsuba 0.6's `twoStage`): a first stage of BDPT samples
     /// estimates the image at a reduced resolution, and the chains sample paths in
     /// proportion to their luminance over it, so that dim pixels get as many mutations as
@@ -198,7 +198,7 @@ impl Default for MemltOptions {
     fn default() -> MemltOptions {
         MemltOptions {
             heuristic: Default::default(),
-            chain: super::mlt::ChainOptions::default(),
+            chain: crate::integrator::metropolis::ChainOptions::default(),
             two_stage: true,
             direct_samples: 16,
             direct_balance: true,
@@ -555,7 +555,6 @@ fn candidates(
         (0..n.div_ceil(chunk))
             .into_par_iter()
             .map(|c| {
-                crate::accel::embree::set_flush_denormals();
                 let mut counters = Counters::default();
                 let mut walk_only = 0.0;
                 let ws = (c * chunk..((c + 1) * chunk).min(n))
@@ -609,9 +608,9 @@ fn normalisation(
 ) -> ((f64, f64), (f64, f64), usize, Counters) {
     let n = mo.chain.bootstrap;
     let (mut sum, mut variance, mut counters) = ([0.0; 2], [0.0; 2], Counters::default());
-    let batches = super::mlt::bootstrap::in_batches(opts, start, mo.bootstrap_fraction, |batch| {
+    let batches = crate::integrator::metropolis::bootstrap::in_batches(opts, start, mo.bootstrap_fraction, |batch| {
         let offset = batch * n as u64;
-        let (target, plain, c) = super::mlt::bootstrap::bdpt_normalisation(
+        let (target, plain, c) = crate::integrator::metropolis::bootstrap::bdpt_normalisation(
             scene,
             mo.heuristic,
             pool,
@@ -712,7 +711,7 @@ fn balance(
 fn check_options(scene: &Scene, mo: &MemltOptions) -> Result<(), crate::error::Error> {
     use crate::error::Error;
     mo.chain.check_counts()?;
-    super::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
+    crate::integrator::bidir::bdpt::check_lights(scene, "memlt").map_err(Error::Usage)?;
     let direct = mo.direct_samples;
     if direct == 0 || direct < -1 {
         return Err(Error::Usage(format!(
@@ -760,7 +759,7 @@ pub fn render(
     let n_boot = mo.chain.bootstrap;
     let direct = mo.direct_samples;
     let defensive = mo.independent_defensive;
-    let pool = super::thread_pool(opts.threads)?;
+    let pool = crate::workers::render_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let mut lengths = lengths(scene);
     let dirac = scene.shapes.iter().any(|sh| scene.bsdfs[sh.bsdf].lobes(glam::Vec2::ZERO).any(|l| l.is_delta()));
@@ -822,7 +821,7 @@ pub fn render(
     let (importance, first_stage_samples) = if mo.two_stage {
         let fraction = mo.bootstrap_fraction / 2.0;
         let render_key = |stream: u64, i: u64| vec![opts.seed, stream, i];
-        let (map, n, c) = super::mlt::bootstrap::first_stage(
+        let (map, n, c) = crate::integrator::metropolis::bootstrap::first_stage(
             scene,
             opts,
             &pool,
@@ -933,7 +932,7 @@ pub fn render(
         };
         let run =
             |chains: &mut [Chain], base: &mut Film, span, rescale: &Option<(Vec<Rgb>, f64)>, snapshots: &mut _| {
-                super::run_chains(
+                crate::integrator::metropolis::run_chains(
                     &pool,
                     opts,
                     start,
@@ -947,7 +946,7 @@ pub fn render(
                     |_, f| developed(&f, rescale.as_ref()).0,
                 )
             };
-        let mut span = super::ChainSpan::default();
+        let mut span = crate::integrator::metropolis::ChainSpan::default();
         let mut time_left = true;
         if let (Some(halves), Budget::Time(t)) = (light.halves.take(), opts.budget) {
             // A tenth of the chains' time, then the balance.
@@ -955,7 +954,7 @@ pub fn render(
             span.until = Some(chains_start + direct_balance::MEASURE_SHARE * (t - chains_start));
             let first = run(&mut chains, &mut base, span, &rescale, &mut snapshots);
             (done, interrupted) = (first.done, first.interrupted);
-            span = super::ChainSpan { done, until: None };
+            span = crate::integrator::metropolis::ChainSpan { done, until: None };
             let now = start.elapsed().as_secs_f64();
             time_left = now < t;
             let chain_halves = direct_balance::chain_halves(&first.groups, done, chains.len());
@@ -978,7 +977,7 @@ pub fn render(
             (done, interrupted) = (rest.done, rest.interrupted);
         }
     }
-    let longest = super::stays::longest(chains.iter().map(|c| &c.stays));
+    let longest = crate::integrator::metropolis::stays::longest(chains.iter().map(|c| &c.stays));
     tally(&chains, &mut counters, &mut stats);
     let seconds = start.elapsed().as_secs_f64();
     stats.mutations_per_second = done as f64 / (seconds - stats.bootstrap_seconds).max(1e-9);
@@ -1039,7 +1038,7 @@ fn finish(
     mut stats: MemltStats,
     counters: Counters,
     start: Instant,
-    snapshots: Vec<super::Snapshot>,
+    snapshots: Vec<crate::integrator::Snapshot>,
     interrupted: bool,
     done: u64,
     iterations: Option<std::ops::Range<u32>>,
@@ -1054,7 +1053,7 @@ fn finish(
     let spp = (done / pixels) as u32;
     let (image, s) = developed(&film, rescale.as_ref().filter(|_| done > 0));
     stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b * s, done);
-    Ok(super::chains_output(
+    Ok(crate::integrator::metropolis::chains_output(
         scene,
         opts,
         threads,

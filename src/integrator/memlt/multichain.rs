@@ -13,7 +13,7 @@
 //! from the film and those directions to the re-traced vertices' areas: the pinhole's
 //! direction density times each re-traced vertex's area factor.
 //!
-//! **The light hit** ([`Mutator::LightHit`](super::Mutator), beyond Veach and Mitsuba 0.6):
+//! **The light hit** ([`Mutator::LightHit`](crate::integrator::memlt::Mutator), beyond Veach and Mitsuba 0.6):
 //! where no two neighbouring vertices of the path are rough, its light end is a chain of
 //! Dirac vertices that no shadow ray joins (`L S+ D S+ E`: a floor's caustic seen in a glass
 //! ball; `L S+ E`: a small light seen in it). Then the same re-trace goes on to the light
@@ -22,13 +22,13 @@
 //! manifold perturbation's walk fails: like a primary-sample-space step, `f / T` stays
 //! bounded there, both holding the chain's singular geometric factor.
 
-use super::bidirectional::Proposal;
-use super::lens::Radii;
-use super::path::{
-    area_factor, as_light, connectible, contribution, hittable_light, join, ray_from, retrace, settle_sky,
-};
 use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
+use crate::integrator::memlt::bidirectional::Proposal;
+use crate::integrator::memlt::lens::Radii;
+use crate::integrator::memlt::path::{
+    area_factor, as_light, connectible, contribution, hittable_light, join, ray_from, retrace, settle_sky,
+};
 use crate::math::Frame;
 use crate::sampling::Random;
 use crate::scene::Scene;

@@ -2,15 +2,15 @@
 //! as Mitsuba 0.6 does, by a separate estimate): the direct-light pass by the path tracer
 //! (`--direct-samples`: paths of one edge, and of two through a rough vertex; those through a
 //! Dirac lobe, a small light's reflection in glass say, are the specular pass's, or the
-//! chains' without one), the specular pass ([`super::specular_pass`], `--specular-samples`),
+//! chains' without one), the specular pass ([`crate::integrator::memlt::specular_pass`], `--specular-samples`),
 //! and the film the chains splat into over them. Under a time budget with
 //! `--direct-balance` the direct pass runs twice, from two streams, so that its noise can be
-//! measured, and goes on later for the share of the time [`super::direct_balance`] gives it.
+//! measured, and goes on later for the share of the time [`crate::integrator::memlt::direct_balance`] gives it.
 
-use super::specular_pass::SpecularPass;
 use crate::error::Error;
 use crate::film::Film;
-use crate::integrator::mlt::bootstrap::Keys;
+use crate::integrator::memlt::specular_pass::SpecularPass;
+use crate::integrator::metropolis::bootstrap::Keys;
 use crate::integrator::path::PathTracer;
 use crate::integrator::{Budget, Counters, RenderOptions, render_loop};
 use crate::math::Rgb;
@@ -68,7 +68,8 @@ impl SeparateLight {
         if let Some(n) = specular {
             // Its own sample count: its image adds to the direct pass's.
             let spec = &scene.integrator;
-            let max_edges = if spec.max_depth < 0 { super::MAX_EDGES as u32 } else { spec.max_depth as u32 };
+            let max_edges =
+                if spec.max_depth < 0 { crate::integrator::memlt::MAX_EDGES as u32 } else { spec.max_depth as u32 };
             let out =
                 render_loop::run(scene, &pass(opts, key, n, SPECULAR_STREAM), SpecularPass { max_edges }, false, None)?;
             counters += out.stats.counters;

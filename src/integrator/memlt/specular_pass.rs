@@ -8,13 +8,13 @@
 //! few pixels, so the chains' share of it comes in rare, long visits (and the chains' fixed
 //! total spreads what they miss over the rest of the image). Here each pixel estimates it
 //! directly; the pixel's cells make its share of a reflection it covers in part nearly
-//! exact. The chains' paths are the rest ([`super::bidirectional::Lengths::covers`]).
+//! exact. The chains' paths are the rest ([`crate::integrator::memlt::bidirectional::Lengths::covers`]).
 
-use super::super::Counters;
-use super::super::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_in};
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
+use crate::integrator::Counters;
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_in};
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;

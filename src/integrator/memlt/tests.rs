@@ -4,9 +4,9 @@
 //! density the check must reject; and every mutator's detailed balance, `E[r] = P(r > 0)`
 //! for `x ∼ π`, on the glass ball's scene.
 
-use super::*;
 use crate::integrator::bidir::VertexKind;
-use crate::integrator::mlt::bootstrap::ChainPaths;
+use crate::integrator::memlt::*;
+use crate::integrator::metropolis::bootstrap::ChainPaths;
 
 /// A scene of the repository with `-D` style overrides.
 fn scene(file: &str, overrides: &[(&str, &str)]) -> Scene {
@@ -36,9 +36,11 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
 /// `seed`), with its standard error.
 fn bootstrap_estimate(scene: &Scene, paths: ChainPaths, (seed, n): (u64, usize)) -> (f64, f64) {
     let heuristic = MemltOptions::default().heuristic;
-    let pool = super::super::thread_pool(2).unwrap();
-    super::super::mlt::bootstrap::bdpt_normalisation(scene, heuristic, &pool, n, paths, None, &|s, i| vec![seed, s, i])
-        .0
+    let pool = crate::workers::render_pool(2).unwrap();
+    crate::integrator::metropolis::bootstrap::bdpt_normalisation(scene, heuristic, &pool, n, paths, None, &|s, i| {
+        vec![seed, s, i]
+    })
+    .0
 }
 
 /// BDPT's estimate of the luminance of paths of at least `min` edges.
@@ -679,7 +681,7 @@ fn the_direct_and_specular_passes_and_the_chains_share_every_path() {
     fn pass<M: Iterative + Clone>(scene: &Scene, method: M, spp: u32) -> (f64, f64) {
         let means: Vec<f64> = (0..4)
             .map(|seed| {
-                let mut o = RenderOptions::new(super::super::IntegratorKind::Path, Budget::Spp(spp));
+                let mut o = RenderOptions::new(crate::integrator::IntegratorKind::Path, Budget::Spp(spp));
                 (o.threads, o.progress, o.seed) = (2, false, 43 + seed);
                 let out = run(scene, &o, method.clone(), false, None).unwrap();
                 let image = out.film.unwrap().develop();

@@ -3,16 +3,14 @@
 //! patch poisoned), the weights sum to one; for paths without Dirac deltas they equal the
 //! weights computed from full path densities.
 
-use super::*;
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::integrator::Counters;
-use crate::integrator::bidir::pcbpt::{
-    Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, PoolOptions, trace_records,
-};
+use crate::integrator::bidir::mis::*;
 use crate::integrator::bidir::pool::LightPool;
-use crate::integrator::bidir::spcbpt::{Measured, Model, SpCounts, test_model};
 use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
+use crate::integrator::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, PoolOptions, trace_records};
+use crate::integrator::spcbpt::{Measured, Model, SpCounts, test_model};
 use crate::light::{Light, LightSampler};
 use crate::math::{Frame, Rgb};
 use crate::sampling::Sampler;
@@ -647,7 +645,7 @@ fn unit_count_walk_is_the_general_walk_with_unit_counts() {
 /// the footprint's area is `A = 1 / (100 pE(x_4))`.
 #[test]
 fn correlation_factors_follow_the_prefixes_randomness() {
-    use super::Correlation;
+    use crate::integrator::bidir::mis::Correlation;
     let corr = Correlation { pixels: 100.0, connections: 4.0 };
     let factors = |pl: [f32; 6], pe: [f32; 6]| {
         let mut out = [0.0f32; 6];

@@ -18,7 +18,7 @@
 //!    uniform distribution. From then on the state is fixed: `Γ`, and what the MIS counts take
 //!    from the last training iteration, so a chunk of a distributed render re-runs at most
 //!    the training iterations and the one after them.
-//! 4. **Budget** (`--pc-budget auto`, [`super::budget`]). It measures the last two training
+//! 4. **Budget** (`--pc-budget auto`, [`crate::integrator::budget`]). It measures the last two training
 //!    iterations (`--sp-budget-in-training`; `false`: the two after training), their
 //!    training samples kept as in any other ([`TrainingSampler`], carried in the tile's
 //!    moments), and chooses once `Γ` is trained: on `staircase2`, where it takes path
@@ -35,25 +35,29 @@
 //! every strategy of every weighed path; the camera subpath's and the pool's vertices are
 //! labelled with their subspaces once instead ([`Model::label`]).
 
-use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{
-    Budget, BudgetMode, BudgetOptions, CameraSample, Operations, Plan, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES,
-    SPCBPT_SUBSPACE_PRICES, SplatShares, TileMoments, TracedPool, pool_tile,
-};
-use super::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
-use super::pc_cache::{Record, trace_records};
-use super::pcbpt::{
-    PcMis, PcOptions, PoolOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
-};
-use super::pool::{
+pub mod subspace;
+
+use crate::error::Error;
+use crate::film::Tile;
+use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
+use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
+use crate::integrator::bidir::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
     concentration_depth, pass_concentration,
 };
-use super::subspace::{FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability};
-use super::{Sink, Vertex, VertexKind};
-use crate::error::Error;
-use crate::film::Tile;
+use crate::integrator::bidir::{Sink, Vertex, VertexKind};
+use crate::integrator::budget::{
+    Budget, BudgetMode, BudgetOptions, CameraSample, Operations, Plan, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES,
+    SPCBPT_SUBSPACE_PRICES, SplatShares, TileMoments, TracedPool, pool_tile,
+};
+use crate::integrator::pcbpt::cache::{Record, trace_records};
+use crate::integrator::pcbpt::{
+    PcMis, PcOptions, PoolOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
+};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
+use crate::integrator::spcbpt::subspace::{
+    FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability,
+};
 use crate::integrator::{Counters, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Random, Sampler};
@@ -158,7 +162,7 @@ impl SpOptions {
     }
 
     /// The budget's prices: a connection's weight costs more with the counts that follow
-    /// the path's subspaces ([`super::budget::cost`]).
+    /// the path's subspaces ([`crate::integrator::budget::cost`]).
     fn prices(&self) -> Prices {
         match self.mis {
             PcMis::Subspace => SPCBPT_SUBSPACE_PRICES,
@@ -852,7 +856,7 @@ pub(crate) fn test_model(
     subspaces: (usize, usize),
     w: impl Fn(f32) -> f32,
 ) -> (Model, LightPool) {
-    let limits = super::WalkLimits::new(8, 3);
+    let limits = crate::integrator::bidir::WalkLimits::new(8, 3);
     let (pool, _, _) = LightPool::trace::<Counts>(scene, &limits, m, 3, 0, None);
     let grid = PcOptions { stride, ..PcOptions::default() };
     let (records, _) = trace_records(scene, &limits, &grid, 3, 0);
@@ -874,9 +878,9 @@ pub(crate) fn test_model(
 mod tests {
     use super::*;
     use crate::integrator::Counters;
-    use crate::integrator::bidir::pc_cache::tests::scene;
     use crate::integrator::bidir::pool::draw_one_by_one;
     use crate::integrator::bidir::{WalkLimits, camera_subpath};
+    use crate::integrator::pcbpt::cache::tests::scene;
     use crate::sampling::Sampler;
     use crate::sampling::chi2::discrete_chi2_of;
 

@@ -1,7 +1,7 @@
 //! BDPT with efficiency-optimised Russian roulette on connections (EORR, contract §4): a
 //! connection whose MIS-weighted contribution (luminance) falls below a per-pixel threshold
 //! `τ = fraction × (the pixel's mean luminance)` is traced with probability `c / τ` and
-//! divided by it ([`super::bdpt::RouletteMap`]); this file holds what the render loop keeps
+//! divided by it ([`crate::integrator::bidir::bdpt::RouletteMap`]); this file holds what the render loop keeps
 //! between iterations: the pixel means the thresholds come from.
 //!
 //! The means come from a pilot: the render's own first `P` samples per pixel
@@ -13,9 +13,9 @@
 //! every earlier one (a running mean; each iteration is a pass of its own): no bounded
 //! pilot, so such a render is not cut into chunks.
 
-use super::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
-use super::mis::{Counts, Heuristic};
 use crate::film::{Film, Tile};
+use crate::integrator::bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
+use crate::integrator::bidir::mis::{Counts, Heuristic};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, add_results, sample_tile};
 use crate::math::luminance;
 use crate::scene::Scene;

@@ -29,18 +29,21 @@
 //! reach, and the share of draws that reach one is `P(Vis)`; their ratio, `κ`, is how many
 //! times more often the cache's draws reach a vertex than uniform ones would.
 
-use super::Vertex;
-use super::bdpt::{Bdpt, Connector, Scratch};
-use super::budget::{Budget, BudgetOptions, Operations, PRICES, Plan, SplatShares, TracedPool, pool_tile};
-use super::cache_fit::CacheFit;
-use super::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
-use super::pool::{
-    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
-    concentration_depth, draw_one_by_one, pass_concentration,
-};
+pub mod cache;
+pub mod fit;
+
 use crate::bsdf::TransportMode;
 use crate::error::Error;
 use crate::film::Tile;
+use crate::integrator::bidir::Vertex;
+use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
+use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
+use crate::integrator::bidir::pool::{
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
+    concentration_depth, draw_one_by_one, pass_concentration,
+};
+use crate::integrator::budget::{Budget, BudgetOptions, Operations, PRICES, Plan, SplatShares, TracedPool, pool_tile};
+use crate::integrator::pcbpt::fit::CacheFit;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::{CacheStats, Counters, RenderStats};
 use crate::math::Rgb;
@@ -50,7 +53,7 @@ use serde::Serialize;
 use std::ops::Range;
 use std::time::Instant;
 
-pub use super::pc_cache::{Blend, Cache, MAX_NEIGHBOURS, Nearest, Neighbours, Record, trace_records};
+pub use crate::integrator::pcbpt::cache::{Blend, Cache, MAX_NEIGHBOURS, Nearest, Neighbours, Record, trace_records};
 
 /// The distance term `D_i` of the interpolation weights (supplemental Eq. 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
@@ -75,7 +78,7 @@ pub enum PcMis {
     /// uniform over the vertices they reach.
     Harmonic,
     /// `harmonic`'s counts corrected for the correlation of the `N` connections that share
-    /// one camera vertex's prefix ([`super::mis::Correlation`]).
+    /// one camera vertex's prefix ([`crate::integrator::bidir::mis::Correlation`]).
     Correlated,
     /// SPCBPT only: `n = N M Γ_ij / V_j`, the selection density with the draw within the
     /// light subspace taken as uniform over its `V_j` vertices (no light throughputs).
@@ -253,7 +256,7 @@ pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
     let x0 = path.get(0);
     let mut alpha = if x0.at_infinity() {
         // The radiance from infinity over the densities of its direction and of the disk.
-        let pdf = x0.pdf_light_origin(scene) * super::disk_pdf(scene);
+        let pdf = x0.pdf_light_origin(scene) * crate::integrator::bidir::disk_pdf(scene);
         if pdf <= 0.0 {
             return;
         }
@@ -437,7 +440,7 @@ pub(super) fn connection_counts(
 /// than using it).
 #[inline]
 fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
-    use super::mis::{CAP, SHORT};
+    use crate::integrator::bidir::mis::{CAP, SHORT};
     if n <= SHORT { f(&mut [Rgb::ZERO; SHORT][..n]) } else { f(&mut [Rgb::ZERO; CAP][..n]) }
 }
 
@@ -580,7 +583,7 @@ impl Iterative for PcbptRender {
 
     fn warmup(&self, first: u32) -> Warmup {
         let kappa = matches!(self.pc.opts.mis, PcMis::Harmonic | PcMis::Correlated);
-        Warmup::after_budget(self.pc.opts.budget.mode, self.pc.opts.budget.iterations + 1, first, kappa)
+        crate::integrator::budget::warmup(self.pc.opts.budget.mode, self.pc.opts.budget.iterations + 1, first, kappa)
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<PcPass> {

@@ -77,17 +77,19 @@
 pub mod cost;
 pub mod measure;
 
+pub use crate::integrator::bidir::pool::SplatShares;
 pub use cost::{Operations, PRICES, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES, SPCBPT_SUBSPACE_PRICES};
-pub use measure::{BudgetSink, Realized, SplatShares, Spread, TileMoments, Top};
+pub use measure::{BudgetSink, Realized, Spread, TileMoments, Top};
 use measure::{RealizedSums, Weighing, accumulate, own_moment, typical};
 
-use super::bdpt::{Bdpt, Connector};
-use super::mis::{Shares, StrategyCounts};
-use super::pool::{LightPool, PoolPlan};
 use crate::film::{Splat, Tile};
 use crate::integrator::Counters;
+use crate::integrator::bidir::Sink;
+use crate::integrator::bidir::bdpt::{Bdpt, Connector};
+use crate::integrator::bidir::mis::{Shares, StrategyCounts};
+use crate::integrator::bidir::pool::{LightPool, PoolPlan, PoolSampler, PoolSelection};
 use crate::integrator::path::PathTracer;
-use crate::integrator::render_loop::{Ctx, TileResult, sample_tile};
+use crate::integrator::render_loop::{Ctx, TileResult, Warmup, sample_tile};
 use crate::sampling::Sampler;
 use glam::Vec2;
 use serde::Serialize;
@@ -316,9 +318,32 @@ pub(crate) fn normalise_splats(splats: &mut [Splat], plan: &Plan, reference: usi
     reference as u64
 }
 
+/// The warm-up of a pool integrator whose budget is measured in iterations before
+/// `window_end` (with [`BudgetMode::Auto`]) and whose counts take the previous iteration's
+/// state (its camera pass too with `previous_tiles`): those iterations, with their camera
+/// passes, then iteration `first - 1`.
+pub(crate) fn warmup(mode: BudgetMode, window_end: u32, first: u32, previous_tiles: bool) -> Warmup {
+    let previous = first.saturating_sub(1)..first;
+    if mode == BudgetMode::Off {
+        return Warmup::new(previous, previous_tiles);
+    }
+    let measured = 0..first.min(window_end);
+    let mut ranges = vec![(measured.clone(), true)];
+    if previous.start >= measured.end {
+        ranges.push((previous, previous_tiles));
+    }
+    Warmup { ranges }
+}
+
 /// One camera sample of a pool integrator, into any sink.
 pub(crate) trait CameraSample {
-    fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl super::Sink, counters: &mut Counters);
+    fn sample(
+        &mut self,
+        pos: Vec2,
+        rng: &mut Sampler,
+        sink: &mut impl crate::integrator::bidir::Sink,
+        counters: &mut Counters,
+    );
 
     /// What the integrator learned from the tile's samples for later iterations (SPCBPT's
     /// training samples), taken once the tile is done: a measured tile carries it in its
@@ -879,6 +904,14 @@ pub(crate) fn pick(gains: &[f64], current: usize, margin: f64) -> usize {
     };
     // Ties go to the measured plan, then to the earlier candidate.
     (0..gains.len()).fold(current, |best, k| if credited(k) > credited(best) { k } else { best })
+}
+
+/// The pool integrators' camera pass, one sample at a time.
+impl<C: StrategyCounts, P: PoolSelection> CameraSample for PoolSampler<'_, C, P> {
+    #[inline]
+    fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl Sink, counters: &mut Counters) {
+        self.pass.sample(self.select, pos, rng, &mut self.scratch, sink, counters);
+    }
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 //! - [`LightSubspaces`]: a pool's connectible vertices by light subspace, and the draw of one
 //!   vertex within a subspace from the subspace's alias table.
 
-use super::Vertex;
+use crate::integrator::bidir::Vertex;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 

@@ -2,9 +2,11 @@
 //! primary-sample-space sampler (the small step's symmetry, its range, rejected proposals
 //! restored).
 
-use super::bootstrap::bdpt_normalisation;
-use super::*;
-use crate::integrator::two_stage::{Grid, Importance};
+use crate::integrator::metropolis::bootstrap::bdpt_normalisation;
+use crate::integrator::metropolis::primary::{PrimarySampler, perturb};
+use crate::integrator::metropolis::two_stage::{Grid, Importance};
+use crate::integrator::pssmlt::*;
+use crate::sampling::Random;
 
 #[test]
 fn two_stage_normalisation_is_the_image_over_the_map() {
@@ -21,10 +23,10 @@ fn two_stage_normalisation_is_the_image_over_the_map() {
     let pixels = 256.0;
     let sums: Vec<f64> = [1.0, 20.0, 5.0, 0.5].iter().map(|m| m * 64.0 / pixels).collect();
     let map = Importance::from_cells(grid, &sums, 1).unwrap();
-    let mut opts = RenderOptions::new(super::super::IntegratorKind::Bdpt, Budget::Spp(2048));
+    let mut opts = RenderOptions::new(crate::integrator::IntegratorKind::Bdpt, Budget::Spp(2048));
     opts.seed = 3;
     opts.threads = 2;
-    let image = super::super::render(&scene, &opts).unwrap().image;
+    let image = crate::integrator::render(&scene, &opts).unwrap().image;
     let over_map: f64 = image
         .iter()
         .enumerate()
@@ -32,7 +34,7 @@ fn two_stage_normalisation_is_the_image_over_the_map() {
         .sum::<f64>()
         / pixels;
     let plain = image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / pixels;
-    let pool = super::super::thread_pool(2).unwrap();
+    let pool = crate::workers::render_pool(2).unwrap();
     let key = |s: u64, i: u64| vec![17, s, i];
     let ((b, e), (l, le), _) =
         bdpt_normalisation(&scene, Default::default(), &pool, 400_000, ChainPaths::ALL, Some(&map), &key);

@@ -40,18 +40,10 @@
 //! 0.66× the variance of 4 and 2 at 1.65× (renders: 0.63–0.77×, 1.37–1.49×; the moments 0.88×
 //! and 1.21×).
 
-use super::super::mis::Shares;
-use super::super::{Sink, Vertex};
-use super::Plan;
+use crate::integrator::bidir::mis::Shares;
+use crate::integrator::bidir::{Sink, Vertex};
+use crate::integrator::budget::Plan;
 use glam::Vec2;
-
-/// A light-tracing splat's luminance and MIS shares.
-#[derive(Clone, Copy, Debug)]
-pub struct SplatShares {
-    pub pos: Vec2,
-    pub value: f32,
-    pub shares: Shares,
-}
 
 /// How the measured contributions count for the candidates: each candidate's count scales
 /// `(a, c)` against the plan in use, and the least density ratio whose moment counts in full
@@ -215,7 +207,7 @@ pub struct TileMoments {
     /// Per entry: its largest contribution and that contribution's shares ([`Top`]).
     pub(super) top: Vec<Top>,
     /// What the integrator learned from the tile besides (SPCBPT's training samples when it
-    /// measures a training iteration; [`super::CameraSample::learned`]).
+    /// measures a training iteration; [`crate::integrator::budget::CameraSample::learned`]).
     pub learned: Option<Box<dyn std::any::Any + Send + Sync>>,
     /// Connections each camera vertex draws under the plan in use.
     draws: u32,
@@ -357,7 +349,7 @@ impl TileMoments {
 /// those with a contribution of the camera path's own strategies ([`Realized::cross`]) are
 /// scaled by how much the realized samples miss of those strategies' diagonal (`own_moment`,
 /// from every strategy's samples, over `own_diagonal`, realized; summed over the pixels as
-/// relMSE weighs them: [`super::BudgetStats::missed`]). Without it the model put path tracing on
+/// relMSE weighs them: [`crate::integrator::budget::BudgetStats::missed`]). Without it the model put path tracing on
 /// `cornell-ply` at 3.3× the variance of PCBPT's defaults (renders: 4.1×), with it at
 /// 4.3–4.4× (the realized samples missed 42% of the camera path's diagonal). Scaling the
 /// connections' cross terms too (they have no such tail) put 8 connections on `veach-ajar`

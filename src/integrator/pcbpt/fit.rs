@@ -2,7 +2,7 @@
 //! value of each option would make it fit its memory limit: the numbers the render loop's
 //! refusal names.
 
-use super::pcbpt::{Cache, PcOptions};
+use crate::integrator::pcbpt::{Cache, PcOptions};
 
 /// PCBPT's cache size before the first iteration, as a function of its options: the pool
 /// is sized at 1.5 times the pilot's mean connectible vertices per light path.

@@ -1,7 +1,7 @@
 //! The cost model of a budget ([`super`]): the operations an iteration counts and their
 //! prices, from which the cost of an iteration under another plan is predicted.
 
-use super::Plan;
+use crate::integrator::budget::Plan;
 use crate::integrator::render_loop::TileResult;
 use serde::Serialize;
 

@@ -14,74 +14,24 @@
 //! exact sums make the image independent of the thread count.
 //!
 //! With `--two-stage true` (off by default) the scalar contribution is each luminance over a
-//! first stage's map of the image at its film position ([`super::two_stage`]), and the image
+//! first stage's map of the image at its film position ([`crate::integrator::metropolis::two_stage`]), and the image
 //! is scaled to the mean luminance. The BDPT bootstrap and the first stage also serve MEMLT.
 
-pub(crate) mod bootstrap;
-
-use super::bidir::bdpt::Scratch;
-use super::stays::{self, LongestStay, Stay, Stays, pixel_of, share_in};
-use super::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::film::{Film, Splat};
-use crate::math::{Rgb, luminance};
-use crate::sampling::{Distribution1D, Random, Sampler};
-use crate::scene::Scene;
-use bootstrap::{
+use crate::integrator::bidir::bdpt::Scratch;
+use crate::integrator::metropolis::bootstrap::{
     BOOTSTRAP_STREAM, ChainPaths, Contributions, Evaluator, bootstrap, evaluator, first_stage, mean_and_error,
 };
+use crate::integrator::metropolis::primary::PrimarySampler;
+use crate::integrator::metropolis::stays::{self, LongestStay, Stay, Stays, pixel_of, share_in};
+use crate::integrator::metropolis::{ChainOptions, MltBase};
+use crate::integrator::{Budget, Counters, RenderOptions, RenderOutput};
+use crate::math::{Rgb, luminance};
+use crate::sampling::{Distribution1D, Sampler};
+use crate::scene::Scene;
 use serde::Serialize;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
-
-/// Which estimator the Markov chain drives.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum MltBase {
-    /// Bidirectional path tracing: every strategy of one sample, MIS-weighted.
-    Bdpt,
-    /// Unidirectional path tracing.
-    Path,
-}
-
-/// What every Markov-chain integrator (PSSMLT, MEMLT) reads: the bootstrap, the chains and
-/// two-stage Metropolis' first stage.
-#[derive(Clone, Debug, Serialize, clap::Args)]
-pub struct ChainOptions {
-    /// Independent samples for the normalisation and the chains' start states.
-    #[arg(long, default_value_t = ChainOptions::default().bootstrap)]
-    pub bootstrap: usize,
-    /// Markov chains, each started from a bootstrap path drawn in proportion to its
-    /// contribution (the image does not depend on the thread count).
-    #[arg(long, default_value_t = ChainOptions::default().chains)]
-    pub chains: usize,
-    /// Two-stage Metropolis: pixels per side of the first stage's cells (Mitsuba 0.6's
-    /// `firstStageSizeReduction`).
-    #[arg(long, default_value_t = ChainOptions::default().first_stage_reduction)]
-    pub first_stage_reduction: u32,
-}
-
-impl Default for ChainOptions {
-    fn default() -> ChainOptions {
-        ChainOptions { bootstrap: 100_000, chains: 64, first_stage_reduction: 16 }
-    }
-}
-
-impl ChainOptions {
-    /// Refuses no bootstrap sample or no chain (PSSMLT and MEMLT alike).
-    pub fn check_counts(&self) -> Result<(), crate::error::Error> {
-        use crate::error::Error;
-        if self.bootstrap == 0 {
-            return Err(Error::Usage("--bootstrap must be at least 1".into()));
-        }
-        if self.chains == 0 {
-            return Err(Error::Usage("--chains must be at least 1".into()));
-        }
-        if self.first_stage_reduction == 0 {
-            return Err(Error::Usage("--first-stage-reduction must be at least 1 (pixels per side of a cell)".into()));
-        }
-        Ok(())
-    }
-}
 
 /// Options of PSSMLT (`--integrator pssmlt`).
 #[derive(Clone, Debug, Serialize, clap::Args)]
@@ -97,7 +47,7 @@ pub struct PssmltOptions {
     pub base: MltBase,
     #[command(flatten)]
     pub chain: ChainOptions,
-    /// Two-stage Metropolis (Mitsuba 0.6's `twoStage`, [`super::two_stage`]): a first stage of
+    /// Two-stage Metropolis (Mitsuba 0.6's `twoStage`, [`crate::integrator::metropolis::two_stage`]): a first stage of
     /// BDPT samples estimates the image at a reduced resolution, and the chains sample paths
     /// in proportion to their luminance over it. Off for PSSMLT, whose scalar contribution
     /// the contract fixes as the luminance.
@@ -144,130 +94,6 @@ pub struct MltStats {
     /// The image's mean luminance, from the bootstrap and every large step (the
     /// normalisation without a first stage).
     pub mean_luminance: f64,
-}
-
-/// Kelemen's small-step perturbation of one coordinate: an offset of size
-/// `s2 · exp(-ln(s2/s1) · v)`, `v` uniform, in a random direction, wrapped to `[0, 1)`.
-#[inline]
-pub fn perturb(x: f32, u: f32) -> f32 {
-    const S1: f32 = 1.0 / 1024.0;
-    const S2: f32 = 1.0 / 64.0;
-    let (up, v) = if u < 0.5 { (true, u * 2.0) } else { (false, (u - 0.5) * 2.0) };
-    let dv = S2 * (-(S2 / S1).ln() * v).exp();
-    let mut y = if up { x + dv } else { x - dv };
-    if y >= 1.0 {
-        y -= 1.0;
-    }
-    if y < 0.0 {
-        y += 1.0;
-    }
-    if y >= 1.0 { 0.0 } else { y }
-}
-
-#[derive(Clone, Copy, Debug, Default)]
-struct Coordinate {
-    value: f32,
-    modified: u64,
-    backup_value: f32,
-    backup_modified: u64,
-}
-
-/// Number of interleaved streams (camera, light, connections).
-const STREAMS: usize = 3;
-
-/// A point of primary sample space with lazy mutation (Kelemen et al. 2002).
-pub struct PrimarySampler {
-    rng: Sampler,
-    coords: Vec<Coordinate>,
-    iteration: u64,
-    last_large_step: u64,
-    large_step: bool,
-    large_step_prob: f32,
-    stream: usize,
-    index: usize,
-}
-
-impl PrimarySampler {
-    pub fn new(key: &[u64], large_step_prob: f32) -> PrimarySampler {
-        PrimarySampler {
-            rng: Sampler::new(key),
-            coords: Vec::new(),
-            iteration: 0,
-            last_large_step: 0,
-            large_step: true,
-            large_step_prob,
-            stream: 0,
-            index: 0,
-        }
-    }
-
-    /// Begins a proposal: a large step with probability `large_step_prob` (or when forced).
-    pub fn start_iteration(&mut self, force_large: bool) {
-        self.iteration += 1;
-        self.large_step = force_large || self.rng.next_1d() < self.large_step_prob;
-        self.stream = 0;
-        self.index = 0;
-    }
-
-    pub fn is_large_step(&self) -> bool {
-        self.large_step
-    }
-
-    pub fn accept(&mut self) {
-        if self.large_step {
-            self.last_large_step = self.iteration;
-        }
-    }
-
-    pub fn reject(&mut self) {
-        for c in &mut self.coords {
-            if c.modified == self.iteration {
-                c.value = c.backup_value;
-                c.modified = c.backup_modified;
-            }
-        }
-        self.iteration -= 1;
-    }
-
-    fn ensure_ready(&mut self, i: usize) {
-        if i >= self.coords.len() {
-            self.coords.resize(i + 1, Coordinate::default());
-        }
-        let rng = &mut self.rng;
-        let c = &mut self.coords[i];
-        // A coordinate untouched since before the last accepted large step takes that
-        // step's fresh value first.
-        if c.modified < self.last_large_step {
-            c.value = rng.next_1d();
-            c.modified = self.last_large_step;
-        }
-        c.backup_value = c.value;
-        c.backup_modified = c.modified;
-        if self.large_step {
-            c.value = rng.next_1d();
-        } else {
-            for _ in c.modified..self.iteration {
-                c.value = perturb(c.value, rng.next_1d());
-            }
-        }
-        c.modified = self.iteration;
-    }
-}
-
-impl Random for PrimarySampler {
-    #[inline]
-    fn next_1d(&mut self) -> f32 {
-        let i = self.index * STREAMS + self.stream;
-        self.index += 1;
-        self.ensure_ready(i);
-        self.coords[i].value
-    }
-
-    #[inline]
-    fn start_stream(&mut self, k: u32) {
-        self.stream = k as usize % STREAMS;
-        self.index = 0;
-    }
 }
 
 /// Splats contributions scaled by `weight`.
@@ -399,9 +225,9 @@ pub fn render(
     }
     mo.chain.check_counts()?;
     if mo.base == MltBase::Bdpt {
-        super::bidir::bdpt::check_lights(scene, "pssmlt").map_err(crate::error::Error::Usage)?;
+        crate::integrator::bidir::bdpt::check_lights(scene, "pssmlt").map_err(crate::error::Error::Usage)?;
     }
-    let pool = super::thread_pool(opts.threads)?;
+    let pool = crate::workers::render_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let ev = evaluator(scene, mo.heuristic, mo.base);
     let (w, h) = (scene.film.width, scene.film.height);
@@ -473,7 +299,7 @@ pub fn render(
                 let f = ev.eval(&mut rng, &mut scratch, &mut current, &mut counters);
                 rng.accept();
                 // The chain's own mutation stream from here on.
-                rng.rng = Sampler::new(&key(CHAIN_STREAM ^ 1, i));
+                rng.reseed(&key(CHAIN_STREAM ^ 1, i));
                 Chain {
                     rng,
                     decide: Sampler::new(&key(CHAIN_STREAM ^ 2, i)),
@@ -492,13 +318,13 @@ pub fn render(
             .collect();
         let bf = b as f32;
         let n_boot = weights.len();
-        let run = super::run_chains(
+        let run = crate::integrator::metropolis::run_chains(
             &pool,
             opts,
             start,
             pixels,
             total,
-            super::ChainSpan::default(),
+            crate::integrator::metropolis::ChainSpan::default(),
             &mut chains,
             &mut film,
             |ch, film| ch.step(&ev, bf, film),
@@ -535,7 +361,7 @@ pub fn render(
     // Each mutation put the bootstrap's `b` (times the map there), so scaled, into the image.
     let b_there = b * s * importance.map_or(1.0, |m| m.pixel(longest.pixel) as f64);
     stats.longest_stay = LongestStay::measure(longest, &image, (w, h), b_there, stats.mutations);
-    Ok(super::chains_output(
+    Ok(crate::integrator::metropolis::chains_output(
         scene,
         opts,
         threads,

@@ -2,13 +2,13 @@
 //! vertices, every record's CMF over the light pool, and the lookup that blends the CMFs of
 //! a camera vertex's nearest records and draws pool vertices from the blend.
 
-use super::mis::FullPath;
-use super::pcbpt::{DistanceTerm, PcOptions, PcSampling};
-use super::pool::LightPool;
-use super::{Vertex, VertexKind, WalkLimits, camera_subpath, visible};
 use crate::bsdf::TransportMode;
 use crate::film::tiles;
 use crate::integrator::Counters;
+use crate::integrator::bidir::mis::FullPath;
+use crate::integrator::bidir::pool::LightPool;
+use crate::integrator::bidir::{Vertex, VertexKind, WalkLimits, camera_subpath, visible};
+use crate::integrator::pcbpt::{DistanceTerm, PcOptions, PcSampling};
 use crate::math::{Rgb, luminance};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -66,7 +66,6 @@ pub fn trace_records(
         .par_chunks(64)
         .enumerate()
         .map(|(c, chunk)| {
-            crate::accel::embree::set_flush_denormals();
             let mut records = Vec::new();
             let mut counters = Counters::default();
             let mut path = Vec::new();
@@ -248,7 +247,6 @@ impl Cache {
             cmf.par_chunks_mut(v)
                 .zip(records.par_iter())
                 .map(|(row, rec)| {
-                    crate::accel::embree::set_flush_denormals();
                     let mut counters = Counters::default();
                     let mut total = 0.0f64;
                     for (k, &g) in pool.connectible.iter().enumerate() {
@@ -691,7 +689,7 @@ impl CandidateGrid {
 pub(crate) mod tests {
     use super::*;
     use crate::integrator::bidir::mis::Counts;
-    use crate::integrator::bidir::pcbpt::DRAW_BATCH;
+    use crate::integrator::pcbpt::DRAW_BATCH;
     use crate::sampling::chi2::discrete_chi2;
     use crate::scene::LoadOptions;
 

@@ -2,7 +2,7 @@
 //! MEMLT take of it before their chains (contract §6; `memlt.md`): the bootstrap that
 //! estimates the normalisation `b` (the mean luminance of the paths the chains take), and
 //! two-stage Metropolis' first stage, which maps that luminance over the image
-//! ([`super::super::two_stage`]).
+//! ([`crate::integrator::metropolis::two_stage`]).
 //!
 //! A sample is one run of the BDPT estimator (or the path tracer, for PSSMLT over it) on a
 //! [`PrimarySampler`]'s numbers through a uniformly random film position; [`Contributions`]
@@ -11,13 +11,14 @@
 //! their own), with its scalar contribution. Samples run in parallel in fixed chunks, each
 //! from its own stream, so every figure here is independent of the thread count.
 
-use super::super::bidir::bdpt::{Bdpt, Connector, Scratch};
-use super::super::bidir::mis::{Counts, Heuristic};
-use super::super::bidir::{Sink, Vertex, WalkLimits};
-use super::super::two_stage::{Grid, Importance};
-use super::super::{Budget, Counters, RenderOptions};
-use super::{ChainOptions, MltBase, PrimarySampler};
 use crate::film::Splat;
+use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
+use crate::integrator::bidir::mis::{Counts, Heuristic};
+use crate::integrator::bidir::{Sink, Vertex, WalkLimits};
+use crate::integrator::metropolis::primary::PrimarySampler;
+use crate::integrator::metropolis::two_stage::{Grid, Importance};
+use crate::integrator::metropolis::{ChainOptions, MltBase};
+use crate::integrator::{Budget, Counters, RenderOptions};
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -57,18 +58,18 @@ impl Default for ChainPaths {
 
 /// What one state adds to the film, with its scalar contribution.
 #[derive(Default)]
-pub(super) struct Contributions<'a> {
-    pub(super) splats: Vec<Splat>,
+pub(crate) struct Contributions<'a> {
+    pub(crate) splats: Vec<Splat>,
     /// Camera-side contributions of the current sample, summed at its film position.
     pixel: Rgb,
-    pub(super) pos: Vec2,
+    pub(crate) pos: Vec2,
     /// The paths whose strategies count.
     paths: ChainPaths,
     /// Two-stage Metropolis: the first stage's map, which each splat's luminance is
     /// divided by in the scalar contribution.
     importance: Option<&'a Importance>,
     /// The plain sum of luminances of the last [`Contributions::finish`].
-    pub(super) luminance: f32,
+    pub(crate) luminance: f32,
 }
 
 impl Sink for Contributions<'_> {
@@ -104,7 +105,7 @@ impl Sink for Contributions<'_> {
 impl<'a> Contributions<'a> {
     /// Collects the contributions of `paths`, with the first stage's map `importance` in
     /// two-stage Metropolis.
-    pub(super) fn new(paths: ChainPaths, importance: Option<&'a Importance>) -> Contributions<'a> {
+    pub(crate) fn new(paths: ChainPaths, importance: Option<&'a Importance>) -> Contributions<'a> {
         Contributions { paths, importance, ..Default::default() }
     }
 
@@ -130,17 +131,17 @@ impl<'a> Contributions<'a> {
     }
 }
 
-pub(super) struct Evaluator<'a> {
+pub(crate) struct Evaluator<'a> {
     scene: &'a Scene,
     base: MltBase,
     bdpt: Bdpt,
-    path: super::super::path::PathTracer,
+    path: crate::integrator::path::PathTracer,
     heuristic: Heuristic,
 }
 
 impl Evaluator<'_> {
     /// Runs the estimator on the sampler's state, filling `out`; returns its contribution.
-    pub(super) fn eval(
+    pub(crate) fn eval(
         &self,
         rng: &mut PrimarySampler,
         scratch: &mut Scratch,
@@ -187,7 +188,6 @@ fn sample_chunks<'a, T: Send>(
         (0..n.div_ceil(chunk))
             .into_par_iter()
             .map(|k| {
-                crate::accel::embree::set_flush_denormals();
                 let mut scratch = Scratch::default();
                 let mut contributions = out();
                 let mut c = Counters::default();
@@ -217,7 +217,7 @@ fn sample_chunks<'a, T: Send>(
 /// `key(BOOTSTRAP_STREAM, i)`), in parallel; their scalar contributions in order (over the
 /// first stage's map where there is one) and, with a map, their plain luminances (else
 /// none: the scalar contributions are those).
-pub(super) fn bootstrap(
+pub(crate) fn bootstrap(
     pool: &rayon::ThreadPool,
     ev: &Evaluator,
     n: usize,
@@ -247,7 +247,7 @@ pub(super) fn bootstrap(
 }
 
 /// Mean and standard error of samples.
-pub(super) fn mean_and_error(xs: &[f32]) -> (f64, f64) {
+pub(crate) fn mean_and_error(xs: &[f32]) -> (f64, f64) {
     let n = xs.len().max(1) as f64;
     let mean = xs.iter().map(|&f| f as f64).sum::<f64>() / n;
     let square = xs.iter().map(|&f| f as f64 * f as f64).sum::<f64>() / n;
@@ -344,7 +344,7 @@ pub(crate) fn in_batches(opts: &RenderOptions, start: Instant, fraction: f64, mu
 }
 
 /// The estimator the chains drive, with the scene's depth limits.
-pub(super) fn evaluator<'a>(scene: &'a Scene, heuristic: Heuristic, base: MltBase) -> Evaluator<'a> {
+pub(crate) fn evaluator<'a>(scene: &'a Scene, heuristic: Heuristic, base: MltBase) -> Evaluator<'a> {
     let spec = &scene.integrator;
     let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
     Evaluator {
@@ -356,10 +356,10 @@ pub(super) fn evaluator<'a>(scene: &'a Scene, heuristic: Heuristic, base: MltBas
             hide_emitters: spec.hide_emitters,
             light_only: false,
         },
-        path: super::super::path::PathTracer::new(spec),
+        path: crate::integrator::path::PathTracer::new(spec),
         heuristic,
     }
 }
 
-pub(super) const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
+pub(crate) const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
 const FIRST_STAGE_STREAM: u64 = 0x6669_7273;
