@@ -69,6 +69,7 @@ impl Eorr {
 
 impl Iterative for Eorr {
     type Pass = ();
+    type TileData = ();
 
     /// Passes in the pilot end where the thresholds are renewed: at powers of two and at `P`;
     /// with a running mean (`P = 0`) after every iteration.

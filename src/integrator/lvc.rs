@@ -115,6 +115,7 @@ impl LvcRender {
 
 impl Iterative for LvcRender {
     type Pass = LightPool;
+    type TileData = ();
 
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
         let (m, limits) = (self.lvc.light_paths, &self.lvc.bdpt.limits);

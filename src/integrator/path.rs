@@ -166,6 +166,7 @@ fn weighs_against_light_sampling(segments: u32, prev_delta: bool) -> bool {
 /// The path tracer in the render loop: no state between iterations.
 impl Iterative for PathTracer {
     type Pass = ();
+    type TileData = ();
 
     fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {
         Prepared::only(())

@@ -91,6 +91,10 @@ pub(crate) trait Iterative: Send + Sync {
     /// What the tiles of a pass share (a light pool, a cache).
     type Pass: Send + Sync;
 
+    /// What a tile gives back besides its image, splats and counters: what the integrator
+    /// learns from it for later iterations (`()` for none).
+    type TileData: Send;
+
     /// Before the first pass: pilot measurements and memory checks.
     fn begin(&mut self, _ctx: &Ctx) -> Result<(), Error> {
         Ok(())
@@ -113,11 +117,18 @@ pub(crate) trait Iterative: Send + Sync {
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<Self::Pass>;
 
     /// Renders iterations `first..first + count` of a tile.
-    fn render_tile(&self, ctx: &Ctx, pass: &Self::Pass, tile: Tile, first: u32, count: u32) -> TileResult;
+    fn render_tile(
+        &self,
+        ctx: &Ctx,
+        pass: &Self::Pass,
+        tile: Tile,
+        first: u32,
+        count: u32,
+    ) -> TileResult<Self::TileData>;
 
     /// After a pass's tiles (`results`, empty in a warm-up without tiles): keeps what the
     /// next iterations need.
-    fn finish(&mut self, ctx: &Ctx, pass: Self::Pass, iterations: Range<u32>, results: &[TileResult]);
+    fn finish(&mut self, ctx: &Ctx, pass: Self::Pass, iterations: Range<u32>, results: &[TileResult<Self::TileData>]);
 
     /// Adds the integrator's own statistics.
     fn report(&self, _stats: &mut RenderStats) {}
@@ -146,13 +157,25 @@ impl crate::integrator::bidir::Sink for PixelSink<'_> {
     }
 }
 
-/// A rendered tile of a pass.
-pub(crate) struct TileResult {
+/// A rendered tile of a pass, with the integrator's own data `D`.
+pub(crate) struct TileResult<D = ()> {
     pub block: ImageBlock,
     pub splats: Vec<Splat>,
     pub counters: Counters,
-    /// What an integrator learns from a tile for later iterations (its own type).
-    pub extra: Option<Box<dyn std::any::Any + Send + Sync>>,
+    /// What the integrator learns from the tile for later iterations.
+    pub data: D,
+}
+
+impl<D> TileResult<D> {
+    /// The tile with `data` instead of its own.
+    pub fn with<E>(self, data: E) -> TileResult<E> {
+        TileResult { block: self.block, splats: self.splats, counters: self.counters, data }
+    }
+
+    /// The tile with its data mapped by `f`.
+    pub fn map<E>(self, f: impl FnOnce(D) -> E) -> TileResult<E> {
+        TileResult { block: self.block, splats: self.splats, counters: self.counters, data: f(self.data) }
+    }
 }
 
 /// Renders iterations `first..first + count` of every pixel of `tile`: `sample` estimates one
@@ -202,7 +225,7 @@ pub(crate) fn sample_tile_in(
             }
         }
     }
-    TileResult { block, splats, counters, extra: None }
+    TileResult { block, splats, counters, data: () }
 }
 
 /// Where sample `s` of a pixel lies in it for a `jitter` in the unit square: in cell `s` of
@@ -221,7 +244,7 @@ fn offset_in_pixel(s: u32, n: u32, jitter: Vec2) -> Vec2 {
 
 /// Adds a pass's preparation splats and its tiles to a film, in a fixed order (preparation
 /// splats, then tile by tile).
-pub(crate) fn add_results(film: &mut Film, splats: &[Splat], light_paths: u64, results: &[TileResult]) {
+pub(crate) fn add_results<D>(film: &mut Film, splats: &[Splat], light_paths: u64, results: &[TileResult<D>]) {
     film.add_splats(splats);
     film.light_paths += light_paths;
     for r in results {
@@ -232,14 +255,14 @@ pub(crate) fn add_results(film: &mut Film, splats: &[Splat], light_paths: u64, r
 }
 
 /// A finished camera pass not yet in the film: the preparation's splats and the tiles.
-struct PendingPass {
+struct PendingPass<D> {
     splats: Vec<Splat>,
     light_paths: u64,
-    results: Vec<TileResult>,
+    results: Vec<TileResult<D>>,
 }
 
 /// Adds a finished pass to the film; returns the seconds it took.
-fn add_pass(film: &mut Film, pass: Option<PendingPass>) -> f64 {
+fn add_pass<D>(film: &mut Film, pass: Option<PendingPass<D>>) -> f64 {
     let Some(pass) = pass else { return 0.0 };
     let t = Instant::now();
     add_results(film, &pass.splats, pass.light_paths, &pass.results);
@@ -308,7 +331,7 @@ pub(crate) fn run<M: Iterative>(
                 let end = next_pass(&method, i, iterations.end, per);
                 let mut scratch = Work::default();
                 let prepared = method.prepare(&ctx, i, false, &mut scratch);
-                let results: Vec<TileResult> = if tiles {
+                let results: Vec<TileResult<M::TileData>> = if tiles {
                     tile_list
                         .par_iter()
                         .with_max_len(1)
@@ -322,7 +345,7 @@ pub(crate) fn run<M: Iterative>(
             }
         }
         work.phases.warmup += t_warm.elapsed().as_secs_f64();
-        let mut pending: Option<PendingPass> = None;
+        let mut pending: Option<PendingPass<M::TileData>> = None;
         while first < range.end {
             let end = next_pass(&method, first, range.end, per);
             let count = end - first;
@@ -333,7 +356,7 @@ pub(crate) fn run<M: Iterative>(
             // pixel keeps the same number of samples.
             let (merge_seconds, results) = rayon::join(
                 || add_pass(&mut film, pending.take()),
-                || -> Option<Vec<TileResult>> {
+                || -> Option<Vec<TileResult<M::TileData>>> {
                     tile_list
                         .par_iter()
                         .with_max_len(1)
@@ -476,6 +499,7 @@ mod tests {
 
     impl Iterative for Boundaries {
         type Pass = ();
+        type TileData = ();
         fn pass_end(&self, first: u32, end: u32) -> u32 {
             self.0.iter().copied().find(|&b| b > first).map_or(end, |b| b.min(end))
         }

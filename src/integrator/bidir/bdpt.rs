@@ -383,6 +383,7 @@ pub struct BdptRender {
 
 impl Iterative for BdptRender {
     type Pass = ();
+    type TileData = ();
 
     fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {
         Prepared::only(())

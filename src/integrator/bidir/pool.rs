@@ -315,7 +315,7 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
 }
 /// The concentration `κ` by camera depth of a camera pass's unoccluded pool draws
 /// ([`Counters::concentration`], summed in tile order); `None` without any.
-pub(crate) fn pass_concentration(results: &[TileResult]) -> Option<[f32; CONCENTRATION_DEPTHS]> {
+pub(crate) fn pass_concentration<D>(results: &[TileResult<D>]) -> Option<[f32; CONCENTRATION_DEPTHS]> {
     let mut counters = Counters::default();
     for r in results {
         counters += r.counters;

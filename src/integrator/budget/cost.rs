@@ -84,7 +84,7 @@ impl std::ops::AddAssign for Operations {
 
 impl Operations {
     /// These operations with those of a camera pass's tiles added.
-    pub(crate) fn with_camera_pass(mut self, results: &[TileResult]) -> Operations {
+    pub(crate) fn with_camera_pass<D>(mut self, results: &[TileResult<D>]) -> Operations {
         for r in results {
             let c = &r.counters;
             self.camera_rays += c.camera_rays + c.extension_rays;

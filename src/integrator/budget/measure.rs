@@ -206,9 +206,6 @@ pub struct TileMoments {
     pub(super) realized: Vec<Realized>,
     /// Per entry: its largest contribution and that contribution's shares ([`Top`]).
     pub(super) top: Vec<Top>,
-    /// What the integrator learned from the tile besides (SPCBPT's training samples when it
-    /// measures a training iteration; [`crate::integrator::budget::CameraSample::learned`]).
-    pub learned: Option<Box<dyn std::any::Any + Send + Sync>>,
     /// Connections each camera vertex draws under the plan in use.
     draws: u32,
     /// The camera vertex whose connections are being summed: its depth, `Σ v`, `Σ v²`.
@@ -230,7 +227,6 @@ impl TileMoments {
             spread: Vec::with_capacity(entries),
             realized: Vec::with_capacity(entries * c),
             top: Vec::with_capacity(entries),
-            learned: None,
             draws,
             vertex: (0, 0.0, 0.0),
             vertex_realized: vec![(0.0, 0.0); c],

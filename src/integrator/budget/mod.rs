@@ -345,30 +345,53 @@ pub(crate) trait CameraSample {
         counters: &mut Counters,
     );
 
-    /// What the integrator learned from the tile's samples for later iterations (SPCBPT's
-    /// training samples), taken once the tile is done: a measured tile carries it in its
-    /// moments ([`TileMoments::learned`]).
-    fn learned(&mut self) -> Option<Box<dyn std::any::Any + Send + Sync>> {
-        None
+    /// What the integrator learns from a tile's samples for later iterations (SPCBPT's
+    /// training samples).
+    type Learned: Send;
+
+    /// What the integrator learned from the tile's samples, taken once the tile is done.
+    fn learned(&mut self) -> Option<Self::Learned>;
+}
+
+/// What a pool integrator's tile gives back ([`TileResult::data`]): the budget's moments
+/// when it measured the tile, and what the integrator learned from it
+/// ([`CameraSample::learned`]).
+pub(crate) struct PoolTile<L> {
+    pub moments: Option<TileMoments>,
+    pub learned: Option<L>,
+}
+
+impl PoolTile<()> {
+    /// The moments of a tile that learned nothing, as the data of an integrator that learns
+    /// `L` from other tiles.
+    pub fn nothing_learned<L>(self) -> PoolTile<L> {
+        PoolTile { moments: self.moments, learned: None }
+    }
+}
+
+impl<L> Default for PoolTile<L> {
+    fn default() -> PoolTile<L> {
+        PoolTile { moments: None, learned: None }
     }
 }
 
 /// A tile of iteration `first` as the budget has it: the path tracer's when the plan
 /// [`Plan::path_tracing`], or `sample`'s with the measured pixels' contributions recorded in
 /// a measured iteration; `None` otherwise (the integrator renders it its own way).
-fn budget_tile(
+fn budget_tile<S: CameraSample>(
     ctx: &Ctx,
     tile: Tile,
     first: u32,
     count: u32,
     budget: &Budget,
-    sample: &mut impl CameraSample,
-) -> Option<TileResult> {
+    sample: &mut S,
+) -> Option<TileResult<PoolTile<S::Learned>>> {
     if !budget.measures(first) {
-        return (budget.plan().path_tracing() && !ctx.layers).then(|| path_traced_tile(ctx, tile, first, count));
+        return (budget.plan().path_tracing() && !ctx.layers)
+            .then(|| path_traced_tile(ctx, tile, first, count).with(PoolTile::default()));
     }
     let mut moments = budget.tile_moments(&tile);
-    let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+    let result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
         match budget.measured_pixel(pos) {
             Some(id) => {
                 moments.begin(id);
@@ -380,31 +403,29 @@ fn budget_tile(
         true
     });
     moments.end_vertex();
-    moments.learned = sample.learned();
-    result.extra = Some(Box::new(moments));
-    Some(result)
+    Some(result.with(PoolTile { moments: Some(moments), learned: sample.learned() }))
 }
 
 /// A tile of iteration `first` of a pool integrator with `sampler`'s camera samples: the
 /// budget's ([`budget_tile`]) when it measures the iteration or path traces, otherwise the
-/// sampler's, with what it learned ([`CameraSample::learned`]) in `extra`.
-pub(crate) fn pool_tile(
+/// sampler's, with what it learned ([`CameraSample::learned`]).
+pub(crate) fn pool_tile<S: CameraSample>(
     ctx: &Ctx,
     tile: Tile,
     first: u32,
     count: u32,
     budget: &Budget,
-    mut sampler: impl CameraSample,
-) -> TileResult {
+    mut sampler: S,
+) -> TileResult<PoolTile<S::Learned>> {
     if let Some(result) = budget_tile(ctx, tile, first, count, budget, &mut sampler) {
         return result;
     }
-    let mut result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+    let result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
         sampler.sample(pos, rng, sink, counters);
         true
     });
-    result.extra = sampler.learned();
-    result
+    let learned = sampler.learned();
+    result.with(PoolTile { moments: None, learned })
 }
 
 /// A tile of a plan that [`Plan::path_tracing`]: the path tracer's samples (next-event
@@ -612,7 +633,13 @@ impl Budget {
     }
 
     /// After iteration `i`'s camera pass (`results`): adds it when it is measured.
-    pub(crate) fn finish(&mut self, i: u32, results: &[TileResult], splat_shares: &[SplatShares], ops: Operations) {
+    pub(crate) fn finish<L>(
+        &mut self,
+        i: u32,
+        results: &[TileResult<PoolTile<L>>],
+        splat_shares: &[SplatShares],
+        ops: Operations,
+    ) {
         if self.measures(i) {
             self.add_iteration(results, splat_shares, ops.with_camera_pass(results));
         }
@@ -690,7 +717,12 @@ impl Budget {
     /// Adds a measured iteration: its tiles' moments (in `extra`, in tile order), its
     /// splats' shares and the operations it made; after the last iteration of the window,
     /// chooses the plan.
-    fn add_iteration(&mut self, results: &[TileResult], splats: &[SplatShares], operations: Operations) {
+    fn add_iteration<L>(
+        &mut self,
+        results: &[TileResult<PoolTile<L>>],
+        splats: &[SplatShares],
+        operations: Operations,
+    ) {
         let (n, c) = (self.measured(), self.candidates.len());
         if self.s1.is_empty() {
             self.s1 = vec![0.0; n];
@@ -704,7 +736,7 @@ impl Budget {
         // An iteration samples each pixel once, so each measured pixel has one entry: its
         // realized sums are the pixel's estimate of the iteration as each candidate weighs it.
         for r in results {
-            let Some(m) = r.extra.as_ref().and_then(|e| e.downcast_ref::<TileMoments>()) else { continue };
+            let Some(m) = r.data.moments.as_ref() else { continue };
             for (e, &id) in m.ids.iter().enumerate() {
                 let id = id as usize;
                 x[id] += m.x[e];
@@ -908,9 +940,15 @@ pub(crate) fn pick(gains: &[f64], current: usize, margin: f64) -> usize {
 
 /// The pool integrators' camera pass, one sample at a time.
 impl<C: StrategyCounts, P: PoolSelection> CameraSample for PoolSampler<'_, C, P> {
+    type Learned = ();
+
     #[inline]
     fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl Sink, counters: &mut Counters) {
         self.pass.sample(self.select, pos, rng, &mut self.scratch, sink, counters);
+    }
+
+    fn learned(&mut self) -> Option<()> {
+        None
     }
 }
 

@@ -81,6 +81,7 @@ impl SpecularPass {
 /// when the render has a sample count.
 impl Iterative for SpecularPass {
     type Pass = ();
+    type TileData = ();
 
     fn prepare(&self, _: &Ctx, _: u32, _: bool, _: &mut Work) -> Prepared<()> {
         Prepared::only(())

@@ -42,7 +42,9 @@ use crate::integrator::bidir::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
     concentration_depth, draw_one_by_one, pass_concentration,
 };
-use crate::integrator::budget::{Budget, BudgetOptions, Operations, PRICES, Plan, SplatShares, TracedPool, pool_tile};
+use crate::integrator::budget::{
+    Budget, BudgetOptions, Operations, PRICES, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
+};
 use crate::integrator::pcbpt::fit::CacheFit;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::{CacheStats, Counters, RenderStats};
@@ -541,6 +543,7 @@ impl PcbptRender {
 
 impl Iterative for PcbptRender {
     type Pass = PcPass;
+    type TileData = PoolTile<()>;
 
     /// Measures `V̄` on a pilot pool, sets `M` from it, and checks the pool and the cache
     /// against their memory limits.
@@ -604,7 +607,7 @@ impl Iterative for PcbptRender {
         Prepared { pass, splats, counters, splat_paths: Some(splat_paths) }
     }
 
-    fn render_tile(&self, ctx: &Ctx, pass: &PcPass, tile: Tile, first: u32, count: u32) -> TileResult {
+    fn render_tile(&self, ctx: &Ctx, pass: &PcPass, tile: Tile, first: u32, count: u32) -> TileResult<PoolTile<()>> {
         let (pool, cache) = (&pass.pool, &pass.cache);
         let counts = self.counts(ctx.scene);
         let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
@@ -618,7 +621,7 @@ impl Iterative for PcbptRender {
 
     /// Keeps `V̄`, the cache and the concentration of the camera pass's draws (summed in
     /// tile order) for the next iteration, and gives a measured iteration to the budget.
-    fn finish(&mut self, _: &Ctx, pass: PcPass, iterations: Range<u32>, results: &[TileResult]) {
+    fn finish(&mut self, _: &Ctx, pass: PcPass, iterations: Range<u32>, results: &[TileResult<PoolTile<()>>]) {
         let PcPass { pool, cache, stats, splat_shares, operations } = pass;
         self.vbar = pool.mean_vertices();
         self.pool_size = Some((pool.paths, pool.connectible.len()));

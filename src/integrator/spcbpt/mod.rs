@@ -47,8 +47,8 @@ use crate::integrator::bidir::pool::{
 };
 use crate::integrator::bidir::{Sink, Vertex, VertexKind};
 use crate::integrator::budget::{
-    Budget, BudgetMode, BudgetOptions, CameraSample, Operations, Plan, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES,
-    SPCBPT_SUBSPACE_PRICES, SplatShares, TileMoments, TracedPool, pool_tile,
+    Budget, BudgetMode, BudgetOptions, CameraSample, Operations, Plan, PoolTile, Prices, SPCBPT_PRICES,
+    SPCBPT_RESAMPLING_PRICES, SPCBPT_SUBSPACE_PRICES, SplatShares, TracedPool, pool_tile,
 };
 use crate::integrator::pcbpt::cache::{Record, trace_records};
 use crate::integrator::pcbpt::{
@@ -576,6 +576,9 @@ impl<S: Sink> Sink for TrainingSink<'_, S> {
 
 /// The camera samples of a training iteration: `inner`'s, with the pool connections of
 /// every `every`-th pixel of a film `width` wide kept as training samples.
+/// A tile's data: the budget's moments and, in a training iteration, its training samples.
+type SpTile = PoolTile<Vec<TrainingSample>>;
+
 struct TrainingSampler<'a, S> {
     inner: S,
     scene: &'a Scene,
@@ -596,8 +599,10 @@ impl<S: CameraSample> CameraSample for TrainingSampler<'_, S> {
         self.inner.sample(pos, rng, &mut sink, counters);
     }
 
-    fn learned(&mut self) -> Option<Box<dyn std::any::Any + Send + Sync>> {
-        Some(Box::new(std::mem::take(&mut self.samples)))
+    type Learned = Vec<TrainingSample>;
+
+    fn learned(&mut self) -> Option<Vec<TrainingSample>> {
+        Some(std::mem::take(&mut self.samples))
     }
 }
 
@@ -695,6 +700,7 @@ impl SpcbptRender {
 
 impl Iterative for SpcbptRender {
     type Pass = SpPass;
+    type TileData = SpTile;
 
     /// Sizes the pool from a pilot, checks the memory limits, and builds the subspace trees
     /// from pilot vertices.
@@ -778,7 +784,7 @@ impl Iterative for SpcbptRender {
         Prepared { pass, splats, counters, splat_paths: Some(splat_paths) }
     }
 
-    fn render_tile(&self, ctx: &Ctx, pass: &SpPass, tile: Tile, first: u32, count: u32) -> TileResult {
+    fn render_tile(&self, ctx: &Ctx, pass: &SpPass, tile: Tile, first: u32, count: u32) -> TileResult<SpTile> {
         let scene = ctx.scene;
         let counts = self.counts(scene);
         let conn = Connector { scene, heuristic: self.heuristic, counts: &counts, roulette: None };
@@ -795,14 +801,14 @@ impl Iterative for SpcbptRender {
             let sampler = TrainingSampler { inner: sampler, scene, model, width, every, samples: Vec::new() };
             pool_tile(ctx, tile, first, count, budget, sampler)
         } else {
-            pool_tile(ctx, tile, first, count, budget, sampler)
+            pool_tile(ctx, tile, first, count, budget, sampler).map(PoolTile::nothing_learned)
         }
     }
 
     /// Until the state is fixed: keeps the pool's subspace totals and the concentration of
     /// the draws for the next iteration's counts, and retrains `Γ` on every training sample
     /// so far (in tile order).
-    fn finish(&mut self, _: &Ctx, pass: SpPass, iterations: Range<u32>, results: &[TileResult]) {
+    fn finish(&mut self, _: &Ctx, pass: SpPass, iterations: Range<u32>, results: &[TileResult<SpTile>]) {
         let i = iterations.start;
         self.pool_size = Some((pass.pool.paths, pass.pool.connectible.len()));
         self.stats.light_subspaces_used = pass.subspaces.used();
@@ -820,10 +826,7 @@ impl Iterative for SpcbptRender {
         }
         let t = Instant::now();
         for r in results {
-            // A measured tile carries its training samples in its moments.
-            let extra = r.extra.as_ref();
-            let learned = extra.and_then(|e| e.downcast_ref::<TileMoments>()).map_or(extra, |m| m.learned.as_ref());
-            if let Some(s) = learned.and_then(|e| e.downcast_ref::<Vec<TrainingSample>>()) {
+            if let Some(s) = &r.data.learned {
                 self.samples.extend_from_slice(s);
             }
         }
