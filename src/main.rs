@@ -485,118 +485,28 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
             output.display()
         );
     }
-    if let (false, Some(m)) = (a.quiet, &s.mlt) {
-        eprintln!(
-            "  PSSMLT: b = {:.5}, {} chains, {} mutations ({:.3} M/s), acceptance small {:.1}% large {:.1}%, bootstrap {:.2} s",
-            m.normalisation,
-            m.chains,
-            m.mutations,
-            m.mutations_per_second / 1e6,
-            m.small_acceptance * 100.0,
-            m.large_acceptance * 100.0,
-            m.bootstrap_seconds
-        );
-        print_first_stage(m.first_stage_samples, m.mean_luminance);
-        print_longest_stay("pssmlt", m.longest_stay.as_ref());
-    } else if let (false, Some(m)) = (a.quiet, &s.memlt) {
-        let acceptance: Vec<String> = m
-            .mutators
-            .iter()
-            .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
-            .collect();
-        eprintln!(
-            "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}, effective {:.0} of {}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors, {} moved the light point, {} the line light from infinity arrives along; bootstrap {:.2} s",
-            m.normalisation,
-            m.normalisation_error,
-            m.seed_normalisation,
-            m.start_ess,
-            m.start_candidates,
-            m.chains,
-            m.mutations,
-            m.mutations_per_second / 1e6,
-            m.min_edges,
-            m.max_edges,
-            acceptance.join(", "),
-            m.manifold_walks.tried,
-            m.manifold_walks.converged,
-            m.manifold_walks.irreversible,
-            m.manifold_walks.glossy,
-            m.manifold_walks.light_points,
-            m.manifold_walks.sky_points,
-            m.bootstrap_seconds
-        );
-        eprintln!(
-            "  MEMLT: {:.2}% of the light camera walks find in paths only such a walk makes; independent mutation {}",
-            m.walk_only_share * 100.0,
-            if m.independent_mutation { "on" } else { "off" }
-        );
-        if let Some(d) = &m.direct_balance {
-            eprintln!(
-                "  MEMLT: direct light {} samples per pixel in {:.2} s ({} added after {:.2} s of the chains: relative variance per second, direct {:.3e}, chains {:.3e})",
-                m.direct_samples, m.direct_seconds, d.extra_samples, d.measured_after, d.direct_noise, d.chain_noise
-            );
-        }
-        print_first_stage(m.first_stage_samples, m.mean_luminance);
-        print_longest_stay("memlt", m.longest_stay.as_ref());
-    } else if !a.quiet && kind.is_bidirectional() {
+    if !a.quiet && kind.is_bidirectional() {
         let c = &s.counters;
+        let cache = s.phases.cache > 0.0 || s.shadow_rays.cache > 0;
         eprintln!(
-            "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette, {} repeated draws merged){}; time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",
+            "  {} light paths, {} connections traced ({} occluded, {} skipped by roulette, {} repeated draws merged); time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",
             c.light_paths,
             c.connections,
             c.connections_occluded,
             c.connections_skipped,
             c.draws_merged,
-            s.pool.map(|(m, v)| format!(", pool of {m} paths with {v} connectible vertices")).unwrap_or_default(),
             s.phases.light_pool,
-            if s.cache.is_some() { format!("cache {:.2} s, ", s.phases.cache) } else { String::new() },
+            if cache { format!("cache {:.2} s, ", s.phases.cache) } else { String::new() },
             s.phases.camera_pass,
             s.phases.merge,
             s.shadow_rays.light_pool,
-            if s.cache.is_some() { format!("cache {}, ", s.shadow_rays.cache) } else { String::new() },
+            if cache { format!("cache {}, ", s.shadow_rays.cache) } else { String::new() },
             s.shadow_rays.camera_pass,
         );
-        if let Some(k) = &s.cache {
-            eprintln!(
-                "  PCBPT cache: {} records ({} empty, {} dropped for the memory limit) × {} pool vertices, {:.1} MiB; unoccluded draws' harmonic mean V·PMF {:.2}",
-                k.records,
-                k.empty_records,
-                k.dropped_records,
-                k.pool_vertices,
-                k.megabytes,
-                c.concentration().map_or(1.0, |(all, _)| all)
-            );
-        }
-        if let Some(b) = &s.budget
-            && let (Some(p), Some(m)) = (b.chosen, b.measured_with)
-        {
-            let why = match b.best {
-                Some(best) if best != p => format!(
-                    "kept: the best, {} and {}, predicted {:.2}×, is within the margin {:.2}",
-                    best.connections, best.splat_paths, b.best_gain, b.margin
-                ),
-                _ => format!("predicted efficiency {:.2}× theirs", b.predicted_gain),
-            };
-            eprintln!(
-                "  budget: {} connections per camera vertex and {} light-traced paths per iteration (measured with {} and {}; {why}, {})",
-                p.connections,
-                p.splat_paths,
-                m.connections,
-                m.splat_paths,
-                if b.horizon == 0 { "expected moments".to_string() } else { format!("planned for {} spp", b.horizon) }
-            );
-        }
-        if let Some(k) = &s.subspaces {
-            eprintln!(
-                "  SPCBPT: {} eye × {} light subspaces ({} light subspaces in the last pool), {} trained rows from {} connections, {:.2} s building and training, matrix and trees {:.2} MiB",
-                k.eye_subspaces,
-                k.light_subspaces,
-                k.light_subspaces_used,
-                k.trained_rows,
-                k.training_samples,
-                k.training_seconds,
-                k.megabytes
-            );
+    }
+    if !a.quiet {
+        for line in s.details.lines(s) {
+            eprintln!("{line}");
         }
     }
     Ok(if s.interrupted { ExitCode::from(INTERRUPTED) } else { ExitCode::SUCCESS })
@@ -675,33 +585,4 @@ fn compare_images(a: CompareArgs) -> Result<ExitCode> {
         image_io::write_png_rgb8(path, r.width, r.height, &bytes)?;
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// Two-stage Metropolis' line of the summary (nothing without a first stage).
-fn print_first_stage(samples: u64, mean_luminance: f64) {
-    if samples > 0 {
-        eprintln!(
-            "  two-stage: the chains' target is luminance over a map from a first stage of {samples} BDPT samples (b above is its mean); the chains' image is scaled to mean luminance {mean_luminance:.5}"
-        );
-    }
-}
-
-/// The summary's line on a Metropolis render's longest stay of a chain around one pixel, and
-/// a warning when that stay carries most of the light in the pixels around it.
-fn print_longest_stay(integrator: &str, stay: Option<&pcbpt::integrator::metropolis::stays::LongestStay>) {
-    let Some(l) = stay else { return };
-    let [x, y] = l.pixel;
-    eprintln!(
-        "  longest stay of a chain around one pixel: {} mutations within a pixel of ({x}, {y}), {:.0}% of the light in those 3×3 pixels",
-        l.mutations,
-        l.share * 100.0
-    );
-    if l.dominates() {
-        eprintln!(
-            "warning: {integrator}: one chain stayed {} mutations within a pixel of ({x}, {y}) and put {:.0}% of the light \
-             in those 3×3 pixels there: their values rest on a single visit (a longer render, or another --seed, averages it out)",
-            l.mutations,
-            l.share * 100.0
-        );
-    }
 }

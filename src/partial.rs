@@ -21,6 +21,7 @@
 
 use crate::error::{Error, Result};
 use crate::film::{ExactSum, Film, Filter};
+use crate::integrator::pssmlt::PssmltStats;
 use crate::integrator::{Budget, RenderOptions, RenderOutput};
 use crate::math::Rgb;
 use crate::scene::Scene;
@@ -149,7 +150,7 @@ pub fn part_info(out: &RenderOutput, render: serde_json::Value, total: u32, filt
         return Err(Error::Usage("the chunk was interrupted: no part is written for an incomplete chunk".into()));
     }
     let iterations = s.iterations.clone().unwrap_or(0..total);
-    let chains = s.mlt.map(|m| ChainsInfo {
+    let chains = s.details.get::<PssmltStats>().map(|&PssmltStats { mlt: m }| ChainsInfo {
         splatted_b: m.bootstrap_normalisation,
         normalisation: m.normalisation,
         normalisation_samples: m.bootstrap_samples + m.large_proposed,

@@ -41,7 +41,7 @@ fn render_model(
         o.method.budget_mut().margin = 1.0;
     }
     let out = integrator::render(scene, &o).unwrap();
-    if let Some(b) = &out.stats.budget {
+    if let Some(b) = budget_of(&out.stats) {
         println!("{kind:?} seed {seed}: plan {:?}, measured with {:?}", b.chosen, b.measured_with);
     }
     image(out)
@@ -126,7 +126,7 @@ fn short_renders_plan_for_the_default_horizon_and_keep_veach_ajars_connections()
     o.seed = 1;
     o.method.budget_mut().mode = BudgetMode::Auto;
     let out = integrator::render(&scene, &o).unwrap();
-    let b = out.stats.budget.expect("a budget's statistics");
+    let b = budget_of(&out.stats).cloned().expect("a budget's statistics");
     println!("veach-ajar 160×90, 8 spp: plan {:?}, planned for {} spp", b.chosen, b.horizon);
     assert_eq!(b.horizon, DEFAULT_HORIZON);
     assert!(b.chosen.is_some_and(|p| p.connections > 0), "plan {:?}", b.chosen);
@@ -149,19 +149,19 @@ fn a_gain_within_the_margin_keeps_the_measured_plan_and_its_image() {
         o.method.budget_mut().margin = margin;
         integrator::render(&scene, &o).unwrap()
     };
-    let free = run(BudgetMode::Auto, 1.0).stats.budget.expect("a budget's statistics");
+    let free = budget_of(&run(BudgetMode::Auto, 1.0).stats).cloned().expect("a budget's statistics");
     let (best, gain, measured) = (free.best.unwrap(), free.best_gain, free.measured_with.unwrap());
     println!("veach-mis 96×54: measured with {measured:?}, best {best:?} at {gain:.3}×");
     assert!(best != measured && !best.path_tracing());
     assert!(gain > 1.2, "the best candidate's predicted gain {gain}");
     assert_eq!(free.chosen, Some(best));
 
-    let below = run(BudgetMode::Auto, (gain * 0.99) as f32).stats.budget.unwrap();
+    let below = budget_of(&run(BudgetMode::Auto, (gain * 0.99) as f32).stats).cloned().unwrap();
     assert_eq!(below.chosen, Some(best));
     assert!((below.predicted_gain - gain).abs() < 1e-9 * gain);
 
     let above = run(BudgetMode::Auto, (gain * 1.01) as f32);
-    let b = above.stats.budget.clone().unwrap();
+    let b = budget_of(&above.stats).cloned().unwrap();
     assert_eq!((b.chosen, b.predicted_gain, b.best), (Some(measured), 1.0, Some(best)));
     let off = run(BudgetMode::Off, 1.1);
     let bits =
@@ -188,7 +188,7 @@ fn spcbpt_measures_its_last_training_iterations() {
     };
     let training = pcbpt::integrator::spcbpt::SpOptions::default().training_iterations;
     assert_eq!(training, 4);
-    let chosen = |spp: u32, in_training: bool| run(spp, BudgetMode::Auto, in_training).stats.budget.is_some();
+    let chosen = |spp: u32, in_training: bool| budget_of(&run(spp, BudgetMode::Auto, in_training).stats).is_some();
     assert!(chosen(training, true), "no choice after the training iterations");
     assert!(!chosen(training - 1, true), "a choice before the last training iteration");
     assert!(!chosen(training, false) && chosen(training + 2, false));
@@ -197,8 +197,15 @@ fn spcbpt_measures_its_last_training_iterations() {
     let off = bits(&run(8, BudgetMode::Off, true));
     for in_training in [true, false] {
         let kept = run(8, BudgetMode::Auto, in_training);
-        let b = kept.stats.budget.clone().expect("a budget's statistics");
+        let b = budget_of(&kept.stats).cloned().expect("a budget's statistics");
         assert_eq!(b.chosen, b.measured_with);
         assert!(bits(&kept) == off, "measured in training: {in_training}; the kept plan's image differs");
     }
+}
+
+/// The budget's statistics of a PCBPT or SPCBPT render.
+fn budget_of(s: &pcbpt::integrator::RenderStats) -> Option<&pcbpt::integrator::budget::BudgetStats> {
+    use pcbpt::integrator::{pcbpt::PcbptStats, spcbpt::SpcbptStats};
+    let pc = s.details.get::<PcbptStats>().map(|d| d.budget.as_ref());
+    pc.or_else(|| s.details.get::<SpcbptStats>().map(|d| d.budget.as_ref())).flatten()
 }

@@ -78,7 +78,7 @@ fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
             };
             let one = render_with(&scene, kind, 6, 42, 1, &set);
             let two = render_with(&scene, kind, 6, 42, 2, &set);
-            let (a, b) = (one.stats.budget.as_ref().unwrap(), two.stats.budget.as_ref().unwrap());
+            let (a, b) = (budget_of(&one.stats).unwrap(), budget_of(&two.stats).unwrap());
             assert!(a.chosen.is_some() && a.chosen == b.chosen, "{kind:?}: {a:?} against {b:?}");
             assert_eq!(a.independence.to_bits(), b.independence.to_bits(), "{kind:?}");
             let bits = |s: &pcbpt::integrator::budget::BudgetStats| -> Vec<(u64, u64)> {
@@ -88,4 +88,11 @@ fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
             assert!(same_bits(&one.image, &two.image), "{kind:?} with a budget differs between 1 and 2 threads");
         }
     }
+}
+
+/// The budget's statistics of a PCBPT or SPCBPT render.
+fn budget_of(s: &pcbpt::integrator::RenderStats) -> Option<&pcbpt::integrator::budget::BudgetStats> {
+    use pcbpt::integrator::{pcbpt::PcbptStats, spcbpt::SpcbptStats};
+    let pc = s.details.get::<PcbptStats>().map(|d| d.budget.as_ref());
+    pc.or_else(|| s.details.get::<SpcbptStats>().map(|d| d.budget.as_ref())).flatten()
 }

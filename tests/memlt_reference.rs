@@ -10,6 +10,7 @@ mod common;
 
 use common::*;
 use pcbpt::accel::Backend;
+use pcbpt::integrator::memlt::MemltDetails;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput};
 use pcbpt::scene::Scene;
 
@@ -118,7 +119,7 @@ fn memlt_glass_caustic() {
         let out = memlt(&scene, 128, seed, -1);
         // The manifold perturbation moves the paths the others cannot (the caustic seen
         // through the ball): its walks must mostly converge and return.
-        let s = out.stats.memlt.clone().unwrap();
+        let s = out.stats.details.get::<MemltDetails>().unwrap().memlt.clone();
         let manifold = s.mutators.iter().find(|m| m.mutator == pcbpt::integrator::memlt::Mutator::Manifold).unwrap();
         let w = s.manifold_walks;
         assert!(manifold.acceptance > 0.2, "manifold perturbation accepted {}", manifold.acceptance);
@@ -149,7 +150,7 @@ fn memlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
     assert_eq!(bits(&a), bits(&run(7, 1)), "one thread against two, different image");
     assert_eq!(bits(&a), bits(&run(7, 3)), "three threads against two, different image");
     assert_ne!(bits(&a), bits(&run(8, 2)), "the seed must change the image");
-    let s = a.stats.memlt.as_ref().unwrap();
+    let s = &a.stats.details.get::<MemltDetails>().unwrap().memlt;
     assert_eq!(s.chains, 64);
     assert_eq!(s.mutations, 4 * 48 * 40);
     assert_eq!(s.mutators.iter().map(|m| m.proposed).sum::<u64>(), s.mutations);
@@ -179,7 +180,7 @@ fn memlt_balances_its_direct_light_under_a_time_budget() {
     let timed = |o: &mut RenderOptions| o.budget = Budget::Time(6.0);
     let (a, b) = (memlt_with(&scene, 0, 1, &timed), memlt_with(&scene, 0, 2, &timed));
     for out in [&a, &b] {
-        let s = out.stats.memlt.as_ref().unwrap();
+        let s = &out.stats.details.get::<MemltDetails>().unwrap().memlt;
         let d = s.direct_balance.expect("the balance measured both parts");
         assert!(d.direct_noise > 0.0 && d.chain_noise > 0.0, "{d:?}");
         assert!(d.extra_samples > 0 && s.direct_samples == 32 + d.extra_samples, "{} samples, {d:?}", s.direct_samples);
@@ -191,7 +192,7 @@ fn memlt_balances_its_direct_light_under_a_time_budget() {
         o.method.memlt_mut().direct_balance = false;
     };
     for out in [memlt_with(&scene, 0, 1, &off), memlt(&scene, 1, 1, 16)] {
-        let s = out.stats.memlt.as_ref().unwrap();
+        let s = &out.stats.details.get::<MemltDetails>().unwrap().memlt;
         assert!(s.direct_samples == 16 && s.direct_balance.is_none(), "{} samples", s.direct_samples);
     }
 }
@@ -238,7 +239,7 @@ fn memlt_bootstrap_takes_its_share_of_a_time_budget() {
     o.method.memlt_mut().bootstrap_fraction = 0.25;
     o.threads = 2;
     let out = integrator::render(&scene, &o).unwrap();
-    let s = out.stats.memlt.as_ref().unwrap();
+    let s = &out.stats.details.get::<MemltDetails>().unwrap().memlt;
     assert!(s.bootstrap_samples > 1000 && s.bootstrap_samples.is_multiple_of(1000), "{} samples", s.bootstrap_samples);
     assert!(s.bootstrap_seconds >= 0.25 && s.normalisation > 0.0, "{} s", s.bootstrap_seconds);
     // Two-stage Metropolis' first stage has the first half of that time, in batches too.
@@ -266,7 +267,7 @@ fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     o.method.memlt_mut().light_hit_perturbation = false;
     o.method.memlt_mut().independent_mutation = Some(false);
     let out = integrator::render(&scene, &o).unwrap();
-    let stay = out.stats.memlt.as_ref().unwrap().longest_stay.unwrap();
+    let stay = out.stats.details.get::<MemltDetails>().unwrap().memlt.longest_stay.unwrap();
     assert_eq!(stay.mutations, out.width as u64 * out.height as u64 * 4);
     assert!((stay.share - 1.0).abs() < 1e-3, "share {}", stay.share);
     assert!(stay.dominates());
@@ -275,6 +276,6 @@ fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     o.seed = 3;
     o.threads = 2;
     let out = integrator::render(&scene, &o).unwrap();
-    let stay = out.stats.memlt.as_ref().unwrap().longest_stay.unwrap();
+    let stay = out.stats.details.get::<MemltDetails>().unwrap().memlt.longest_stay.unwrap();
     assert!(!stay.dominates(), "{stay:?}");
 }

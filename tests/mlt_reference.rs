@@ -8,6 +8,7 @@ mod common;
 
 use common::*;
 use pcbpt::accel::Backend;
+use pcbpt::integrator::pssmlt::PssmltStats;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput};
 use pcbpt::scene::Scene;
 
@@ -46,7 +47,7 @@ fn pssmlt_veach_ajar_two_stage() {
     let reference = reference("veach-ajar.exr");
     let run = |seed| {
         let out = render_with(&scene, IntegratorKind::Pssmlt, 64, seed, 2, &|o| *o.method.two_stage_mut() = true);
-        assert!(out.stats.mlt.unwrap().first_stage_samples > 0);
+        assert!(out.stats.details.get::<PssmltStats>().unwrap().mlt.first_stage_samples > 0);
         image(out)
     };
     let (v, _) = Verdict::averaged(&reference, &run(1), &run(2), 4.5e-3);
@@ -96,7 +97,7 @@ fn pssmlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
         assert_eq!(bits(&a), bits(&run(7, 3, base)), "{base:?}: three threads against two, different image");
         let c = run(8, 2, base);
         assert_ne!(a.image, c.image, "{base:?}: the seed must change the image");
-        let m = a.stats.mlt.unwrap();
+        let m = a.stats.details.get::<PssmltStats>().unwrap().mlt;
         assert_eq!(m.mutations, 4 * 48 * 40);
         assert!(m.small_acceptance > 0.0 && m.small_acceptance <= 1.0 && m.large_acceptance > 0.0);
     }
@@ -114,7 +115,7 @@ fn pssmlt_measures_its_longest_stay_against_the_image() {
     o.threads = 2;
     o.method.chain_mut().chains = 1;
     let out = integrator::render(&scene, &o).unwrap();
-    let stay = out.stats.mlt.unwrap().longest_stay.unwrap();
+    let stay = out.stats.details.get::<PssmltStats>().unwrap().mlt.longest_stay.unwrap();
     assert_eq!(stay.mutations, 3000);
     assert_eq!(stay.pixel, [0, 0]);
     assert!((stay.share - 1.0).abs() < 1e-3, "share {}", stay.share);
@@ -122,6 +123,6 @@ fn pssmlt_measures_its_longest_stay_against_the_image() {
     // At the full film no stay of a short render carries that much.
     let scene = load(&path, &[], Backend::Embree);
     let out = render(&scene, IntegratorKind::Pssmlt, 4, 4, 2);
-    let stay = out.stats.mlt.unwrap().longest_stay.unwrap();
+    let stay = out.stats.details.get::<PssmltStats>().unwrap().mlt.longest_stay.unwrap();
     assert!(!stay.dominates(), "{stay:?}");
 }

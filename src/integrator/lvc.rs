@@ -8,9 +8,11 @@ use crate::integrator::bidir::Sink;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts};
-use crate::integrator::bidir::pool::{LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory};
+use crate::integrator::bidir::pool::{
+    LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, pool_line,
+};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
-use crate::integrator::{Counters, RenderStats};
+use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::Vec2;
@@ -161,6 +163,19 @@ impl Iterative for LvcRender {
     }
 
     fn report(&self, stats: &mut RenderStats) {
-        stats.pool = self.pool_size;
+        stats.details = Details::of(LvcStats { pool: self.pool_size });
+    }
+}
+
+/// LVC's statistics: the last iteration's pool.
+#[derive(Clone, Debug, Serialize)]
+pub struct LvcStats {
+    /// Light paths and connectible vertices of the last pool.
+    pub pool: Option<(usize, usize)>,
+}
+
+impl IntegratorStats for LvcStats {
+    fn lines(&self, _: &RenderStats) -> Vec<String> {
+        self.pool.iter().map(|&p| pool_line(p)).collect()
     }
 }

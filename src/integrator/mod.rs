@@ -15,6 +15,7 @@ pub mod pssmlt;
 pub mod registry;
 pub(crate) mod render_loop;
 pub mod spcbpt;
+pub mod stats;
 
 use crate::film::Film;
 use crate::math::Rgb;
@@ -28,6 +29,7 @@ use pcbpt::{Pcbpt, PcbptRender};
 pub use registry::Method;
 use serde::Serialize;
 use spcbpt::{Spcbpt, SpcbptRender};
+pub use stats::{Counters, Details, IntegratorStats, PhaseRays, PhaseTimes, RenderStats};
 use std::ops::Range;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -92,112 +94,6 @@ impl IntegratorKind {
     }
 }
 
-/// Per-thread work counters, summed after each pass.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct Counters {
-    pub samples: u64,
-    pub camera_rays: u64,
-    pub extension_rays: u64,
-    pub shadow_rays: u64,
-    /// Light subpaths traced.
-    pub light_paths: u64,
-    /// Connections whose shadow ray was traced (NEE, `t = 1`, `s,t >= 2`).
-    pub connections: u64,
-    /// Of those, connections found occluded.
-    pub connections_occluded: u64,
-    /// Connections left untraced by Russian roulette (EORR).
-    pub connections_skipped: u64,
-    /// Pool draws of a camera vertex that repeated an earlier draw of it and were merged
-    /// into that connection (its weight counts both).
-    pub draws_merged: u64,
-    /// Pool draws whose connection was traced and found unoccluded, by the depth of the
-    /// camera vertex (`[t - 2]` for `z_{t-1}`, deeper ones in the last entry).
-    pub pool_hits: [u64; CONCENTRATION_DEPTHS],
-    /// Sum over those draws of `1 / (V · PMF)`, the inverse of their selection probability
-    /// relative to uniform selection (1 for uniform draws), by the same depths.
-    pub pool_hits_inverse_concentration: [f64; CONCENTRATION_DEPTHS],
-    /// Shadow rays of pool connections (of `shadow_rays`).
-    pub pool_shadow_rays: u64,
-    /// Camera vertices that drew pool connections.
-    pub pool_lookups: u64,
-}
-
-impl Counters {
-    /// The harmonic mean of `V · PMF` over the unoccluded pool connections, over all depths
-    /// and per camera depth (a depth without such connections gets the overall one); `None`
-    /// without any.
-    pub fn concentration(&self) -> Option<(f64, [f64; CONCENTRATION_DEPTHS])> {
-        let hits: u64 = self.pool_hits.iter().sum();
-        let inverse: f64 = self.pool_hits_inverse_concentration.iter().sum();
-        if hits == 0 || inverse <= 0.0 {
-            return None;
-        }
-        let all = hits as f64 / inverse;
-        let mut by_depth = [all; CONCENTRATION_DEPTHS];
-        for (k, c) in by_depth.iter_mut().enumerate() {
-            if self.pool_hits[k] > 0 && self.pool_hits_inverse_concentration[k] > 0.0 {
-                *c = self.pool_hits[k] as f64 / self.pool_hits_inverse_concentration[k];
-            }
-        }
-        Some((all, by_depth))
-    }
-}
-
-impl std::ops::AddAssign for Counters {
-    fn add_assign(&mut self, o: Counters) {
-        self.samples += o.samples;
-        self.camera_rays += o.camera_rays;
-        self.extension_rays += o.extension_rays;
-        self.shadow_rays += o.shadow_rays;
-        self.light_paths += o.light_paths;
-        self.connections += o.connections;
-        self.connections_occluded += o.connections_occluded;
-        self.connections_skipped += o.connections_skipped;
-        self.draws_merged += o.draws_merged;
-        self.pool_shadow_rays += o.pool_shadow_rays;
-        self.pool_lookups += o.pool_lookups;
-        for k in 0..CONCENTRATION_DEPTHS {
-            self.pool_hits[k] += o.pool_hits[k];
-            self.pool_hits_inverse_concentration[k] += o.pool_hits_inverse_concentration[k];
-        }
-    }
-}
-
-/// Wall time spent in each phase of the render loop.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct PhaseTimes {
-    /// Tracing light pools (and their light-tracing splats).
-    pub light_pool: f64,
-    /// Tracing the record pixels and evaluating the cache's PMFs (PCBPT).
-    pub cache: f64,
-    /// Camera samples (tiles).
-    pub camera_pass: f64,
-    /// Merging blocks into the film and splatting.
-    pub merge: f64,
-    /// Re-running the iterations before a chunk's first one that its state comes from.
-    pub warmup: f64,
-}
-
-/// Shadow rays traced in each phase of the render loop.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct PhaseRays {
-    pub light_pool: u64,
-    pub cache: u64,
-    pub camera_pass: u64,
-}
-
-/// PCBPT's cache in the last iteration.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct CacheStats {
-    pub records: usize,
-    /// Records whose PMF is all zero (uniform fallback).
-    pub empty_records: usize,
-    /// Records left out to stay within `--pc-max-cache-mb`.
-    pub dropped_records: usize,
-    pub pool_vertices: usize,
-    pub megabytes: f64,
-}
-
 /// How much to render.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Budget {
@@ -243,93 +139,6 @@ impl RenderOptions {
 
     pub fn integrator(&self) -> IntegratorKind {
         self.method.kind()
-    }
-}
-
-/// Statistics of a finished render.
-#[derive(Clone, Debug, Serialize)]
-pub struct RenderStats {
-    pub integrator: IntegratorKind,
-    pub backend: String,
-    pub threads: usize,
-    pub width: u32,
-    pub height: u32,
-    pub spp: u32,
-    pub passes: u32,
-    pub seconds: f64,
-    pub samples_per_second: f64,
-    pub rays_per_second: f64,
-    pub counters: Counters,
-    pub phases: PhaseTimes,
-    pub shadow_rays: PhaseRays,
-    /// PCBPT's cache (when PCBPT ran).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub cache: Option<CacheStats>,
-    /// SPCBPT's subspaces and matrix (when SPCBPT ran).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub subspaces: Option<spcbpt::SubspaceStats>,
-    /// The budget PCBPT or SPCBPT chose (`--pc-budget auto`).
-    pub budget: Option<budget::BudgetStats>,
-    /// The integrator's options.
-    pub options: Method,
-    /// Light-pool size of the last iteration: light paths and connectible vertices.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub pool: Option<(usize, usize)>,
-    /// Metropolis statistics (PSSMLT).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub mlt: Option<pssmlt::MltStats>,
-    /// Path-space Metropolis statistics (MEMLT).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub memlt: Option<memlt::MemltStats>,
-    /// Samples dropped because they were NaN or infinite.
-    pub invalid_samples: u64,
-    /// The render stopped early (interrupted).
-    pub interrupted: bool,
-    /// The iterations rendered (samples per pixel, or mutations per pixel for the Markov
-    /// chains), when known.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub iterations: Option<Range<u32>>,
-}
-
-impl RenderStats {
-    /// The statistics every render loop reports; the rest start empty.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn new(
-        opts: &RenderOptions,
-        scene: &Scene,
-        threads: usize,
-        counters: Counters,
-        seconds: f64,
-        spp: u32,
-        invalid_samples: u64,
-        interrupted: bool,
-    ) -> RenderStats {
-        let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
-        RenderStats {
-            integrator: opts.integrator(),
-            backend: scene.accel.backend().to_string(),
-            threads,
-            width: scene.film.width,
-            height: scene.film.height,
-            spp,
-            passes: 1,
-            seconds,
-            samples_per_second: counters.samples as f64 / seconds.max(1e-9),
-            rays_per_second: rays as f64 / seconds.max(1e-9),
-            counters,
-            phases: PhaseTimes::default(),
-            shadow_rays: PhaseRays::default(),
-            cache: None,
-            subspaces: None,
-            budget: None,
-            options: opts.method.clone(),
-            pool: None,
-            mlt: None,
-            memlt: None,
-            invalid_samples,
-            interrupted,
-            iterations: None,
-        }
     }
 }
 

@@ -323,6 +323,11 @@ pub(crate) fn pass_concentration<D>(results: &[TileResult<D>]) -> Option<[f32; C
     counters.concentration().map(|(_, by_depth)| by_depth.map(|c| c as f32))
 }
 
+/// The summary's line on a light pool of `(paths, connectible vertices)`.
+pub fn pool_line((paths, vertices): (usize, usize)) -> String {
+    format!("  light pool: {paths} paths with {vertices} connectible vertices (the last iteration's)")
+}
+
 /// Key of the pilot pool that measures `V̄` before the first iteration.
 pub(crate) const PILOT_ITERATION: u64 = u64::MAX;
 

@@ -510,6 +510,32 @@ pub struct BudgetStats {
     pub horizon: u32,
 }
 
+impl BudgetStats {
+    /// The summary's line on the choice (none before one was made).
+    pub fn line(&self) -> Option<String> {
+        let (p, m) = (self.chosen?, self.measured_with?);
+        let why = match self.best {
+            Some(best) if best != p => format!(
+                "kept: the best, {} and {}, predicted {:.2}×, is within the margin {:.2}",
+                best.connections, best.splat_paths, self.best_gain, self.margin
+            ),
+            _ => format!("predicted efficiency {:.2}× theirs", self.predicted_gain),
+        };
+        Some(format!(
+            "  budget: {} connections per camera vertex and {} light-traced paths per iteration (measured with {} and {}; {why}, {})",
+            p.connections,
+            p.splat_paths,
+            m.connections,
+            m.splat_paths,
+            if self.horizon == 0 {
+                "expected moments".to_string()
+            } else {
+                format!("planned for {} spp", self.horizon)
+            }
+        ))
+    }
+}
+
 /// The budget of a pool integrator over a render: the plan in use, and the measurement that
 /// replaces it.
 pub struct Budget {

@@ -42,9 +42,10 @@ pub mod specular_pass;
 use crate::film::{Film, Splat};
 use crate::integrator::bidir::Vertex;
 use crate::integrator::metropolis::bootstrap::Keys;
+use crate::integrator::metropolis::first_stage_line;
 use crate::integrator::metropolis::stays::{LongestStay, Stay, Stays, near, pixel_of};
 use crate::integrator::metropolis::two_stage::Importance;
-use crate::integrator::{Budget, Counters, RenderOptions, RenderOutput};
+use crate::integrator::{Budget, Counters, Details, IntegratorStats, RenderOptions, RenderOutput, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
 use crate::scene::Scene;
@@ -256,6 +257,61 @@ pub struct MutatorStats {
     pub proposed: u64,
     pub accepted: u64,
     pub acceptance: f64,
+}
+
+/// MEMLT's statistics, under `memlt` in the JSON.
+#[derive(Clone, Debug, Serialize)]
+pub struct MemltDetails {
+    pub memlt: MemltStats,
+}
+
+impl IntegratorStats for MemltDetails {
+    fn lines(&self, _: &RenderStats) -> Vec<String> {
+        let m = &self.memlt;
+        let acceptance: Vec<String> = m
+            .mutators
+            .iter()
+            .map(|x| format!("{:?} {:.1}% of {}", x.mutator, x.acceptance * 100.0, x.proposed))
+            .collect();
+        let w = &m.manifold_walks;
+        let mut lines = vec![
+            format!(
+                "  MEMLT: b = {:.5} ± {:.5} (start paths: {:.5}, effective {:.0} of {}), {} chains, {} mutations ({:.3} M/s), paths of {}..={} edges, acceptance: {}; manifold walks: {} tried, {} converged, {} irreversible; {} perturbations kept glossy half-vectors, {} moved the light point, {} the line light from infinity arrives along; bootstrap {:.2} s",
+                m.normalisation,
+                m.normalisation_error,
+                m.seed_normalisation,
+                m.start_ess,
+                m.start_candidates,
+                m.chains,
+                m.mutations,
+                m.mutations_per_second / 1e6,
+                m.min_edges,
+                m.max_edges,
+                acceptance.join(", "),
+                w.tried,
+                w.converged,
+                w.irreversible,
+                w.glossy,
+                w.light_points,
+                w.sky_points,
+                m.bootstrap_seconds
+            ),
+            format!(
+                "  MEMLT: {:.2}% of the light camera walks find in paths only such a walk makes; independent mutation {}",
+                m.walk_only_share * 100.0,
+                if m.independent_mutation { "on" } else { "off" }
+            ),
+        ];
+        if let Some(d) = &m.direct_balance {
+            lines.push(format!(
+                "  MEMLT: direct light {} samples per pixel in {:.2} s ({} added after {:.2} s of the chains: relative variance per second, direct {:.3e}, chains {:.3e})",
+                m.direct_samples, m.direct_seconds, d.extra_samples, d.measured_after, d.direct_noise, d.chain_noise
+            ));
+        }
+        lines.extend(first_stage_line(m.first_stage_samples, m.mean_luminance));
+        lines.extend(m.longest_stay.iter().flat_map(|l| l.lines("memlt")));
+        lines
+    }
 }
 
 /// Statistics of a MEMLT render.
@@ -1065,7 +1121,7 @@ fn finish(
         snapshots,
         interrupted,
         iterations,
-        |s| s.memlt = Some(stats),
+        |s| s.details = Details::of(MemltDetails { memlt: stats }),
     ))
 }
 

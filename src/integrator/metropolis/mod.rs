@@ -185,3 +185,12 @@ pub(crate) fn chains_output(
     let (width, height) = (scene.film.width, scene.film.height);
     RenderOutput { image, strategy_images: Vec::new(), snapshots, width, height, stats, film: Some(film) }
 }
+
+/// Two-stage Metropolis' line of a render's summary (none without a first stage).
+pub fn first_stage_line(samples: u64, mean_luminance: f64) -> Option<String> {
+    (samples > 0).then(|| {
+        format!(
+            "  two-stage: the chains' target is luminance over a map from a first stage of {samples} BDPT samples (b above is its mean); the chains' image is scaled to mean luminance {mean_luminance:.5}"
+        )
+    })
+}

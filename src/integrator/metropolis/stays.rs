@@ -77,6 +77,26 @@ pub struct LongestStay {
 }
 
 impl LongestStay {
+    /// The summary's line on the stay and, when that stay carries most of the light in the
+    /// pixels around it, a warning (`integrator` names the render's integrator).
+    pub fn lines(&self, integrator: &str) -> Vec<String> {
+        let [x, y] = self.pixel;
+        let mut lines = vec![format!(
+            "  longest stay of a chain around one pixel: {} mutations within a pixel of ({x}, {y}), {:.0}% of the light in those 3×3 pixels",
+            self.mutations,
+            self.share * 100.0
+        )];
+        if self.dominates() {
+            lines.push(format!(
+                "warning: {integrator}: one chain stayed {} mutations within a pixel of ({x}, {y}) and put {:.0}% of the light \
+                 in those 3×3 pixels there: their values rest on a single visit (a longer render, or another --seed, averages it out)",
+                self.mutations,
+                self.share * 100.0
+            ));
+        }
+        lines
+    }
+
     /// Shorter stays are not reported as a pixel resting on one visit: in a short render
     /// every pixel's value comes from a few.
     pub const MIN_MUTATIONS: u64 = 1000;

@@ -40,14 +40,14 @@ use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
-    concentration_depth, draw_one_by_one, pass_concentration,
+    concentration_depth, draw_one_by_one, pass_concentration, pool_line,
 };
 use crate::integrator::budget::{
-    Budget, BudgetOptions, Operations, PRICES, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
+    Budget, BudgetOptions, BudgetStats, Operations, PRICES, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
 };
 use crate::integrator::pcbpt::fit::CacheFit;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
-use crate::integrator::{CacheStats, Counters, RenderStats};
+use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -635,9 +635,11 @@ impl Iterative for PcbptRender {
     }
 
     fn report(&self, stats: &mut RenderStats) {
-        stats.pool = self.pool_size;
-        stats.cache = self.cache_stats;
-        stats.budget = self.budget.as_ref().and_then(Budget::chosen_stats);
+        stats.details = Details::of(PcbptStats {
+            pool: self.pool_size,
+            cache: self.cache_stats,
+            budget: self.budget.as_ref().and_then(Budget::chosen_stats),
+        });
     }
 }
 
@@ -700,6 +702,47 @@ impl CacheSelection<'_> {
     #[inline]
     fn factor(&self, pmf: f64, n: u32) -> Option<f32> {
         (pmf > 0.0).then(|| (1.0 / (n as f64 * self.paths * pmf)) as f32)
+    }
+}
+
+/// PCBPT's cache in the last iteration.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct CacheStats {
+    pub records: usize,
+    /// Records whose PMF is all zero (uniform fallback).
+    pub empty_records: usize,
+    /// Records left out to stay within `--pc-max-cache-mb`.
+    pub dropped_records: usize,
+    pub pool_vertices: usize,
+    pub megabytes: f64,
+}
+
+/// PCBPT's statistics: the last iteration's pool and cache, and the budget's choice.
+#[derive(Clone, Debug, Serialize)]
+pub struct PcbptStats {
+    /// Light paths and connectible vertices of the last pool.
+    pub pool: Option<(usize, usize)>,
+    pub cache: Option<CacheStats>,
+    /// The budget's choice (`--budget auto`).
+    pub budget: Option<BudgetStats>,
+}
+
+impl IntegratorStats for PcbptStats {
+    fn lines(&self, render: &RenderStats) -> Vec<String> {
+        let mut lines: Vec<String> = self.pool.iter().map(|&p| pool_line(p)).collect();
+        if let Some(k) = &self.cache {
+            lines.push(format!(
+                "  PCBPT cache: {} records ({} empty, {} dropped for the memory limit) × {} pool vertices, {:.1} MiB; unoccluded draws' harmonic mean V·PMF {:.2}",
+                k.records,
+                k.empty_records,
+                k.dropped_records,
+                k.pool_vertices,
+                k.megabytes,
+                render.counters.concentration().map_or(1.0, |(all, _)| all)
+            ));
+        }
+        lines.extend(self.budget.as_ref().and_then(BudgetStats::line));
+        lines
     }
 }
 

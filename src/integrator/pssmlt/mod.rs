@@ -24,8 +24,9 @@ use crate::integrator::metropolis::bootstrap::{
 };
 use crate::integrator::metropolis::primary::PrimarySampler;
 use crate::integrator::metropolis::stays::{self, LongestStay, Stay, Stays, pixel_of, share_in};
-use crate::integrator::metropolis::{ChainOptions, MltBase};
+use crate::integrator::metropolis::{ChainOptions, MltBase, first_stage_line};
 use crate::integrator::{Budget, Counters, RenderOptions, RenderOutput};
+use crate::integrator::{Details, IntegratorStats, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Sampler};
 use crate::scene::Scene;
@@ -94,6 +95,31 @@ pub struct MltStats {
     /// The image's mean luminance, from the bootstrap and every large step (the
     /// normalisation without a first stage).
     pub mean_luminance: f64,
+}
+
+/// PSSMLT's statistics, under `mlt` in the JSON.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct PssmltStats {
+    pub mlt: MltStats,
+}
+
+impl IntegratorStats for PssmltStats {
+    fn lines(&self, _: &RenderStats) -> Vec<String> {
+        let m = &self.mlt;
+        let mut lines = vec![format!(
+            "  PSSMLT: b = {:.5}, {} chains, {} mutations ({:.3} M/s), acceptance small {:.1}% large {:.1}%, bootstrap {:.2} s",
+            m.normalisation,
+            m.chains,
+            m.mutations,
+            m.mutations_per_second / 1e6,
+            m.small_acceptance * 100.0,
+            m.large_acceptance * 100.0,
+            m.bootstrap_seconds
+        )];
+        lines.extend(first_stage_line(m.first_stage_samples, m.mean_luminance));
+        lines.extend(m.longest_stay.iter().flat_map(|l| l.lines("pssmlt")));
+        lines
+    }
 }
 
 /// Splats contributions scaled by `weight`.
@@ -373,7 +399,7 @@ pub fn render(
         snapshots,
         interrupted,
         iterations,
-        |s| s.mlt = Some(stats),
+        |s| s.details = Details::of(PssmltStats { mlt: stats }),
     ))
 }
 

@@ -43,11 +43,11 @@ use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use crate::integrator::bidir::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
-    concentration_depth, pass_concentration,
+    concentration_depth, pass_concentration, pool_line,
 };
 use crate::integrator::bidir::{Sink, Vertex, VertexKind};
 use crate::integrator::budget::{
-    Budget, BudgetMode, BudgetOptions, CameraSample, Operations, Plan, PoolTile, Prices, SPCBPT_PRICES,
+    Budget, BudgetMode, BudgetOptions, BudgetStats, CameraSample, Operations, Plan, PoolTile, Prices, SPCBPT_PRICES,
     SPCBPT_RESAMPLING_PRICES, SPCBPT_SUBSPACE_PRICES, SplatShares, TracedPool, pool_tile,
 };
 use crate::integrator::pcbpt::cache::{Record, trace_records};
@@ -58,7 +58,7 @@ use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmu
 use crate::integrator::spcbpt::subspace::{
     FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability,
 };
-use crate::integrator::{Counters, RenderStats};
+use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
@@ -841,9 +841,40 @@ impl Iterative for SpcbptRender {
     }
 
     fn report(&self, stats: &mut RenderStats) {
-        stats.pool = self.pool_size;
-        stats.subspaces = Some(self.stats);
-        stats.budget = self.budget.as_ref().and_then(Budget::chosen_stats);
+        stats.details = Details::of(SpcbptStats {
+            pool: self.pool_size,
+            subspaces: self.stats,
+            budget: self.budget.as_ref().and_then(Budget::chosen_stats),
+        });
+    }
+}
+
+/// SPCBPT's statistics: the last pool, the subspaces and matrix, the budget's choice.
+#[derive(Clone, Debug, Serialize)]
+pub struct SpcbptStats {
+    /// Light paths and connectible vertices of the last pool.
+    pub pool: Option<(usize, usize)>,
+    pub subspaces: SubspaceStats,
+    /// The budget's choice (`--budget auto`).
+    pub budget: Option<BudgetStats>,
+}
+
+impl IntegratorStats for SpcbptStats {
+    fn lines(&self, _: &RenderStats) -> Vec<String> {
+        let mut lines: Vec<String> = self.pool.iter().map(|&p| pool_line(p)).collect();
+        lines.extend(self.budget.as_ref().and_then(BudgetStats::line));
+        let k = &self.subspaces;
+        lines.push(format!(
+            "  SPCBPT: {} eye × {} light subspaces ({} light subspaces in the last pool), {} trained rows from {} connections, {:.2} s building and training, matrix and trees {:.2} MiB",
+            k.eye_subspaces,
+            k.light_subspaces,
+            k.light_subspaces_used,
+            k.trained_rows,
+            k.training_samples,
+            k.training_seconds,
+            k.megabytes
+        ));
+        lines
     }
 }
 
