@@ -20,7 +20,7 @@ pub fn markdown(cli: &clap::Command, render: fn(Option<IntegratorKind>) -> clap:
     );
     let common = render(None);
     section(&mut s, "pcbpt render", &common);
-    for r in &INTEGRATORS {
+    for r in INTEGRATORS {
         let name = r.kind.name();
         let own = (r.args)(clap::Command::new(name));
         let about = r.kind.to_possible_value_help();

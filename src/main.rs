@@ -229,7 +229,7 @@ fn render_command(kind: Option<IntegratorKind>) -> clap::Command {
                  (NAME: {}; the reference: docs/cli.md).",
                 names.join(", ")
             ));
-            for r in &INTEGRATORS {
+            for r in INTEGRATORS {
                 let theirs = (r.args)(clap::Command::new(r.kind.name()));
                 for arg in theirs.get_arguments() {
                     if !cmd.get_arguments().any(|a| a.get_id() == arg.get_id()) {

@@ -115,3 +115,32 @@ impl Iterative for Eorr {
         }
     }
 }
+
+impl crate::integrator::registry::Integrator for EorrOptions {
+    const BIDIRECTIONAL: bool = true;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        use crate::error::Error;
+        if self.pilot_spp == 0 && iterations.as_ref().is_some_and(|r| r.start > 0) {
+            return Err(Error::Usage(
+                "EORR's running-mean thresholds (--eorr-pilot-spp 0) depend on every earlier pass: render \
+                 them in one process, or give the pilot a sample count"
+                    .into(),
+            ));
+        }
+        if !(self.fraction >= 0.0 && self.fraction.is_finite()) {
+            return Err(Error::Usage(format!("--eorr-fraction must be a non-negative number, got {}", self.fraction)));
+        }
+        let method = Eorr::new(Bdpt::for_scene(scene, false), self.heuristic, self.fraction, self.pilot_spp, scene);
+        crate::integrator::render_loop::run(scene, opts, method, true, iterations)
+    }
+
+    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        Some(&mut self.heuristic)
+    }
+}

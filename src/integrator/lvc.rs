@@ -179,3 +179,27 @@ impl IntegratorStats for LvcStats {
         self.pool.iter().map(|&p| pool_line(p)).collect()
     }
 }
+
+impl crate::integrator::registry::Integrator for LvcOptions {
+    const BIDIRECTIONAL: bool = true;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        if self.connections == 0 {
+            return Err(Error::Usage("--connections must be at least 1".into()));
+        }
+        let pixels = scene.film.width as usize * scene.film.height as usize;
+        let m = if self.light_paths == 0 { pixels } else { self.light_paths };
+        let lvc = Lvc { bdpt: Bdpt::for_scene(scene, false), light_paths: m, connections: self.connections };
+        let method = LvcRender::new(lvc, self.heuristic, self.max_pool_mb);
+        crate::integrator::render_loop::run(scene, opts, method, true, iterations)
+    }
+
+    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        Some(&mut self.heuristic)
+    }
+}

@@ -20,79 +20,12 @@ pub mod stats;
 use crate::film::Film;
 use crate::math::Rgb;
 use crate::scene::Scene;
-use bidir::WalkLimits;
-use bidir::bdpt::{Bdpt, BdptRender};
 pub use bidir::pool::CONCENTRATION_DEPTHS;
-use eorr::Eorr;
-use lvc::{Lvc, LvcRender};
-use pcbpt::{Pcbpt, PcbptRender};
-pub use registry::Method;
-use serde::Serialize;
-use spcbpt::{Spcbpt, SpcbptRender};
+pub use registry::{Integrator, IntegratorKind, Method};
 pub use stats::{Counters, Details, IntegratorStats, PhaseRays, PhaseTimes, RenderStats};
 use std::ops::Range;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
-
-/// The integrators selectable with `--integrator`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum IntegratorKind {
-    /// Unidirectional path tracing with next-event estimation and MIS.
-    Path,
-    /// Light tracing: light subpaths connected to the camera (`t = 1`) only.
-    Lighttrace,
-    /// Bidirectional path tracing with every strategy.
-    Bdpt,
-    /// BDPT with efficiency-optimised Russian roulette on connections.
-    Eorr,
-    /// Light-vertex-cache BDPT: a shared pool of light paths, uniform connections.
-    Lvc,
-    /// Primary-sample-space Metropolis light transport over BDPT (or the path tracer).
-    Pssmlt,
-    /// Probabilistic connections: a shared pool, connections drawn from cached PMFs.
-    Pcbpt,
-    /// Subspace-based probabilistic connections: connections drawn from a trained matrix
-    /// over eye and light subspaces.
-    Spcbpt,
-    /// Path-space Metropolis with Manifold Exploration's mutations.
-    Memlt,
-}
-
-impl IntegratorKind {
-    /// The integrator a scene file's plugin name selects.
-    pub fn from_plugin(name: &str) -> Option<IntegratorKind> {
-        match name {
-            "path" => Some(IntegratorKind::Path),
-            "ptracer" => Some(IntegratorKind::Lighttrace),
-            "bdpt" => Some(IntegratorKind::Bdpt),
-            "pssmlt" => Some(IntegratorKind::Pssmlt),
-            "mlt" => Some(IntegratorKind::Memlt),
-            _ => None,
-        }
-    }
-
-    /// The name `--integrator` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            IntegratorKind::Path => "path",
-            IntegratorKind::Lighttrace => "lighttrace",
-            IntegratorKind::Bdpt => "bdpt",
-            IntegratorKind::Eorr => "eorr",
-            IntegratorKind::Lvc => "lvc",
-            IntegratorKind::Pssmlt => "pssmlt",
-            IntegratorKind::Pcbpt => "pcbpt",
-            IntegratorKind::Spcbpt => "spcbpt",
-            IntegratorKind::Memlt => "memlt",
-        }
-    }
-
-    /// Whether the integrator samples with the bidirectional core's strategies (and reports
-    /// connections and light paths).
-    pub fn is_bidirectional(self) -> bool {
-        !matches!(self, IntegratorKind::Path | IntegratorKind::Pssmlt | IntegratorKind::Memlt)
-    }
-}
 
 /// How much to render.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -208,62 +141,9 @@ pub fn render_iterations(
             )));
         }
     }
-    let spec = &scene.integrator;
-    let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
-    let bdpt = |light_only| Bdpt {
-        limits: WalkLimits::new(max_depth, spec.rr_depth),
-        max_depth,
-        hide_emitters: spec.hide_emitters,
-        light_only,
-    };
     let kind = opts.integrator();
     if kind.is_bidirectional() {
         bidir::bdpt::check_lights(scene, kind.name()).map_err(Error::Usage)?;
     }
-    match &opts.method {
-        Method::Pssmlt(o) => pssmlt::render(scene, opts, o, iterations),
-        Method::Memlt(o) => memlt::render(scene, opts, o, iterations),
-        Method::Path(_) => render_loop::run(scene, opts, path::PathTracer::new(spec), false, iterations),
-        Method::Lighttrace(_) => {
-            let method = BdptRender { bdpt: bdpt(true), heuristic: Default::default() };
-            render_loop::run(scene, opts, method, true, iterations)
-        }
-        Method::Bdpt(o) => {
-            let method = BdptRender { bdpt: bdpt(false), heuristic: o.heuristic };
-            render_loop::run(scene, opts, method, true, iterations)
-        }
-        Method::Eorr(o) => {
-            if o.pilot_spp == 0 && iterations.as_ref().is_some_and(|r| r.start > 0) {
-                return Err(Error::Usage(
-                    "EORR's running-mean thresholds (--eorr-pilot-spp 0) depend on every earlier pass: render \
-                     them in one process, or give the pilot a sample count"
-                        .into(),
-                ));
-            }
-            if !(o.fraction >= 0.0 && o.fraction.is_finite()) {
-                return Err(Error::Usage(format!("--eorr-fraction must be a non-negative number, got {}", o.fraction)));
-            }
-            let method = Eorr::new(bdpt(false), o.heuristic, o.fraction, o.pilot_spp, scene);
-            render_loop::run(scene, opts, method, true, iterations)
-        }
-        Method::Lvc(o) => {
-            if o.connections == 0 {
-                return Err(Error::Usage("--connections must be at least 1".into()));
-            }
-            let pixels = scene.film.width as usize * scene.film.height as usize;
-            let m = if o.light_paths == 0 { pixels } else { o.light_paths };
-            let lvc = Lvc { bdpt: bdpt(false), light_paths: m, connections: o.connections };
-            render_loop::run(scene, opts, LvcRender::new(lvc, o.heuristic, o.max_pool_mb), true, iterations)
-        }
-        Method::Pcbpt(o) => {
-            o.pc.validate().map_err(Error::Usage)?;
-            let pc = Pcbpt { bdpt: bdpt(false), opts: o.pc.clone() };
-            render_loop::run(scene, opts, PcbptRender::new(pc, o.heuristic, o.pc.pool.max_pool_mb), true, iterations)
-        }
-        Method::Spcbpt(o) => {
-            o.sp.validate().map_err(Error::Usage)?;
-            let sp = Spcbpt { bdpt: bdpt(false), opts: o.sp.clone() };
-            render_loop::run(scene, opts, SpcbptRender::new(sp, o.heuristic, o.sp.pool.max_pool_mb), true, iterations)
-        }
-    }
+    opts.method.render(scene, opts, iterations)
 }

@@ -188,3 +188,16 @@ impl Iterative for PathTracer {
 /// scene's and the command line's `--max-depth`, `--rr-depth`).
 #[derive(Clone, Debug, Default, serde::Serialize, clap::Args)]
 pub struct PathOptions {}
+
+impl crate::integrator::registry::Integrator for PathOptions {
+    const BIDIRECTIONAL: bool = false;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        crate::integrator::render_loop::run(scene, opts, PathTracer::new(&scene.integrator), false, iterations)
+    }
+}

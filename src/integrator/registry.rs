@@ -1,34 +1,45 @@
-//! The integrators in one table: each one's name ([`IntegratorKind`]), its options type (one
-//! struct, read alike by the command line, experiment files and the library) and its
-//! defaults. [`Method`] is an integrator with its options, what a render is given.
+//! The integrators in one table ([`integrators!`]): one line each names the integrator,
+//! its options type (one struct, read alike by the command line, experiment files and the
+//! library; the type implements [`Integrator`], which renders with them) and the scene-file
+//! plugins that select it. From that table come [`IntegratorKind`], [`Method`] (an integrator
+//! with its options, what a render is given), [`INTEGRATORS`] and the dispatch of a render.
 
-use crate::integrator::IntegratorKind;
-use crate::integrator::bidir::bdpt::{BdptOptions, LighttraceOptions};
+use crate::error::Error;
 use crate::integrator::bidir::mis::Heuristic;
 use crate::integrator::budget::BudgetOptions;
 use crate::integrator::eorr::EorrOptions;
 use crate::integrator::lvc::LvcOptions;
 use crate::integrator::memlt::MemltOptions;
 use crate::integrator::metropolis::ChainOptions;
-use crate::integrator::path::PathOptions;
 use crate::integrator::pcbpt::{PcbptOptions, PoolOptions};
 use crate::integrator::pssmlt::PssmltOptions;
 use crate::integrator::spcbpt::SpcbptOptions;
+use crate::integrator::{RenderOptions, RenderOutput};
+use crate::scene::Scene;
 use serde::Serialize;
+use std::ops::Range;
 
-/// An integrator and its options (serialized as the options alone).
-#[derive(Clone, Debug, Serialize)]
-#[serde(untagged)]
-pub enum Method {
-    Path(PathOptions),
-    Lighttrace(LighttraceOptions),
-    Bdpt(BdptOptions),
-    Eorr(EorrOptions),
-    Lvc(LvcOptions),
-    Pssmlt(PssmltOptions),
-    Pcbpt(PcbptOptions),
-    Spcbpt(SpcbptOptions),
-    Memlt(MemltOptions),
+/// An integrator's options type, and how the integrator renders with them.
+pub trait Integrator:
+    clap::Args + clap::FromArgMatches + Default + Clone + std::fmt::Debug + Serialize + Send + Sync + 'static
+{
+    /// Whether the integrator samples with the bidirectional core's strategies (it needs a
+    /// light to start light subpaths from, and reports connections and light paths).
+    const BIDIRECTIONAL: bool;
+
+    /// Renders iterations `iterations` (all of them when `None`) of the render `opts`
+    /// describes, whose method is this integrator with these options.
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &RenderOptions,
+        iterations: Option<Range<u32>>,
+    ) -> Result<RenderOutput, Error>;
+
+    /// The MIS heuristic, for an integrator that weighs strategies.
+    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        None
+    }
 }
 
 /// One integrator's entry in [`INTEGRATORS`].
@@ -42,29 +53,109 @@ pub struct Registration {
     pub default: fn() -> Method,
 }
 
-macro_rules! registration {
-    ($variant:ident, $options:ty) => {
-        Registration {
-            kind: IntegratorKind::$variant,
-            args: <$options as clap::Args>::augment_args,
-            parse: |m| <$options as clap::FromArgMatches>::from_arg_matches(m).map(Method::$variant),
-            default: || Method::$variant(<$options>::default()),
+/// Makes, from one line per integrator (`Variant("name", plugins: [..]) => OptionsType`,
+/// after the doc comment that `--help` shows), the enum of integrators, [`Method`], the
+/// table of registrations and the dispatch of a render.
+macro_rules! integrators {
+    ($($(#[doc = $doc:literal])* $variant:ident($name:literal, plugins: [$($plugin:literal),*]) => $options:ty,)*) => {
+        /// The integrators selectable with `--integrator`.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+        pub enum IntegratorKind {
+            $($(#[doc = $doc])* #[value(name = $name)] #[serde(rename = $name)] $variant,)*
+        }
+
+        impl IntegratorKind {
+            /// The integrator a scene file's plugin name selects.
+            pub fn from_plugin(plugin: &str) -> Option<IntegratorKind> {
+                match plugin {
+                    $($($plugin => Some(IntegratorKind::$variant),)*)*
+                    _ => None,
+                }
+            }
+
+            /// The name `--integrator` takes.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(IntegratorKind::$variant => $name,)*
+                }
+            }
+
+            /// Whether the integrator samples with the bidirectional core's strategies (and
+            /// reports connections and light paths).
+            pub fn is_bidirectional(self) -> bool {
+                match self {
+                    $(IntegratorKind::$variant => <$options as Integrator>::BIDIRECTIONAL,)*
+                }
+            }
+        }
+
+        /// An integrator and its options (serialized as the options alone).
+        #[derive(Clone, Debug, Serialize)]
+        #[serde(untagged)]
+        pub enum Method {
+            $($variant($options),)*
+        }
+
+        /// Every integrator, in the order `--help` lists them.
+        pub static INTEGRATORS: &[Registration] = &[
+            $(Registration {
+                kind: IntegratorKind::$variant,
+                args: <$options as clap::Args>::augment_args,
+                parse: |m| <$options as clap::FromArgMatches>::from_arg_matches(m).map(Method::$variant),
+                default: || Method::$variant(<$options>::default()),
+            },)*
+        ];
+
+        impl Method {
+            pub fn kind(&self) -> IntegratorKind {
+                match self {
+                    $(Method::$variant(_) => IntegratorKind::$variant,)*
+                }
+            }
+
+            /// The MIS heuristic, for the integrators that weigh strategies.
+            pub fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+                match self {
+                    $(Method::$variant(o) => o.heuristic_mut(),)*
+                }
+            }
+
+            /// Renders with the integrator (see [`Integrator::render`]).
+            pub(crate) fn render(
+                &self,
+                scene: &Scene,
+                opts: &RenderOptions,
+                iterations: Option<Range<u32>>,
+            ) -> Result<RenderOutput, Error> {
+                match self {
+                    $(Method::$variant(o) => o.render(scene, opts, iterations),)*
+                }
+            }
         }
     };
 }
 
-/// Every integrator, in the order `--help` lists them.
-pub static INTEGRATORS: [Registration; 9] = [
-    registration!(Path, PathOptions),
-    registration!(Lighttrace, LighttraceOptions),
-    registration!(Bdpt, BdptOptions),
-    registration!(Eorr, EorrOptions),
-    registration!(Lvc, LvcOptions),
-    registration!(Pssmlt, PssmltOptions),
-    registration!(Pcbpt, PcbptOptions),
-    registration!(Spcbpt, SpcbptOptions),
-    registration!(Memlt, MemltOptions),
-];
+integrators! {
+    /// Unidirectional path tracing with next-event estimation and MIS.
+    Path("path", plugins: ["path"]) => crate::integrator::path::PathOptions,
+    /// Light tracing: light subpaths connected to the camera (`t = 1`) only.
+    Lighttrace("lighttrace", plugins: ["ptracer"]) => crate::integrator::bidir::bdpt::LighttraceOptions,
+    /// Bidirectional path tracing with every strategy.
+    Bdpt("bdpt", plugins: ["bdpt"]) => crate::integrator::bidir::bdpt::BdptOptions,
+    /// BDPT with efficiency-optimised Russian roulette on connections.
+    Eorr("eorr", plugins: []) => EorrOptions,
+    /// Light-vertex-cache BDPT: a shared pool of light paths, uniform connections.
+    Lvc("lvc", plugins: []) => LvcOptions,
+    /// Primary-sample-space Metropolis light transport over BDPT (or the path tracer).
+    Pssmlt("pssmlt", plugins: ["pssmlt"]) => PssmltOptions,
+    /// Probabilistic connections: a shared pool, connections drawn from cached PMFs.
+    Pcbpt("pcbpt", plugins: []) => PcbptOptions,
+    /// Subspace-based probabilistic connections: connections drawn from a trained matrix
+    /// over eye and light subspaces.
+    Spcbpt("spcbpt", plugins: []) => SpcbptOptions,
+    /// Path-space Metropolis with Manifold Exploration's mutations.
+    Memlt("memlt", plugins: ["mlt"]) => MemltOptions,
+}
 
 /// The registration of `kind`.
 pub fn registration(kind: IntegratorKind) -> &'static Registration {
@@ -128,34 +219,6 @@ impl Method {
     /// `kind` with its default options.
     pub fn default_for(kind: IntegratorKind) -> Method {
         (registration(kind).default)()
-    }
-
-    pub fn kind(&self) -> IntegratorKind {
-        match self {
-            Method::Path(_) => IntegratorKind::Path,
-            Method::Lighttrace(_) => IntegratorKind::Lighttrace,
-            Method::Bdpt(_) => IntegratorKind::Bdpt,
-            Method::Eorr(_) => IntegratorKind::Eorr,
-            Method::Lvc(_) => IntegratorKind::Lvc,
-            Method::Pssmlt(_) => IntegratorKind::Pssmlt,
-            Method::Pcbpt(_) => IntegratorKind::Pcbpt,
-            Method::Spcbpt(_) => IntegratorKind::Spcbpt,
-            Method::Memlt(_) => IntegratorKind::Memlt,
-        }
-    }
-
-    /// The MIS heuristic, for the integrators that weigh strategies.
-    pub fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
-        match self {
-            Method::Path(_) | Method::Lighttrace(_) => None,
-            Method::Bdpt(o) => Some(&mut o.heuristic),
-            Method::Eorr(o) => Some(&mut o.heuristic),
-            Method::Lvc(o) => Some(&mut o.heuristic),
-            Method::Pssmlt(o) => Some(&mut o.heuristic),
-            Method::Pcbpt(o) => Some(&mut o.heuristic),
-            Method::Spcbpt(o) => Some(&mut o.heuristic),
-            Method::Memlt(o) => Some(&mut o.heuristic),
-        }
     }
 
     /// PCBPT's options. Panics for another integrator.

@@ -404,6 +404,53 @@ impl Iterative for BdptRender {
     fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 }
 
+impl Bdpt {
+    /// The bidirectional estimator with the scene's depth limits and emitter visibility
+    /// (light tracing alone with `light_only`).
+    pub fn for_scene(scene: &Scene, light_only: bool) -> Bdpt {
+        let spec = &scene.integrator;
+        let max_depth = if spec.max_depth < 0 { u32::MAX } else { spec.max_depth as u32 };
+        Bdpt {
+            limits: WalkLimits::new(max_depth, spec.rr_depth),
+            max_depth,
+            hide_emitters: spec.hide_emitters,
+            light_only,
+        }
+    }
+}
+
+impl crate::integrator::registry::Integrator for LighttraceOptions {
+    const BIDIRECTIONAL: bool = true;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        let method = BdptRender { bdpt: Bdpt::for_scene(scene, true), heuristic: Default::default() };
+        crate::integrator::render_loop::run(scene, opts, method, true, iterations)
+    }
+}
+
+impl crate::integrator::registry::Integrator for BdptOptions {
+    const BIDIRECTIONAL: bool = true;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        let method = BdptRender { bdpt: Bdpt::for_scene(scene, false), heuristic: self.heuristic };
+        crate::integrator::render_loop::run(scene, opts, method, true, iterations)
+    }
+
+    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        Some(&mut self.heuristic)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

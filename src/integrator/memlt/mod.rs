@@ -1125,5 +1125,22 @@ fn finish(
     ))
 }
 
+impl crate::integrator::registry::Integrator for MemltOptions {
+    const BIDIRECTIONAL: bool = false;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        render(scene, opts, self, iterations)
+    }
+
+    fn heuristic_mut(&mut self) -> Option<&mut crate::integrator::bidir::mis::Heuristic> {
+        Some(&mut self.heuristic)
+    }
+}
+
 #[cfg(test)]
 mod tests;

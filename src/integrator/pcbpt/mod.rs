@@ -746,6 +746,26 @@ impl IntegratorStats for PcbptStats {
     }
 }
 
+impl crate::integrator::registry::Integrator for PcbptOptions {
+    const BIDIRECTIONAL: bool = true;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        self.pc.validate().map_err(Error::Usage)?;
+        let pc = Pcbpt { bdpt: Bdpt::for_scene(scene, false), opts: self.pc.clone() };
+        let method = PcbptRender::new(pc, self.heuristic, self.pc.pool.max_pool_mb);
+        crate::integrator::render_loop::run(scene, opts, method, true, iterations)
+    }
+
+    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        Some(&mut self.heuristic)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::light_paths_for;

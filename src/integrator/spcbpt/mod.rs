@@ -908,6 +908,26 @@ pub(crate) fn test_model(
     (model, pool)
 }
 
+impl crate::integrator::registry::Integrator for SpcbptOptions {
+    const BIDIRECTIONAL: bool = true;
+
+    fn render(
+        &self,
+        scene: &Scene,
+        opts: &crate::integrator::RenderOptions,
+        iterations: Option<std::ops::Range<u32>>,
+    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+        self.sp.validate().map_err(Error::Usage)?;
+        let sp = Spcbpt { bdpt: Bdpt::for_scene(scene, false), opts: self.sp.clone() };
+        let method = SpcbptRender::new(sp, self.heuristic, self.sp.pool.max_pool_mb);
+        crate::integrator::render_loop::run(scene, opts, method, true, iterations)
+    }
+
+    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        Some(&mut self.heuristic)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
