@@ -48,7 +48,7 @@ pub struct PssmltOptions {
     pub base: MltBase,
     #[command(flatten)]
     pub chain: ChainOptions,
-    /// Two-stage Metropolis (Mitsuba 0.6's `twoStage`, [`crate::integrator::metropolis::two_stage`]): a first stage of
+    /// Two-stage Metropolis (Mitsuba 0.6's `twoStage`): a first stage of
     /// BDPT samples estimates the image at a reduced resolution, and the chains sample paths
     /// in proportion to their luminance over it. Off for PSSMLT, whose scalar contribution
     /// the contract fixes as the luminance.
