@@ -14,8 +14,10 @@
 //! pilot, so such a render is not cut into chunks.
 
 use crate::film::{Film, Tile};
+use crate::integrator::RenderOptions;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
 use crate::integrator::bidir::mis::{Counts, Heuristic};
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, add_results, sample_tile};
 use crate::math::luminance;
 use crate::scene::Scene;
@@ -116,15 +118,10 @@ impl Iterative for Eorr {
     }
 }
 
-impl crate::integrator::registry::Integrator for EorrOptions {
+impl Integrator for EorrOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         use crate::error::Error;
         if self.pilot_spp == 0 && iterations.as_ref().is_some_and(|r| r.start > 0) {
             return Err(Error::Usage(

@@ -4,6 +4,7 @@
 
 use crate::error::Error;
 use crate::film::Tile;
+use crate::integrator::RenderOptions;
 use crate::integrator::bidir::Sink;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
@@ -11,6 +12,7 @@ use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
     LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, pool_line,
 };
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
 use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
 use crate::sampling::Random;
@@ -180,15 +182,10 @@ impl IntegratorStats for LvcStats {
     }
 }
 
-impl crate::integrator::registry::Integrator for LvcOptions {
+impl Integrator for LvcOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         if self.connections == 0 {
             return Err(Error::Usage("--connections must be at least 1".into()));
         }

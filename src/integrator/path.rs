@@ -6,6 +6,8 @@ use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
 use crate::integrator::Counters;
+use crate::integrator::RenderOptions;
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::math::{Rgb, max_component};
 use crate::sampling::{Random, power_heuristic};
@@ -189,15 +191,10 @@ impl Iterative for PathTracer {
 #[derive(Clone, Debug, Default, serde::Serialize, clap::Args)]
 pub struct PathOptions {}
 
-impl crate::integrator::registry::Integrator for PathOptions {
+impl Integrator for PathOptions {
     const BIDIRECTIONAL: bool = false;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         crate::integrator::render_loop::run(scene, opts, PathTracer::new(&scene.integrator), false, iterations)
     }
 }

@@ -19,6 +19,12 @@ use crate::scene::Scene;
 use serde::Serialize;
 use std::ops::Range;
 
+/// The iterations of a render to render (all of them when `None`).
+pub type Iterations = Option<Range<u32>>;
+
+/// What rendering gives.
+pub type Rendered = Result<RenderOutput, Error>;
+
 /// An integrator's options type, and how the integrator renders with them.
 pub trait Integrator:
     clap::Args + clap::FromArgMatches + Default + Clone + std::fmt::Debug + Serialize + Send + Sync + 'static

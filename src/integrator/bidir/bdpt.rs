@@ -6,10 +6,12 @@
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
 use crate::integrator::Counters;
+use crate::integrator::RenderOptions;
 use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_shares_with, mis_weight_with};
 use crate::integrator::bidir::{
     Connection, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
 };
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
@@ -419,29 +421,19 @@ impl Bdpt {
     }
 }
 
-impl crate::integrator::registry::Integrator for LighttraceOptions {
+impl Integrator for LighttraceOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         let method = BdptRender { bdpt: Bdpt::for_scene(scene, true), heuristic: Default::default() };
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 }
 
-impl crate::integrator::registry::Integrator for BdptOptions {
+impl Integrator for BdptOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         let method = BdptRender { bdpt: Bdpt::for_scene(scene, false), heuristic: self.heuristic };
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }

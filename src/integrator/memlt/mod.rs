@@ -45,6 +45,7 @@ use crate::integrator::metropolis::bootstrap::Keys;
 use crate::integrator::metropolis::first_stage_line;
 use crate::integrator::metropolis::stays::{LongestStay, Stay, Stays, near, pixel_of};
 use crate::integrator::metropolis::two_stage::Importance;
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::{Budget, Counters, Details, IntegratorStats, RenderOptions, RenderOutput, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
@@ -1125,15 +1126,10 @@ fn finish(
     ))
 }
 
-impl crate::integrator::registry::Integrator for MemltOptions {
+impl Integrator for MemltOptions {
     const BIDIRECTIONAL: bool = false;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)
     }
 

@@ -35,6 +35,7 @@ pub mod fit;
 use crate::bsdf::TransportMode;
 use crate::error::Error;
 use crate::film::Tile;
+use crate::integrator::RenderOptions;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
@@ -46,6 +47,7 @@ use crate::integrator::budget::{
     Budget, BudgetOptions, BudgetStats, Operations, PRICES, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
 };
 use crate::integrator::pcbpt::fit::CacheFit;
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
 use crate::math::Rgb;
@@ -746,15 +748,10 @@ impl IntegratorStats for PcbptStats {
     }
 }
 
-impl crate::integrator::registry::Integrator for PcbptOptions {
+impl Integrator for PcbptOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         self.pc.validate().map_err(Error::Usage)?;
         let pc = Pcbpt { bdpt: Bdpt::for_scene(scene, false), opts: self.pc.clone() };
         let method = PcbptRender::new(pc, self.heuristic, self.pc.pool.max_pool_mb);

@@ -25,6 +25,7 @@ use crate::integrator::metropolis::bootstrap::{
 use crate::integrator::metropolis::primary::PrimarySampler;
 use crate::integrator::metropolis::stays::{self, LongestStay, Stay, Stays, pixel_of, share_in};
 use crate::integrator::metropolis::{ChainOptions, MltBase, first_stage_line};
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::{Budget, Counters, RenderOptions, RenderOutput};
 use crate::integrator::{Details, IntegratorStats, RenderStats};
 use crate::math::{Rgb, luminance};
@@ -403,15 +404,10 @@ pub fn render(
     ))
 }
 
-impl crate::integrator::registry::Integrator for PssmltOptions {
+impl Integrator for PssmltOptions {
     const BIDIRECTIONAL: bool = false;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)
     }
 

@@ -39,6 +39,7 @@ pub mod subspace;
 
 use crate::error::Error;
 use crate::film::Tile;
+use crate::integrator::RenderOptions;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
 use crate::integrator::bidir::pool::{
@@ -54,6 +55,7 @@ use crate::integrator::pcbpt::cache::{Record, trace_records};
 use crate::integrator::pcbpt::{
     PcMis, PcOptions, PoolOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
 };
+use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::spcbpt::subspace::{
     FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability,
@@ -908,15 +910,10 @@ pub(crate) fn test_model(
     (model, pool)
 }
 
-impl crate::integrator::registry::Integrator for SpcbptOptions {
+impl Integrator for SpcbptOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &crate::integrator::RenderOptions,
-        iterations: Option<std::ops::Range<u32>>,
-    ) -> Result<crate::integrator::RenderOutput, crate::error::Error> {
+    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         self.sp.validate().map_err(Error::Usage)?;
         let sp = Spcbpt { bdpt: Bdpt::for_scene(scene, false), opts: self.sp.clone() };
         let method = SpcbptRender::new(sp, self.heuristic, self.sp.pool.max_pool_mb);
