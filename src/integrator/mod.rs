@@ -1,6 +1,7 @@
-//! Integrators, their options and statistics, and [`render`], which hands the chosen one to
-//! its render loop: [`render_loop`] for every integrator that renders iterations of one
-//! sample per pixel, [`mlt`]'s and [`memlt`]'s own for the Markov chains.
+//! Integrators, their options and statistics, and [`render`], which hands the chosen one
+//! (the [`Method`] of [`registry`]) to its own [`Integrator::render`]: [`render_loop`] for
+//! every integrator that renders iterations of one sample per pixel,
+//! [`metropolis::run_chains`] for the Markov chains of [`pssmlt`] and [`memlt`].
 
 pub mod bidir;
 pub mod budget;
