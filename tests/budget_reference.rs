@@ -202,10 +202,3 @@ fn spcbpt_measures_its_last_training_iterations() {
         assert!(bits(&kept) == off, "measured in training: {in_training}; the kept plan's image differs");
     }
 }
-
-/// The budget's statistics of a PCBPT or SPCBPT render.
-fn budget_of(s: &pcbpt::integrator::RenderStats) -> Option<&pcbpt::integrator::budget::BudgetStats> {
-    use pcbpt::integrator::{pcbpt::PcbptStats, spcbpt::SpcbptStats};
-    let pc = s.details.get::<PcbptStats>().map(|d| d.budget.as_ref());
-    pc.or_else(|| s.details.get::<SpcbptStats>().map(|d| d.budget.as_ref())).flatten()
-}

@@ -89,10 +89,3 @@ fn budgeted_pool_integrators_are_bit_identical_with_1_and_2_threads() {
         }
     }
 }
-
-/// The budget's statistics of a PCBPT or SPCBPT render.
-fn budget_of(s: &pcbpt::integrator::RenderStats) -> Option<&pcbpt::integrator::budget::BudgetStats> {
-    use pcbpt::integrator::{pcbpt::PcbptStats, spcbpt::SpcbptStats};
-    let pc = s.details.get::<PcbptStats>().map(|d| d.budget.as_ref());
-    pc.or_else(|| s.details.get::<SpcbptStats>().map(|d| d.budget.as_ref())).flatten()
-}

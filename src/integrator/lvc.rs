@@ -164,8 +164,8 @@ impl Iterative for LvcRender {
         self.pool_size = Some((pool.paths, pool.connectible.len()));
     }
 
-    fn report(&self, stats: &mut RenderStats) {
-        stats.details = Details::of(LvcStats { pool: self.pool_size });
+    fn details(&self) -> Details {
+        Details::of(LvcStats { pool: self.pool_size })
     }
 }
 

@@ -25,7 +25,7 @@
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
 use crate::integrator::{
-    Budget, Counters, PhaseRays, PhaseTimes, RenderOptions, RenderOutput, RenderStats, take_snapshots,
+    Budget, Counters, Details, PhaseRays, PhaseTimes, RenderOptions, RenderOutput, RenderStats, take_snapshots,
 };
 use crate::math::Rgb;
 use crate::sampling::Sampler;
@@ -130,8 +130,10 @@ pub(crate) trait Iterative: Send + Sync {
     /// next iterations need.
     fn finish(&mut self, ctx: &Ctx, pass: Self::Pass, iterations: Range<u32>, results: &[TileResult<Self::TileData>]);
 
-    /// Adds the integrator's own statistics.
-    fn report(&self, _stats: &mut RenderStats) {}
+    /// The integrator's own statistics of the render, once its passes are done.
+    fn details(&self) -> Details {
+        Details::default()
+    }
 }
 
 /// Sink of one camera sample: its radiance, its per-strategy parts, and its splats.
@@ -167,11 +169,6 @@ pub(crate) struct TileResult<D = ()> {
 }
 
 impl<D> TileResult<D> {
-    /// The tile with `data` instead of its own.
-    pub fn with<E>(self, data: E) -> TileResult<E> {
-        TileResult { block: self.block, splats: self.splats, counters: self.counters, data }
-    }
-
     /// The tile with its data mapped by `f`.
     pub fn map<E>(self, f: impl FnOnce(D) -> E) -> TileResult<E> {
         TileResult { block: self.block, splats: self.splats, counters: self.counters, data: f(self.data) }
@@ -431,14 +428,14 @@ pub(crate) fn run<M: Iterative>(
     result?;
     let seconds = start.elapsed().as_secs_f64();
     let spp = first - range.start;
-    let mut stats = RenderStats {
+    let stats = RenderStats {
         passes,
         phases: work.phases,
         shadow_rays: work.shadow,
         iterations: Some(range.start..first),
+        details: method.details(),
         ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
-    method.report(&mut stats);
     let strategy_images =
         (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
     Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats, film: Some(film) })

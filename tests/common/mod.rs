@@ -338,3 +338,10 @@ pub fn mean_and_standard_error(xs: &[f64]) -> (f64, f64) {
     let se = (xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0) / n).sqrt();
     (mean, se)
 }
+
+/// The budget's statistics of a PCBPT or SPCBPT render.
+pub fn budget_of(s: &pcbpt::integrator::RenderStats) -> Option<&pcbpt::integrator::budget::BudgetStats> {
+    use pcbpt::integrator::{pcbpt::PcbptStats, spcbpt::SpcbptStats};
+    let pc = s.details.get::<PcbptStats>().map(|d| d.budget.as_ref());
+    pc.or_else(|| s.details.get::<SpcbptStats>().map(|d| d.budget.as_ref())).flatten()
+}

@@ -208,7 +208,7 @@ fn budget_tile<S: CameraSample>(
 ) -> Option<TileResult<PoolTile<S::Learned>>> {
     if !budget.measures(first) {
         return (budget.plan().path_tracing() && !ctx.layers)
-            .then(|| path_traced_tile(ctx, tile, first, count).with(PoolTile::default()));
+            .then(|| path_traced_tile(ctx, tile, first, count).map(|()| PoolTile::default()));
     }
     let mut moments = budget.tile_moments(&tile);
     let result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
@@ -223,7 +223,7 @@ fn budget_tile<S: CameraSample>(
         true
     });
     moments.end_vertex();
-    Some(result.with(PoolTile { moments: Some(moments), learned: sample.learned() }))
+    Some(result.map(|()| PoolTile { moments: Some(moments), learned: sample.learned() }))
 }
 
 /// A tile of iteration `first` of a pool integrator with `sampler`'s camera samples: the
@@ -245,7 +245,7 @@ pub(crate) fn pool_tile<S: CameraSample>(
         true
     });
     let learned = sampler.learned();
-    result.with(PoolTile { moments: None, learned })
+    result.map(|()| PoolTile { moments: None, learned })
 }
 
 /// A tile of a plan that [`Plan::path_tracing`]: the path tracer's samples (next-event

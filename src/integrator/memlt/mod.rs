@@ -47,11 +47,10 @@ pub use stats::*;
 use crate::film::{Film, Splat};
 use crate::integrator::bidir::Vertex;
 use crate::integrator::metropolis::bootstrap::Keys;
-use crate::integrator::metropolis::first_stage_line;
 use crate::integrator::metropolis::stays::{LongestStay, Stay, Stays, near, pixel_of};
 use crate::integrator::metropolis::two_stage::Importance;
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
-use crate::integrator::{Budget, Counters, Details, IntegratorStats, RenderOptions, RenderOutput, RenderStats};
+use crate::integrator::{Budget, Counters, Details, RenderOptions, RenderOutput};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
 use crate::scene::Scene;
@@ -871,7 +870,7 @@ fn finish(
         snapshots,
         interrupted,
         iterations,
-        |s| s.details = Details::of(MemltDetails { memlt: stats }),
+        Details::of(MemltDetails { memlt: stats }),
     ))
 }
 

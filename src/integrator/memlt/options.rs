@@ -1,6 +1,7 @@
 //! MEMLT's options, and which mutators they enable.
 
-use super::*;
+use super::Mutator;
+use serde::Serialize;
 
 /// Options of MEMLT (`--integrator memlt`).
 #[derive(Clone, Debug, Serialize, clap::Args)]

@@ -1,7 +1,12 @@
 //! MEMLT's statistics: per mutator, of the manifold walks, of the normalisation and the
 //! direct light's balance, and their lines in the render's summary.
 
-use super::*;
+use super::Mutator;
+use super::{direct_balance, manifold_perturbation};
+use crate::integrator::metropolis::first_stage_line;
+use crate::integrator::metropolis::stays::LongestStay;
+use crate::integrator::{IntegratorStats, RenderStats};
+use serde::Serialize;
 
 /// Proposals and acceptances of one mutator.
 #[derive(Clone, Copy, Debug, Serialize)]

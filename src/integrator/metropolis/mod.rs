@@ -10,7 +10,9 @@ pub mod stays;
 pub mod two_stage;
 
 use crate::film::Film;
-use crate::integrator::{Budget, Counters, RenderOptions, RenderOutput, RenderStats, Snapshot, take_snapshots};
+use crate::integrator::{
+    Budget, Counters, Details, RenderOptions, RenderOutput, RenderStats, Snapshot, take_snapshots,
+};
 use crate::math::Rgb;
 use crate::scene::Scene;
 use serde::Serialize;
@@ -158,7 +160,7 @@ pub(crate) fn run_chains<C: Send>(
 }
 
 /// The output of a Markov-chain render (PSSMLT, MEMLT): its statistics, with the
-/// iterations (mutations per pixel) it rendered and what `set` adds, and its image.
+/// iterations (mutations per pixel) it rendered and the integrator's `details`, and its image.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn chains_output(
     scene: &Scene,
@@ -172,16 +174,16 @@ pub(crate) fn chains_output(
     snapshots: Vec<Snapshot>,
     interrupted: bool,
     iterations: Option<Range<u32>>,
-    set: impl FnOnce(&mut RenderStats),
+    details: Details,
 ) -> RenderOutput {
-    let mut stats = RenderStats {
+    let stats = RenderStats {
         iterations: match opts.budget {
             Budget::Spp(spp) => Some(iterations.unwrap_or(0..spp)),
             Budget::Time(_) => None,
         },
+        details,
         ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
-    set(&mut stats);
     let (width, height) = (scene.film.width, scene.film.height);
     RenderOutput { image, strategy_images: Vec::new(), snapshots, width, height, stats, film: Some(film) }
 }

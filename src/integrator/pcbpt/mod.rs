@@ -636,12 +636,12 @@ impl Iterative for PcbptRender {
         budget.finish(iterations.start, results, &splat_shares, operations);
     }
 
-    fn report(&self, stats: &mut RenderStats) {
-        stats.details = Details::of(PcbptStats {
+    fn details(&self) -> Details {
+        Details::of(PcbptStats {
             pool: self.pool_size,
             cache: self.cache_stats,
             budget: self.budget.as_ref().and_then(Budget::chosen_stats),
-        });
+        })
     }
 }
 

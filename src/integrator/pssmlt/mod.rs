@@ -400,7 +400,7 @@ pub fn render(
         snapshots,
         interrupted,
         iterations,
-        |s| s.details = Details::of(PssmltStats { mlt: stats }),
+        Details::of(PssmltStats { mlt: stats }),
     ))
 }
 

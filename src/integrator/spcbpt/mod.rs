@@ -50,12 +50,11 @@ use crate::integrator::bidir::pool::{
 };
 use crate::integrator::bidir::{Sink, Vertex, VertexKind};
 use crate::integrator::budget::{
-    Budget, BudgetMode, BudgetOptions, BudgetStats, CameraSample, Operations, Plan, PoolTile, Prices, SPCBPT_PRICES,
-    SPCBPT_RESAMPLING_PRICES, SPCBPT_SUBSPACE_PRICES, SplatShares, TracedPool, pool_tile,
+    Budget, BudgetMode, BudgetStats, CameraSample, Operations, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
 };
 use crate::integrator::pcbpt::cache::{Record, trace_records};
 use crate::integrator::pcbpt::{
-    PcMis, PcOptions, PoolOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
+    PcMis, PcOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
 };
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
@@ -734,12 +733,12 @@ impl Iterative for SpcbptRender {
         }
     }
 
-    fn report(&self, stats: &mut RenderStats) {
-        stats.details = Details::of(SpcbptStats {
+    fn details(&self) -> Details {
+        Details::of(SpcbptStats {
             pool: self.pool_size,
             subspaces: self.stats,
             budget: self.budget.as_ref().and_then(Budget::chosen_stats),
-        });
+        })
     }
 }
 

@@ -1,6 +1,12 @@
 //! SPCBPT's options: its pool, the budget and its own (`--sp-*`).
 
-use super::*;
+use crate::integrator::bidir::mis::Heuristic;
+use crate::integrator::budget::{
+    BudgetOptions, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES, SPCBPT_SUBSPACE_PRICES,
+};
+use crate::integrator::pcbpt::{PcMis, PoolOptions};
+use crate::integrator::spcbpt::subspace::TrainingSample;
+use serde::Serialize;
 
 /// Options of SPCBPT (`--integrator spcbpt`).
 #[derive(Clone, Debug, Default, Serialize, clap::Args)]
