@@ -2,14 +2,15 @@
 //!
 //! [`Accel`] answers closest-hit and occlusion queries, for single rays and batches, over
 //! the scene's primitives: triangle meshes and exact spheres. The default backend is the
-//! system Embree bound by our own bindgen layer ([`embree`], in the FFI module [`crate::ffi`]);
+//! system Embree ([`embree`], over the raw bindings of our own bindgen layer, [`crate::ffi::embree`]);
 //! with the `obvhs` feature the pure-Rust CWBVH of the `obvhs` crate ([`bvh`]) is
 //! available too, and both report the same hits (up to floating-point ties at shared edges).
 
 #[cfg(feature = "obvhs")]
 pub mod bvh;
+#[allow(unsafe_code)]
+pub mod embree;
 pub mod query;
-pub use crate::ffi::embree;
 pub use query::{
     AccelError, BuildOptions, BuildQuality, BvhLayout, Cutout, Cutouts, Geometry, Hit, Ray, hit_hash01, keeps_hit,
 };

@@ -1,8 +1,8 @@
 //! BDPT with efficiency-optimised Russian roulette on connections (EORR, contract §4): a
 //! connection whose MIS-weighted contribution (luminance) falls below a per-pixel threshold
 //! `τ = fraction × (the pixel's mean luminance)` is traced with probability `c / τ` and
-//! divided by it ([`crate::integrator::bidir::bdpt::RouletteMap`]); this file holds what the render loop keeps
-//! between iterations: the pixel means the thresholds come from.
+//! divided by it: a [`ConnectionPolicy`] of the bidirectional core ([`Roulette`]). The
+//! render loop keeps between iterations the pixel means the thresholds come from.
 //!
 //! The means come from a pilot: the render's own first `P` samples per pixel
 //! (`--eorr-pilot-spp`), the thresholds renewed when the pilot reaches 1, 2, 4, … samples
@@ -14,13 +14,17 @@
 //! pilot, so such a render is not cut into chunks.
 
 use crate::film::{Film, Tile};
-use crate::integrator::RenderOptions;
-use crate::integrator::bidir::bdpt::{Bdpt, Connector, RouletteMap, Scratch};
+use crate::integrator::bidir::bdpt::{Bdpt, ConnectionPolicy, Connector, Scratch};
 use crate::integrator::bidir::mis::{Counts, Heuristic};
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, add_results, sample_tile};
-use crate::math::luminance;
+use crate::integrator::{Details, IntegratorStats, RenderOptions, RenderStats};
+use crate::math::{Rgb, luminance};
+use crate::sampling::Random;
 use crate::scene::Scene;
+use glam::Vec2;
+use serde::Serialize;
+use std::cell::Cell;
 use std::ops::Range;
 
 /// Options of EORR (`--integrator eorr`).
@@ -44,6 +48,52 @@ impl Default for EorrOptions {
     }
 }
 
+/// EORR's roulette on connections, per pixel: a connection whose weighted contribution
+/// (luminance) falls below the pixel's threshold `τ` is traced with probability `c / τ` and
+/// divided by it. Without thresholds (the first sample of every pixel) every connection is
+/// traced.
+pub struct Roulette<'a> {
+    /// `τ` per pixel, row by row.
+    pub tau: Option<&'a [f32]>,
+    pub width: u32,
+    pub height: u32,
+    /// Connections left untraced.
+    pub skipped: Cell<u64>,
+}
+
+impl Roulette<'_> {
+    #[inline]
+    fn tau_at(tau: &[f32], width: u32, height: u32, pos: Vec2) -> f32 {
+        let x = (pos.x.max(0.0) as u32).min(width - 1);
+        let y = (pos.y.max(0.0) as u32).min(height - 1);
+        tau[(y * width + x) as usize]
+    }
+}
+
+impl ConnectionPolicy for Roulette<'_> {
+    #[inline]
+    fn judges(&self) -> bool {
+        self.tau.is_some()
+    }
+
+    #[inline]
+    fn keep<R: Random>(&self, c: Rgb, pos: Vec2, rng: &mut R) -> Option<f32> {
+        let Some(tau) = self.tau else { return Some(1.0) };
+        let tau = Roulette::tau_at(tau, self.width, self.height, pos);
+        let y = luminance(c).abs();
+        if y >= tau || tau <= 0.0 {
+            return Some(1.0);
+        }
+        let p = y / tau;
+        if rng.next_1d() < p {
+            Some(1.0 / p)
+        } else {
+            self.skipped.set(self.skipped.get() + 1);
+            None
+        }
+    }
+}
+
 /// EORR in the render loop.
 pub struct Eorr {
     pub bdpt: Bdpt,
@@ -56,12 +106,14 @@ pub struct Eorr {
     pilot: Film,
     /// The thresholds, per pixel (none before the first sample).
     tau: Option<Vec<f32>>,
+    /// Connections the roulette left untraced in the iterations the render keeps.
+    skipped: u64,
 }
 
 impl Eorr {
     pub fn new(bdpt: Bdpt, heuristic: Heuristic, fraction: f32, pilot_spp: u32, scene: &Scene) -> Eorr {
         let pilot = Film::new(scene.film.width, scene.film.height, scene.film.filter);
-        Eorr { bdpt, heuristic, fraction, pilot_spp, pilot, tau: None }
+        Eorr { bdpt, heuristic, fraction, pilot_spp, pilot, tau: None, skipped: 0 }
     }
 
     fn in_pilot(&self, iteration: u32) -> bool {
@@ -71,7 +123,8 @@ impl Eorr {
 
 impl Iterative for Eorr {
     type Pass = ();
-    type TileData = ();
+    /// Connections the tile's roulette left untraced.
+    type TileData = u64;
 
     /// Passes in the pilot end where the thresholds are renewed: at powers of two and at `P`;
     /// with a running mean (`P = 0`) after every iteration.
@@ -94,18 +147,22 @@ impl Iterative for Eorr {
         Prepared::only(())
     }
 
-    fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
+    fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult<u64> {
         let (width, height) = (ctx.scene.film.width, ctx.scene.film.height);
-        let roulette = self.tau.as_deref().map(|tau| RouletteMap { tau, width, height });
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &Counts::Bdpt, roulette };
+        let policy = Roulette { tau: self.tau.as_deref(), width, height, skipped: Cell::new(0) };
+        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &Counts::Bdpt, policy };
         let mut scratch = Scratch::default();
-        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+        let result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
             self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);
             true
-        })
+        });
+        result.map(|()| conn.policy.skipped.get())
     }
 
-    fn finish(&mut self, _: &Ctx, _: (), iterations: Range<u32>, results: &[TileResult]) {
+    fn finish(&mut self, ctx: &Ctx, _: (), iterations: Range<u32>, results: &[TileResult<u64>]) {
+        if iterations.start >= ctx.start {
+            self.skipped += results.iter().map(|r| r.data).sum::<u64>();
+        }
         if !self.in_pilot(iterations.start) {
             return;
         }
@@ -115,6 +172,23 @@ impl Iterative for Eorr {
             let fraction = self.fraction;
             self.tau = Some(self.pilot.develop().iter().map(|c| luminance(*c).max(0.0) * fraction).collect());
         }
+    }
+
+    fn details(&self) -> Details {
+        Details::of(EorrStats { connections_skipped: self.skipped })
+    }
+}
+
+/// EORR's statistics.
+#[derive(Clone, Debug, Serialize)]
+pub struct EorrStats {
+    /// Connections left untraced by the roulette.
+    pub connections_skipped: u64,
+}
+
+impl IntegratorStats for EorrStats {
+    fn lines(&self, _: &RenderStats) -> Vec<String> {
+        vec![format!("  EORR: {} connections left untraced by the roulette", self.connections_skipped)]
     }
 }
 

@@ -8,7 +8,7 @@ use crate::integrator::RenderOptions;
 use crate::integrator::bidir::Sink;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
-use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts};
+use crate::integrator::bidir::mis::{FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
     LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, pool_line,
 };
@@ -75,6 +75,26 @@ impl Lvc {
     }
 }
 
+/// LVC's strategy counts: light tracing from `M` paths over `W·H` pixels
+/// (`light_trace = M / (W·H)`) and `N` uniform pool connections per camera vertex
+/// (`connect = N / V̄`, V̄ the mean number of pool vertices per light path).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LvcCounts {
+    pub light_trace: f32,
+    pub connect: f32,
+}
+
+impl StrategyCounts for LvcCounts {
+    #[inline]
+    fn count(&self, _: &FullPath, s: usize, t: usize) -> f32 {
+        match (s, t) {
+            (_, 1) => self.light_trace,
+            (0 | 1, _) => 1.0,
+            _ => self.connect,
+        }
+    }
+}
+
 /// Uniform selection over the pool's `v` vertices (LVC): each draw weighs `V / (N M)`.
 struct Uniform {
     v: usize,
@@ -108,9 +128,9 @@ impl LvcRender {
         LvcRender { lvc, heuristic, max_pool_mb, vbar: 0.0, pool_size: None }
     }
 
-    fn counts(&self, scene: &Scene) -> Counts {
+    fn counts(&self, scene: &Scene) -> LvcCounts {
         let pixels = scene.film.width as f32 * scene.film.height as f32;
-        Counts::Pool {
+        LvcCounts {
             light_trace: self.lvc.light_paths as f32 / pixels,
             connect: if self.vbar > 0.0 { self.lvc.connections as f32 / self.vbar } else { 0.0 },
         }
@@ -123,7 +143,7 @@ impl Iterative for LvcRender {
 
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
         let (m, limits) = (self.lvc.light_paths, &self.lvc.bdpt.limits);
-        let (pilot, _, _) = LightPool::trace::<Counts>(ctx.scene, limits, m, ctx.seed, PILOT_ITERATION, None);
+        let (pilot, _, _) = LightPool::trace::<LvcCounts>(ctx.scene, limits, m, ctx.seed, PILOT_ITERATION, None);
         check_pool_memory(m, &pilot, self.max_pool_mb, "--lvc-light-paths")?;
         self.vbar = pilot.mean_vertices();
         Ok(())
@@ -140,7 +160,7 @@ impl Iterative for LvcRender {
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<LightPool> {
         let t = Instant::now();
         let counts = self.counts(ctx.scene);
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
         let splat = keep.then_some((&conn, &self.lvc.bdpt, ctx.layers));
         let (pool, splats, counters) =
             LightPool::trace(ctx.scene, &self.lvc.bdpt.limits, self.lvc.light_paths, ctx.seed, first as u64, splat);
@@ -151,7 +171,7 @@ impl Iterative for LvcRender {
 
     fn render_tile(&self, ctx: &Ctx, pool: &LightPool, tile: Tile, first: u32, count: u32) -> TileResult {
         let counts = self.counts(ctx.scene);
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
         let mut scratch = Scratch::default();
         sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
             self.lvc.sample(&conn, pool, pos, rng, &mut scratch, sink, counters);

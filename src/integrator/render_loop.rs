@@ -45,6 +45,9 @@ pub(crate) struct Ctx<'a> {
     /// The whole render's samples per pixel when it has a fixed count (`--spp`; every chunk
     /// of a distributed render sees the whole count), `None` with `--time`.
     pub planned_spp: Option<u32>,
+    /// The first iteration whose samples the render keeps (a chunk's start; the iterations
+    /// before it are a warm-up).
+    pub start: u32,
 }
 
 /// A prepared pass: what its tiles share, and the splats and counters of the preparation
@@ -269,10 +272,9 @@ fn add_pass<D>(film: &mut Film, pass: Option<PendingPass<D>>) -> f64 {
 /// Iterations per pass of a render of `total` samples per pixel at `w × h`: as many as fit
 /// in ~1 M samples (so that Ctrl-C stays responsive), all of them when they fit. A tile
 /// renders a pixel's samples of a pass one after the other, so the more a pass holds, the
-/// more often a sample finds its pixel's first hits (their texels, their triangles) in cache:
-/// one pass of 16 spp renders `staircase2` about 8% faster than 16 passes of one (see
-/// BENCHMARKS.md). Passes start at multiples of it, whatever range of iterations a chunk
-/// renders.
+/// more often a sample finds its pixel's first hits (their texels, their triangles) in cache
+/// (the speed-up: `docs/results/path-tracer.md`). Passes start at multiples of it,
+/// whatever range of iterations a chunk renders.
 fn pass_size(total: u32, w: u32, h: u32) -> u32 {
     let cap = ((1u64 << 20) / (w as u64 * h as u64)).max(1) as u32;
     total.clamp(1, cap)
@@ -301,13 +303,13 @@ pub(crate) fn run<M: Iterative>(
         Budget::Spp(spp) => Some(spp),
         Budget::Time(_) => None,
     };
-    let ctx = Ctx { scene, seed: opts.seed, layers, planned_spp };
     let tile_list = tiles(w, h, opts.tile_size.max(1));
     let mut film = Film::with_layers(w, h, scene.film.filter, if layers { STRATEGY_LAYERS } else { 0 });
     let (range, per) = match opts.budget {
         Budget::Spp(spp) => (iterations.unwrap_or(0..spp), pass_size(spp, w, h)),
         Budget::Time(_) => (0..u32::MAX, 1),
     };
+    let ctx = Ctx { scene, seed: opts.seed, layers, planned_spp, start: range.start };
     let mut counters = Counters::default();
     let mut work = Work::default();
     let start = Instant::now();

@@ -76,8 +76,6 @@ pub struct Counters {
     pub connections: u64,
     /// Of those, connections found occluded.
     pub connections_occluded: u64,
-    /// Connections left untraced by Russian roulette (EORR).
-    pub connections_skipped: u64,
     /// Pool draws of a camera vertex that repeated an earlier draw of it and were merged
     /// into that connection (its weight counts both).
     pub draws_merged: u64,
@@ -123,7 +121,6 @@ impl std::ops::AddAssign for Counters {
         self.light_paths += o.light_paths;
         self.connections += o.connections;
         self.connections_occluded += o.connections_occluded;
-        self.connections_skipped += o.connections_skipped;
         self.draws_merged += o.draws_merged;
         self.pool_shadow_rays += o.pool_shadow_rays;
         self.pool_lookups += o.pool_lookups;

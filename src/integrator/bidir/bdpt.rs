@@ -1,72 +1,72 @@
 //! The strategies of bidirectional path tracing on the shared core, and the per-sample
-//! estimators built from them: light tracing (`t = 1` only), BDPT (Veach 1997: every
-//! `(s,t)`), and BDPT with efficiency-optimised Russian roulette on connections (EORR,
-//! contract §4).
+//! estimators built from them: light tracing (`t = 1` only) and BDPT (Veach 1997, contract
+//! §2: every `(s,t)`), with a [`ConnectionPolicy`] deciding which connections are traced
+//! (EORR's roulette is one, contract §4).
 
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
 use crate::integrator::Counters;
 use crate::integrator::RenderOptions;
-use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_shares_with, mis_weight_with};
+use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_weight_with};
 use crate::integrator::bidir::{
-    Connection, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath, visible,
+    Connection, Delivery, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath,
+    visible,
 };
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
-use crate::math::{Rgb, luminance};
+use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::Vec2;
 use std::ops::Range;
 use std::slice::from_ref;
 
-/// Per-pixel thresholds of efficiency-optimised Russian roulette: a connection whose
-/// weighted contribution (luminance) falls below `tau` is traced with probability
-/// `c / tau` and divided by it.
-#[derive(Clone, Copy)]
-pub struct RouletteMap<'a> {
-    pub tau: &'a [f32],
-    pub width: u32,
-    pub height: u32,
+/// Which connections get their shadow ray traced: every one ([`Always`]), or those a
+/// policy keeps, their contributions divided by the probability of keeping them (EORR's
+/// roulette, [`crate::integrator::eorr`]).
+pub trait ConnectionPolicy {
+    /// Whether the policy judges connections at all: its [`ConnectionPolicy::keep`] then
+    /// sees each connection's MIS-weighted contribution before its shadow ray is traced,
+    /// and a connection of weight zero is not traced.
+    fn judges(&self) -> bool;
+    /// For the connection of MIS-weighted contribution `c` at film position `pos`:
+    /// `Some(factor)` to trace it (its contribution multiplied by `factor`), `None` to
+    /// leave it untraced.
+    fn keep<R: Random>(&self, c: Rgb, pos: Vec2, rng: &mut R) -> Option<f32>;
 }
 
-impl RouletteMap<'_> {
-    #[inline]
-    fn at(&self, pos: Vec2) -> f32 {
-        let x = (pos.x.max(0.0) as u32).min(self.width - 1);
-        let y = (pos.y.max(0.0) as u32).min(self.height - 1);
-        self.tau[(y * self.width + x) as usize]
+/// Every connection traced, weighed after its shadow ray.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Always;
+
+impl ConnectionPolicy for Always {
+    #[inline(always)]
+    fn judges(&self) -> bool {
+        false
+    }
+
+    #[inline(always)]
+    fn keep<R: Random>(&self, _: Rgb, _: Vec2, _: &mut R) -> Option<f32> {
+        Some(1.0)
     }
 }
 
 /// Evaluates single strategies of a path and hands their weighted contributions to a sink.
-pub struct Connector<'a, C> {
+pub struct Connector<'a, C, P = Always> {
     pub scene: &'a Scene,
     pub heuristic: Heuristic,
     pub counts: &'a C,
-    pub roulette: Option<RouletteMap<'a>>,
+    pub policy: P,
 }
 
-impl<C: StrategyCounts> Connector<'_, C> {
-    /// Russian roulette on a connection whose weighted contribution is `c`, for the pixel
-    /// at `pos`: `Some(scale)` when the shadow ray is to be traced.
-    #[inline]
-    fn roulette<R: Random>(&self, c: Rgb, pos: Vec2, rng: &mut R, counters: &mut Counters) -> Option<f32> {
-        let Some(map) = &self.roulette else { return Some(1.0) };
-        let tau = map.at(pos);
-        let y = luminance(c).abs();
-        if y >= tau || tau <= 0.0 {
-            return Some(1.0);
-        }
-        let p = y / tau;
-        if rng.next_1d() < p {
-            Some(1.0 / p)
-        } else {
-            counters.connections_skipped += 1;
-            None
-        }
+impl<'a, C: StrategyCounts> Connector<'a, C> {
+    /// Strategies weighed with `counts`, every connection traced.
+    pub fn new(scene: &'a Scene, heuristic: Heuristic, counts: &'a C) -> Connector<'a, C> {
+        Connector { scene, heuristic, counts, policy: Always }
     }
+}
 
+impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
     /// Traces the shadow ray of a connection: `true` when unoccluded.
     #[inline]
     fn trace(&self, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
@@ -94,8 +94,9 @@ impl<C: StrategyCounts> Connector<'_, C> {
             return;
         }
         let w = mis_weight_with(self.scene, &[], camera, None, self.heuristic, self.counts);
-        if sink.wants_shares() {
-            sink.note_shares(mis_shares_with(self.scene, &[], camera, None, self.counts, None));
+        if sink.observes() {
+            let (scene, counts) = (self.scene, self.counts);
+            sink.observe(&Delivery { scene, light: &[], camera, conn: None, counts, drawn: None });
         }
         sink.add_emission(camera, pt.beta * le * w);
     }
@@ -206,10 +207,10 @@ impl<C: StrategyCounts> Connector<'_, C> {
         })
     }
 
-    /// Tells a sink that wants them the MIS shares of the connection about to be delivered,
-    /// re-based on its draw's factor `drawn` for a drawn connection ([`Shares::drawn`]).
+    /// Shows a sink that observes them the connection about to be delivered; `drawn` is
+    /// the factor of a connection drawn from a pool.
     #[inline]
-    fn note_shares(
+    fn observe(
         &self,
         light: &[Vertex],
         camera: &[Vertex],
@@ -217,14 +218,15 @@ impl<C: StrategyCounts> Connector<'_, C> {
         drawn: Option<f32>,
         sink: &mut impl Sink,
     ) {
-        if sink.wants_shares() {
-            sink.note_shares(mis_shares_with(self.scene, light, camera, Some(conn), self.counts, drawn));
+        if sink.observes() {
+            let (scene, counts) = (self.scene, self.counts);
+            sink.observe(&Delivery { scene, light, camera, conn: Some(conn), counts, drawn });
         }
     }
 
-    /// Weights an unweighted connection contribution, applies roulette, traces the shadow
+    /// Weights an unweighted connection contribution, applies the connection policy, traces the shadow
     /// ray and delivers the result; `true` when the shadow ray was traced and unoccluded.
-    /// `drawn` is the factor of a drawn connection (its shares are re-based on it).
+    /// `drawn` is the factor of a drawn connection.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn finish<R: Random, S: Sink>(
@@ -241,22 +243,22 @@ impl<C: StrategyCounts> Connector<'_, C> {
         deliver: impl FnOnce(&mut S, Rgb, f32),
     ) -> bool {
         let (a, b) = (&light[light.len() - 1], &camera[camera.len() - 1]);
-        if self.roulette.is_some() {
-            // The weight is part of what the roulette judges, so it comes first.
+        if self.policy.judges() {
+            // The weight is part of what the policy judges, so it comes first.
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
             if w == 0.0 {
                 return false;
             }
-            let Some(k) = self.roulette(c * w, pos, rng, counters) else { return false };
+            let Some(k) = self.policy.keep(c * w, pos, rng) else { return false };
             let visible = self.trace(a, b, counters);
             if visible {
-                self.note_shares(light, camera, conn, drawn, sink);
+                self.observe(light, camera, conn, drawn, sink);
                 deliver(sink, c, w * k);
             }
             visible
         } else if self.trace(a, b, counters) {
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
-            self.note_shares(light, camera, conn, drawn, sink);
+            self.observe(light, camera, conn, drawn, sink);
             deliver(sink, c, w);
             true
         } else {
@@ -305,9 +307,9 @@ impl Bdpt {
     /// One camera sample at film position `pos`: a camera subpath (unless light tracing),
     /// one light subpath, and every strategy joining them.
     #[allow(clippy::too_many_arguments)]
-    pub fn sample<R: Random, C: StrategyCounts>(
+    pub fn sample<R: Random, C: StrategyCounts, P: ConnectionPolicy>(
         &self,
-        conn: &Connector<C>,
+        conn: &Connector<C, P>,
         pos: Vec2,
         rng: &mut R,
         scratch: &mut Scratch,
@@ -393,7 +395,7 @@ impl Iterative for BdptRender {
 
     fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
         let counts = if self.bdpt.light_only { Counts::LightTrace } else { Counts::Bdpt };
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
         let mut scratch = Scratch::default();
         // Light tracing only splats, but for the sky seen directly.
         let camera_samples = !self.bdpt.light_only || !ctx.scene.infinite_lights.is_empty();

@@ -1,5 +1,5 @@
-//! MIS weights of bidirectional strategies by the ratio walk (pbrt-v4 style), on a copy of
-//! the path's densities: the vertices are never modified.
+//! MIS weights of bidirectional strategies by the ratio walk (pbrt-v4 style; contract §2), on
+//! a copy of the path's densities: the vertices are never modified.
 //!
 //! A full path `x_0..x_{n-1}` runs from the light end (`x_0 = y_0`) to the camera
 //! (`x_{n-1} = z_0`). Strategy `s'` (with `t' = n - s'`) samples `x_0..x_{s'-1}` from the
@@ -75,7 +75,7 @@ impl<const N: usize> PathPdfs<N> {
 
 /// Zero densities mark Dirac deltas; they cancel in the ratios (pbrt's `remap0`).
 #[inline]
-fn remap0(x: f32) -> f32 {
+pub(crate) fn remap0(x: f32) -> f32 {
     if x == 0.0 { 1.0 } else { x }
 }
 
@@ -193,11 +193,18 @@ pub trait StrategyCounts {
         false
     }
 
-    /// The correlation correction of the pool connections' counts (`--pc-mis correlated`),
-    /// `None` for counts used as they are.
-    fn correlation(&self) -> Option<Correlation> {
-        None
+    /// Whether the counts carry factors that are functions of the path's densities
+    /// ([`StrategyCounts::density_factors`]: a correction for correlated samples, such as
+    /// PCBPT's `--pc-mis correlated`).
+    fn density_dependent(&self) -> bool {
+        false
     }
+
+    /// The factors of the counts of the strategies `0..n` of a path of `n` vertices whose
+    /// densities are `pl(i)`, `pe(i)`, into `out[..n]` (left as they are by default). They
+    /// must be the same whichever strategy sampled the path, so that the weights still sum
+    /// to one.
+    fn density_factors(&self, _n: usize, _pl: impl Fn(usize) -> f32, _pe: impl Fn(usize) -> f32, _out: &mut [f32]) {}
 
     /// The counts of the strategies `s'` of the path for which `needed(s')`, into `out[s']`.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
@@ -210,75 +217,13 @@ pub trait StrategyCounts {
     }
 }
 
-/// The correction of pool connections' counts for correlation (`--pc-mis correlated`; the
-/// idea of Grittmann, Georgiev and Slusallek, "Correlation-aware multiple importance sampling
-/// for bidirectional rendering algorithms", CGF 2021, there for next-event estimation with
-/// several shadow rays): the `N` connections made from one camera vertex share its camera
-/// prefix, so where that prefix carries the randomness they are worth fewer than `N`
-/// independent samples. Each strategy `s' ≥ 2, t' ≥ 2` has its count multiplied by
-///
-/// `c = max(P_E / (P_E + P_L - P_E P_L), 1/N)`,
-///
-/// where `P_E = Π min(A pE(x_i), 1)` over the camera prefix's vertices beyond the primary
-/// hit, `P_L = Π min(A pL(x_i), 1) / N` over the light prefix, and `A` the area of the
-/// pixel's footprint at the primary hit, `1 / (W·H pE(x_{n-2}))`: `P` is how likely the
-/// prefix lands again within a footprint of where it is, 1 for a fully determined one
-/// (Dirac vertices count as determined). A fully determined camera prefix keeps `N`; a
-/// random camera prefix joined to a nearly determined light prefix counts as one sample.
-/// `c` is a function of the path's densities alone, the same whichever strategy sampled it,
-/// so the weights still sum to one.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Correlation {
-    /// `W·H`.
-    pub pixels: f32,
-    /// `N`.
-    pub connections: f32,
-}
-
-impl Correlation {
-    /// The factors `c` of the strategies `0..n` of a path of `n` vertices whose densities
-    /// are `pl(i)`, `pe(i)`, into `out` (1 where a strategy is no pool connection).
-    pub fn factors(&self, n: usize, pl: impl Fn(usize) -> f32, pe: impl Fn(usize) -> f32, out: &mut [f32]) {
-        out[..n].fill(1.0);
-        if n < 4 {
-            return;
-        }
-        let area = 1.0 / (self.pixels * pe(n - 2));
-        if !(area.is_finite() && area > 0.0) {
-            return;
-        }
-        let prob = |p: f32| if p <= 0.0 { 1.0 } else { (area * p).min(1.0) };
-        // P_E of strategy s', over x_{s'}..x_{n-3}, from the camera end.
-        let mut p_e = 1.0f32;
-        for s in (2..=n - 2).rev() {
-            if s <= n - 3 {
-                p_e *= prob(pe(s));
-            }
-            out[s] = p_e;
-        }
-        // P_L of strategy s', over x_0..x_{s'-1}, from the light end; `out[s']` holds P_E.
-        let mut p_l = prob(pl(0));
-        for (s, o) in out.iter_mut().enumerate().take(n - 1).skip(2) {
-            p_l *= prob(pl(s - 1));
-            let (p_e, p_l) = (*o, p_l / self.connections);
-            let denom = p_e + p_l - p_e * p_l;
-            let c = if denom > 0.0 { p_e / denom } else { 1.0 };
-            *o = c.max(1.0 / self.connections);
-        }
-    }
-}
-
-/// The counts of the integrators without probabilistic selection.
+/// The counts of BDPT and light tracing.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Counts {
     /// BDPT: every strategy once.
     Bdpt,
     /// Light tracing alone: only `t = 1` (and the camera ray to the sky).
     LightTrace,
-    /// A light pool shared by all pixels: light tracing from `M` paths over `W·H` pixels
-    /// (`light_trace = M / (W·H)`) and `N` uniform pool connections per camera vertex
-    /// (`connect = N / V̄`, V̄ the mean number of pool vertices per light path).
-    Pool { light_trace: f32, connect: f32 },
 }
 
 impl StrategyCounts for Counts {
@@ -299,11 +244,6 @@ impl StrategyCounts for Counts {
                     0.0
                 }
             }
-            Counts::Pool { light_trace, connect } => match (s, t) {
-                (_, 1) => light_trace,
-                (0 | 1, _) => 1.0,
-                _ => connect,
-            },
         }
     }
 }
@@ -403,7 +343,7 @@ fn weight_in<const N: usize>(
     let full = FullPath { light, camera };
     let (n, s) = (full.len(), light.len());
     let p = path_pdfs::<N>(scene, light, camera, conn);
-    if counts.path_dependent() || counts.correlation().is_some() {
+    if counts.path_dependent() || counts.density_dependent() {
         // Costly or corrected counts: all those the walk needs, evaluated together first.
         let table = count_table(&p, &full, counts);
         weight_from_pdfs(&p, s, heuristic, &|i| table[i])
@@ -415,130 +355,17 @@ fn weight_in<const N: usize>(
 }
 
 /// The counts of every strategy of the path that the walk needs (the sampled one and the
-/// valid ones), with the correlation correction applied.
-fn count_table<const N: usize>(p: &PathPdfs<N>, full: &FullPath, counts: &impl StrategyCounts) -> [f32; N] {
+/// valid ones), with their density-dependent factors applied.
+pub(crate) fn count_table<const N: usize>(p: &PathPdfs<N>, full: &FullPath, counts: &impl StrategyCounts) -> [f32; N] {
     let (n, s) = (full.len(), full.light.len());
     let mut table = [0.0f32; N];
     counts.fill(full, &|i| i == s || p.valid(i), &mut table);
-    if let Some(corr) = counts.correlation() {
+    if counts.density_dependent() {
         let mut c = [1.0f32; N];
-        corr.factors(n, |i| p.pl[i], |i| p.pe[i], &mut c);
+        counts.density_factors(n, |i| p.pl[i], |i| p.pe[i], &mut c);
         table[..n].iter_mut().zip(&c[..n]).for_each(|(t, c)| *t *= c);
     }
     table
-}
-
-/// The kinds of strategies an integrator with a light pool can budget: the camera path's own
-/// (`s = 0` and next-event estimation), pool connections (`s, t >= 2`) and light tracing
-/// (`t = 1`).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Shares {
-    pub unidirectional: f32,
-    pub connection: f32,
-    pub light_trace: f32,
-}
-
-impl Shares {
-    /// The class of strategy `(s, t)`: 0 unidirectional, 1 connection, 2 light tracing.
-    #[inline]
-    pub fn class(s: usize, t: usize) -> usize {
-        match (s, t) {
-            (_, 1) => 2,
-            (0 | 1, _) => 0,
-            _ => 1,
-        }
-    }
-
-    /// The path's combined density under counts that scale the connections' by `a` and
-    /// light tracing's by `c`, over its combined density now: `u + a k + c l`.
-    #[inline]
-    pub fn combined(&self, a: f64, c: f64) -> f64 {
-        self.unidirectional as f64 + a * self.connection as f64 + c * self.light_trace as f64
-    }
-
-    /// The shares of a pool connection whose strategy's count in the MIS weights is `r`
-    /// times the count its draw had (`n / n_drawn`: the count MIS gives the strategy, such
-    /// as `harmonic`'s `N M P̄_t`, times the draw's factor `1 / (N M P(y | z))`), re-based on
-    /// the density the sample was drawn with: the camera path's own and light tracing's
-    /// shares times `r`. Whatever the counts, a sample of the weighted contribution `v` then
-    /// estimates `∫ f² / Σ n'_k p_k` by `v² / combined(a, c)` (the counts `n'` of a budget
-    /// with drawn counts, [`crate::integrator::budget::measure`]); with the MIS counts' shares it would
-    /// estimate `r` times as much for a connection that drew its vertex `r` times less often
-    /// than MIS assumed (SPCBPT's harmonic counts on `staircase2`: path tracing predicted at
-    /// 2.9–4.2 times the plan's variance, against 1.6–2.5 with its exact counts). `r = 1`
-    /// (BDPT's connections, exact counts) leaves them as they are.
-    pub fn drawn(self, r: f32) -> Shares {
-        if !(r.is_finite() && r > 0.0) {
-            return self;
-        }
-        Shares { unidirectional: self.unidirectional * r, light_trace: self.light_trace * r, ..self }
-    }
-
-    fn add(&mut self, class: usize, x: f32) {
-        match class {
-            0 => self.unidirectional += x,
-            1 => self.connection += x,
-            _ => self.light_trace += x,
-        }
-    }
-}
-
-/// The balance-heuristic weights of all strategies of the path that joins `light` and
-/// `camera` (with the connection `conn`, `None` for `s = 0`), summed by [`Shares::class`]:
-/// they sum to one. With other counts `n'` that scale each class's counts by `a_k`, the
-/// path's combined density changes by `Σ_k a_k share_k`, which is what an efficiency
-/// estimate needs to predict the second moment of another budget from this one's samples.
-/// `drawn`, the factor of a connection drawn from a pool (`1 / (N M P(y | z))`), re-bases
-/// them on the density it was drawn with ([`Shares::drawn`]); they then sum to one only
-/// where the draw's count is the MIS count.
-pub fn mis_shares_with(
-    scene: &Scene,
-    light: &[Vertex],
-    camera: &[Vertex],
-    conn: Option<&Connection>,
-    counts: &impl StrategyCounts,
-    drawn: Option<f32>,
-) -> Shares {
-    let full = FullPath { light, camera };
-    let (n, s) = (full.len(), light.len());
-    let p = path_pdfs::<CAP>(scene, light, camera, conn);
-    let table = count_table(&p, &full, counts);
-    // The terms `n_i p_i / (n_s p_s)` of the balance heuristic's walk, by class.
-    let nee = |i: usize| if i == 1 { p.nee_ratio } else { 1.0 };
-    let n_s = table[s] * nee(s);
-    let mut shares = Shares::default();
-    if n_s.is_nan() || n_s <= 0.0 {
-        return shares;
-    }
-    let term = |i: usize, r: f32| if p.valid(i) && table[i] > 0.0 { r * nee(i) * table[i] / n_s } else { 0.0 };
-    let mut sum = 1.0f32;
-    shares.add(Shares::class(s, n - s), 1.0);
-    let mut r = 1.0f32;
-    for i in (0..s).rev() {
-        r *= remap0(p.pe[i]) / remap0(p.pl[i]);
-        let x = term(i, r);
-        sum += x;
-        shares.add(Shares::class(i, n - i), x);
-    }
-    let mut r = 1.0f32;
-    for i in s..n.saturating_sub(1) {
-        r *= remap0(p.pl[i]) / remap0(p.pe[i]);
-        let x = term(i + 1, r);
-        sum += x;
-        shares.add(Shares::class(i + 1, n - i - 1), x);
-    }
-    if !(sum.is_finite() && sum > 0.0) {
-        return Shares::default();
-    }
-    let shares = Shares {
-        unidirectional: shares.unidirectional / sum,
-        connection: shares.connection / sum,
-        light_trace: shares.light_trace / sum,
-    };
-    match drawn {
-        Some(scale) => shares.drawn(table[s] * scale),
-        None => shares,
-    }
 }
 
 /// The MIS weight of the strategy that joins `light` and `camera`, evaluating the
@@ -558,18 +385,6 @@ pub fn mis_weight(
         None => None,
     };
     mis_weight_with(scene, light, camera, conn.as_ref(), heuristic, counts)
-}
-
-/// [`mis_shares_with`], evaluating the connection itself.
-pub fn mis_shares(scene: &Scene, light: &[Vertex], camera: &[Vertex], counts: &impl StrategyCounts) -> Shares {
-    let conn = match light.last() {
-        Some(qs) => match Connection::new(scene, qs, &camera[camera.len() - 1]) {
-            Some(c) => Some(c),
-            None => return Shares::default(),
-        },
-        None => None,
-    };
-    mis_shares_with(scene, light, camera, conn.as_ref(), counts, None)
 }
 
 /// The weights of every strategy of a full path computed from scratch: each strategy's
@@ -602,9 +417,7 @@ pub fn brute_force_weights(
         })
         .collect();
     let mut corr = vec![1.0f32; n];
-    if let Some(c) = counts.correlation() {
-        c.factors(n, |i| pl[i] as f32, |i| pe[i] as f32, &mut corr);
-    }
+    counts.density_factors(n, |i| pl[i] as f32, |i| pe[i] as f32, &mut corr);
     let nee = nee_ratio(scene, &path[0], path[1].p) as f64;
     let delta_light = matches!(path[0].kind, VertexKind::Light(l) if scene.lights[l as usize].is_unreachable());
     let at_infinity = path[0].at_infinity();

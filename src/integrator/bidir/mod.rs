@@ -79,10 +79,11 @@ pub struct Vertex {
     pub flat: bool,
     /// The vertex lies at infinity (see above).
     pub infinite: bool,
-    /// Classes a pool selection gave the vertex, to look up rather than recompute (SPCBPT's
-    /// eye and light subspaces, [`spcbpt::Model::label`]): a cache of a function of the
-    /// vertex's position and shading normal, `None` where none were given.
-    pub classes: Option<[u16; 4]>,
+    /// An integrator's label of the vertex, opaque to the core: a cache of a function of the
+    /// vertex's position and shading normal that a [`pool::PoolSelection::label`] wrote and
+    /// that the integrator's strategy counts read instead of recomputing it; `None` where
+    /// none was written.
+    pub label: Option<[u16; 4]>,
 }
 
 impl Vertex {
@@ -105,7 +106,7 @@ impl Vertex {
             connectible: true,
             flat: true,
             infinite: false,
-            classes: None,
+            label: None,
         }
     }
 
@@ -128,7 +129,7 @@ impl Vertex {
             connectible: true,
             flat: true,
             infinite: false,
-            classes: None,
+            label: None,
         }
     }
 
@@ -187,7 +188,7 @@ impl Vertex {
             connectible,
             flat: si.shading.n == si.ng,
             infinite: false,
-            classes: None,
+            label: None,
         }
     }
 
@@ -761,13 +762,28 @@ pub trait Sink {
     fn add_connection(&mut self, light: &[Vertex], camera: &[Vertex], c: Rgb, w: f32) {
         self.add(light.len(), camera.len(), c * w);
     }
-    /// Whether the sink wants the MIS [`mis::Shares`] of each contribution (an efficiency
-    /// estimate does); they then come through [`Sink::note_shares`] right before it.
+    /// Whether the sink looks at the paths of the contributions it receives (an
+    /// efficiency estimate does): each then comes through [`Sink::observe`] right before it.
     #[inline]
-    fn wants_shares(&self) -> bool {
+    fn observes(&self) -> bool {
         false
     }
-    /// The shares of the contribution delivered next.
+    /// The path of the contribution delivered next, with what weighs it.
     #[inline]
-    fn note_shares(&mut self, _shares: mis::Shares) {}
+    fn observe<C: mis::StrategyCounts>(&mut self, _delivery: &Delivery<'_, C>) {}
+}
+
+/// The path of a strategy about to be delivered to a sink, with what weighs it
+/// ([`Sink::observe`]).
+pub struct Delivery<'a, C> {
+    pub scene: &'a Scene,
+    pub light: &'a [Vertex],
+    pub camera: &'a [Vertex],
+    /// The connection's evaluation (`None` for `s = 0`, where the camera subpath ends on an
+    /// emitter).
+    pub conn: Option<&'a Connection>,
+    /// The strategy counts of the weights.
+    pub counts: &'a C,
+    /// The contribution factor of a connection drawn from a pool (`1 / (N M P(y | z))`).
+    pub drawn: Option<f32>,
 }

@@ -7,9 +7,10 @@ use crate::error::Error;
 use crate::film::Splat;
 use crate::integrator::Counters;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
-use crate::integrator::bidir::mis::{Shares, StrategyCounts};
-use crate::integrator::bidir::{Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
+use crate::integrator::bidir::mis::StrategyCounts;
+use crate::integrator::bidir::{Delivery, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
 use crate::integrator::render_loop::TileResult;
+use crate::math::Rgb;
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
@@ -45,42 +46,58 @@ pub struct LightPool {
     pub paths: usize,
 }
 
-/// A light-tracing splat's luminance and MIS shares.
-#[derive(Clone, Copy, Debug)]
-pub struct SplatShares {
-    pub pos: Vec2,
-    pub value: f32,
-    pub shares: Shares,
+/// What a pool's light tracing records of each splat besides the splat, for its
+/// integrator (the budget's efficiency estimate records the splat's MIS shares): each splat's
+/// path comes through [`SplatRecorder::observe`] right before the splat.
+pub trait SplatRecorder: Sync {
+    /// What is kept of a path until its splat.
+    type Pending: Copy + Default;
+    /// What is kept of a splat.
+    type Record: Send;
+    fn observe<C: StrategyCounts>(&self, delivery: &Delivery<'_, C>) -> Self::Pending;
+    fn record(&self, pending: Self::Pending, pos: Vec2, value: Rgb) -> Self::Record;
 }
 
-/// Collects splats (pool light tracing has no pixel of its own), and with `shares` each
-/// splat's luminance and MIS shares for an efficiency estimate.
-pub struct SplatSink<'a> {
-    pub splats: &'a mut Vec<Splat>,
-    pub layers: bool,
-    pub shares: Option<&'a mut Vec<SplatShares>>,
-    pub pending: Shares,
+/// Records nothing.
+pub struct NoRecords;
+
+impl SplatRecorder for NoRecords {
+    type Pending = ();
+    type Record = ();
+    fn observe<C: StrategyCounts>(&self, _: &Delivery<'_, C>) {}
+    fn record(&self, _: (), _: Vec2, _: Rgb) {}
 }
 
-impl Sink for SplatSink<'_> {
-    fn add(&mut self, _s: usize, _t: usize, _value: crate::math::Rgb) {
+/// Collects splats (pool light tracing has no pixel of its own), and with a recorder each
+/// splat's record.
+struct SplatSink<'a, R: SplatRecorder> {
+    splats: &'a mut Vec<Splat>,
+    layers: bool,
+    recorder: Option<(&'a R, &'a mut Vec<R::Record>)>,
+    pending: R::Pending,
+}
+
+impl<R: SplatRecorder> Sink for SplatSink<'_, R> {
+    fn add(&mut self, _s: usize, _t: usize, _value: Rgb) {
         unreachable!("light paths only splat");
     }
 
     #[inline]
-    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: crate::math::Rgb) {
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
         self.splats.push(Splat::of_strategy(s, t, pos, value, self.layers));
-        if let Some(out) = self.shares.as_deref_mut() {
-            out.push(SplatShares { pos, value: crate::math::luminance(value), shares: self.pending });
+        if let Some((recorder, out)) = self.recorder.as_mut() {
+            out.push(recorder.record(self.pending, pos, value));
         }
     }
 
-    fn wants_shares(&self) -> bool {
-        self.shares.is_some()
+    fn observes(&self) -> bool {
+        self.recorder.is_some()
     }
 
-    fn note_shares(&mut self, shares: Shares) {
-        self.pending = shares;
+    fn observe<C: StrategyCounts>(&mut self, delivery: &Delivery<'_, C>) {
+        if let Some((recorder, _)) = &self.recorder {
+            self.pending = recorder.observe(delivery);
+        }
     }
 }
 
@@ -117,30 +134,30 @@ impl LightPool {
         splat: Option<(&Connector<C>, &Bdpt, bool)>,
     ) -> (LightPool, Vec<Splat>, Counters) {
         let (pool, splats, counters, _) =
-            LightPool::trace_plan(scene, limits, PoolPlan::both(paths), seed, iteration, splat, false);
+            LightPool::trace_plan::<C, NoRecords>(scene, limits, PoolPlan::both(paths), seed, iteration, splat, None);
         (pool, splats, counters)
     }
 
-    /// [`LightPool::trace`] by a [`PoolPlan`]; with `shares`, also each splat's luminance and
-    /// MIS shares, in the splats' order.
-    pub fn trace_plan<C: StrategyCounts + Sync>(
+    /// [`LightPool::trace`] by a [`PoolPlan`]; with a `recorder`, also each splat's record,
+    /// in the splats' order.
+    pub fn trace_plan<C: StrategyCounts + Sync, R: SplatRecorder>(
         scene: &Scene,
         limits: &WalkLimits,
         plan: PoolPlan,
         seed: u64,
         iteration: u64,
         splat: Option<(&Connector<C>, &Bdpt, bool)>,
-        shares: bool,
-    ) -> (LightPool, Vec<Splat>, Counters, Vec<SplatShares>) {
+        recorder: Option<&R>,
+    ) -> (LightPool, Vec<Splat>, Counters, Vec<R::Record>) {
         const CHUNK: usize = 256;
         let paths = plan.traced();
-        let chunks: Vec<(Chunk, Vec<SplatShares>)> = (0..paths.div_ceil(CHUNK))
+        let chunks: Vec<(Chunk, Vec<R::Record>)> = (0..paths.div_ceil(CHUNK))
             .into_par_iter()
             .map(|c| {
                 let mut verts = Vec::new();
                 let mut lens = Vec::new();
                 let mut splats = Vec::new();
-                let mut splat_shares = Vec::new();
+                let mut records = Vec::new();
                 let mut counters = Counters::default();
                 let mut path = Vec::new();
                 for i in c * CHUNK..((c + 1) * CHUNK).min(paths) {
@@ -148,8 +165,9 @@ impl LightPool {
                     light_subpath(scene, limits, &mut rng, &mut path, &mut counters);
                     counters.light_paths += 1;
                     if let Some((conn, bdpt, layers)) = splat.filter(|_| i < plan.splat_paths) {
-                        let shares = shares.then_some(&mut splat_shares);
-                        let mut sink = SplatSink { splats: &mut splats, layers, shares, pending: Shares::default() };
+                        let recorder = recorder.map(|r| (r, &mut records));
+                        let mut sink =
+                            SplatSink { splats: &mut splats, layers, recorder, pending: R::Pending::default() };
                         for s in 1..=path.len() {
                             if bdpt.allowed(s, 1) {
                                 conn.to_camera(&path[..s], &mut rng, &mut sink, &mut counters);
@@ -161,15 +179,15 @@ impl LightPool {
                         verts.extend_from_slice(&path);
                     }
                 }
-                ((verts, lens, splats, counters), splat_shares)
+                ((verts, lens, splats, counters), records)
             })
             .collect();
         let mut pool = LightPool { paths: plan.pool_paths, ..Default::default() };
         let mut splats = Vec::new();
-        let mut all_shares = Vec::new();
+        let mut all_records = Vec::new();
         let mut counters = Counters::default();
         for ((verts, lens, sp, c), sh) in chunks {
-            all_shares.extend(sh);
+            all_records.extend(sh);
             let mut k = 0usize;
             for len in lens {
                 let start = pool.vertices.len() as u32;
@@ -186,7 +204,7 @@ impl LightPool {
             splats.extend(sp);
             counters += c;
         }
-        (pool, splats, counters, all_shares)
+        (pool, splats, counters, all_records)
     }
 
     /// The light subpath `y_0..y_{s-1}` that ends at connectible vertex `k`.
@@ -208,7 +226,7 @@ pub trait PoolSelection {
     type Lookup;
     fn lookup(&self, z: &Vertex) -> Self::Lookup;
     /// Labels the camera subpath's vertices before their strategies are weighed
-    /// ([`Vertex::classes`]); nothing by default.
+    /// ([`Vertex::label`]); nothing by default.
     fn label(&self, _camera: &mut [Vertex]) {}
     /// Draw `k` of `n` for a camera vertex: a connectible pool index and the factor
     /// `1 / (N M P)` of its contribution, or `None` when the draw is wasted.

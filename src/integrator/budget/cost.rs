@@ -6,26 +6,19 @@ use crate::integrator::render_loop::TileResult;
 use serde::Serialize;
 
 /// Relative cost of the operations an iteration counts, in extension rays (a closest-hit
-/// ray and the vertex built at its hit). Measured with PCBPT on `staircase2` (320×180,
-/// 24 spp, 2 threads) with 0, 1, 4 and 8 connections per camera vertex: the camera pass took
-/// 1.68, 2.73, 4.37 and 6.53 s for 0, 2.52, 10.1 and 20.1 M pool shadow rays, so a traced
-/// connection (its draw, both BSDFs, the shadow ray and the MIS weight) costs 0.216 µs; the
-/// 4.69 M lookups that drawing needs 0.108 µs each; the pass without connections, 5.32 M
-/// extension rays and 3.14 M next-event rays priced like connections, leaves 0.187 µs per
-/// extension ray; a cache entry (its target and shadow ray) took 0.188 µs (1.0 M in 0.19 s).
+/// ray and the vertex built at its hit), fitted once to PCBPT's camera pass timed at several
+/// connection counts per camera vertex (the timings are in `docs/results/budget.md`): a
+/// traced connection (its draw, both BSDFs, the shadow ray and the MIS weight), a lookup
+/// (the search a camera vertex's draws need), next-event shadow rays priced like
+/// connections, and a cache entry (a record's target and shadow ray for one pool vertex).
 ///
 /// SPCBPT's connection costs more (its draw samples a light subspace from `Γ` by a guide
 /// table into the row's running sum, and a vertex within it from the subspace's alias
-/// table): on `staircase2` (24 spp, 2 threads, `--pc-budget off`, one connection and eight
-/// alternated with PCBPT's, seeds 1–3) its camera pass gained 0.244–0.266 µs per added
-/// connection against PCBPT's 0.224–0.233 µs, 1.12 times as much on the means, so
-/// [`SPCBPT_PRICES`] prices its connections 1.12 times PCBPT's. (With a guide table for the
-/// draw within a subspace too it was 1.18 times; with a binary search in each draw
-/// 1.31–1.34 times.) Its counts that follow the path's subspaces make every connection's
-/// weight dearer: measured so again (seeds 1–3, the camera pass's time per added lookup's
-/// connection, PCBPT twice), 1.42 times PCBPT's with `--sp-mis subspace` and 1.89 times
-/// with `resampling`, against 1.17 times with `harmonic`: [`SPCBPT_SUBSPACE_PRICES`] and
-/// [`SPCBPT_RESAMPLING_PRICES`].
+/// table), and its counts that follow the path's subspaces make every connection's weight
+/// dearer still, so its connections are priced by their MIS counts ([`SPCBPT_PRICES`] for
+/// counts that do not follow them, [`SPCBPT_SUBSPACE_PRICES`], [`SPCBPT_RESAMPLING_PRICES`]),
+/// each from its camera pass's time per added connection against PCBPT's
+/// (`docs/results/spcbpt.md`).
 #[derive(Clone, Copy, Debug)]
 pub struct Prices {
     /// A shadow ray of next-event estimation or light tracing.
@@ -34,8 +27,8 @@ pub struct Prices {
     pub connection: f64,
     pub lookup: f64,
     pub cache_entry: f64,
-    /// The path tracer's camera pass over the bidirectional one's without connections: 124
-    /// and 151 samples per pixel in 10 s on `staircase2` (320×180, 2 threads).
+    /// The path tracer's camera pass over the bidirectional one's without connections (the
+    /// plan without connections or light tracing renders with the path tracer).
     pub path_tracer: f64,
 }
 

@@ -13,9 +13,8 @@
 //! That needs each sample's shares relative to the density it was drawn with: a pool
 //! connection's MIS counts (`harmonic`'s `N M P̄_t`) are not its draw's (`N M P(y | z)`), so
 //! its shares are re-based on the draw ([`Shares::drawn`]); with the counts' shares a vertex
-//! drawn `r` times less often than the counts assume weighs `r` times too much, and SPCBPT's
-//! samples put path tracing at 2.9–4.2 times the measured plan's variance on `staircase2`
-//! (renders: 1.6), at 1.5–2.8 with the draws'. For a candidate with connections the camera
+//! drawn `r` times less often than the counts assume weighs `r` times too much in every
+//! candidate's moment, and most in path tracing's. For a candidate with connections the camera
 //! path's own samples still divide by the counts' connection share (their path's draw is
 //! not made), so only path tracing's prediction is exact in expectation. A
 //! path no strategy of `b'` can make gives an infinite moment, so a budget that would lose
@@ -27,22 +26,18 @@
 //! and the products of a camera path's contributions change with the weights too. Moving
 //! weight from the paths a camera path samples well to light tracing or to more draws
 //! lowers their second moment and their squared mean alike, which the moments count as a
-//! gain: on a constructed estimator (`tests` below) they predict 1.9 for a variance of
-//! 0.083. The realized model keeps the diagonal from every strategy's samples (`q`) and takes
+//! gain: on a constructed estimator (`tests` below) they predict many times its variance.
+//! The realized model keeps the diagonal from every strategy's samples (`q`) and takes
 //! the rest from the camera samples re-weighted as the candidate would weigh them (the
 //! cross terms of the camera path's own strategies scaled by how much of their heavy tail two
-//! iterations miss), so it needs no independence factor. Against renders of fixed plans without connections (per-sample
-//! relative variance over that of PCBPT's defaults, BENCHMARKS.md) it comes within 3% on
-//! `cornell-ply` but for path tracing, 5–9% high (renders: 4.08, with the path tracer), where
-//! the moments come 17–37% low (smoothed means, independence 1) or half (the defaults); on
-//! `staircase2` within 3% for path tracing and 4–8% low for the pool's light tracing (seeds 2
-//! and 3; seed 1 put path tracing at 3.0 against 1.8); on `veach-ajar` 8 connections at
-//! 0.66× the variance of 4 and 2 at 1.65× (renders: 0.63–0.77×, 1.37–1.49×; the moments 0.88×
-//! and 1.21×).
+//! iterations miss), so it needs no independence factor. Its predictions against renders of
+//! fixed plans, beside the moments', are in `docs/results/budget.md`.
 
-use crate::integrator::bidir::mis::Shares;
+use crate::integrator::bidir::Delivery;
+use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::{Sink, Vertex};
 use crate::integrator::budget::Plan;
+use crate::integrator::budget::shares::{Shares, delivered_shares};
 use glam::Vec2;
 
 /// How the measured contributions count for the candidates: each candidate's count scales
@@ -100,10 +95,9 @@ pub(super) fn own_moment(v: f32, s: &Shares, d: f64, floor: f64) -> f64 {
 /// and where that is below one its typical render misses the region's light, a squared error
 /// of the region's squared mean: the expected `1 / d` weighed by `S d / T`, that is `S / T`.
 /// So the moment is what the typical render at the horizon shows, not the expectation that
-/// a few fireflies in a thousand renders carry. On `staircase2` SPCBPT's draws find such
-/// paths often: without the floor 100 of the 57 600 measured pixels held 93% of the path
-/// tracer's predicted second moment, which put it at 97× the variance of SPCBPT's four
-/// connections (seed 1; renders: 1.55×); with the floor of 256 samples per pixel, 4.4×.
+/// a few fireflies in a thousand renders carry. Without the floor a handful of pixels
+/// whose connections found such paths can hold most of a candidate's predicted second
+/// moment and make the path tracer look far worse than its renders are.
 #[inline]
 pub(super) fn typical(d: f64, floor: f64) -> f64 {
     d.max(floor)
@@ -345,12 +339,10 @@ impl TileMoments {
 /// those with a contribution of the camera path's own strategies ([`Realized::cross`]) are
 /// scaled by how much the realized samples miss of those strategies' diagonal (`own_moment`,
 /// from every strategy's samples, over `own_diagonal`, realized; summed over the pixels as
-/// relMSE weighs them: [`crate::integrator::budget::BudgetStats::missed`]). Without it the model put path tracing on
-/// `cornell-ply` at 3.3× the variance of PCBPT's defaults (renders: 4.1×), with it at
-/// 4.3–4.4× (the realized samples missed 42% of the camera path's diagonal). Scaling the
-/// connections' cross terms too (they have no such tail) put 8 connections on `veach-ajar`
-/// at 0.61× the variance of 4 and 2 at 1.76× (renders: 0.63–0.77×, 1.37–1.49×); without, at
-/// 0.66× and 1.65×.
+/// relMSE weighs them: [`crate::integrator::budget::BudgetStats::missed`]): without it the
+/// model underrates path tracing's variance where the realized samples miss much of that
+/// tail. The connections' cross terms are not scaled: they have no such tail, and scaling
+/// them too overrates the gain of more connections.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Realized {
     pub sample: f64,
@@ -463,12 +455,12 @@ impl<S: Sink> Sink for BudgetSink<'_, S> {
         self.inner.add_connection(light, camera, c, w);
     }
 
-    fn wants_shares(&self) -> bool {
+    fn observes(&self) -> bool {
         true
     }
 
-    fn note_shares(&mut self, shares: Shares) {
-        self.pending = shares;
+    fn observe<C: StrategyCounts>(&mut self, delivery: &Delivery<'_, C>) {
+        self.pending = delivered_shares(delivery);
     }
 }
 

@@ -15,80 +15,72 @@
 //! measured across the iterations instead, and a candidate's is that plus the change of
 //! second moment, taken in two steps: to the candidate's light tracing (light paths are
 //! independent samples), then to its connections, that change multiplied by
-//! `--pc-budget-independence` (0.35, fitted on `staircase2`, where a factor of 1 predicted
-//! 3.4× the variance of the budget in use for no connections and 1.4× for one, and
-//! equal-time renders measured 1.75× and 1.15×). With `measured` the factor is the share of
-//! the connections' second moment that is variance about each camera vertex's own mean
-//! ([`Spread`]): given the camera vertex and the pool a vertex's `N` draws are independent,
-//! so only that part changes with `N`. It came out 0.71–0.99 on the six measured scenes, so
-//! the shared prefix is not what 0.35 makes up for.
+//! `--pc-budget-independence` (0.35, fitted on `staircase2`: with a factor of 1 the change
+//! overrates the variance of plans with fewer connections). With `measured` the factor is
+//! the share of the connections' second moment that is variance about each camera vertex's
+//! own mean ([`Spread`]): given the camera vertex and the pool a vertex's `N` draws are independent,
+//! so only that part changes with `N`. (That share stays far above 0.35 on the scenes
+//! measured, so the shared prefix is not what 0.35 makes up for: `docs/results/budget.md`.)
 //!
 //! **Choice.** Per candidate, `Σ_pixels variance / (mean² + 0.01)` (the relMSE the images
 //! are judged by, on luminance) times the cost of an iteration, from the operations the
 //! measured iterations counted, priced by [`Prices`]. The least product wins, but the
 //! measured plan's is divided by `--pc-budget-margin` (1.1; [`pick`]): its variance is
-//! measured, the others' predicted within about a third of renders, so a smaller predicted
-//! gain is noise, and where the plan stays the render is the one without a budget bit for
-//! bit. The moments are those of every `k`-th row and column, at most about
-//! `--pc-budget-pixels` (16 384): on `cornell-ply` (one thread) a measured iteration then
-//! costs 1.1–1.3× an ordinary one, with all its 65 536 pixels about 2.2×. A pixel's
+//! measured, the others' only predicted, so a smaller predicted gain is within the
+//! predictions' error, and where the plan stays the render is the one without a budget bit
+//! for bit. The moments are those of every `k`-th row and column, at most about
+//! `--pc-budget-pixels` (16 384), so that a measured iteration costs little more than an
+//! ordinary one (a moment per candidate for every pixel would not). A pixel's
 //! `mean` is its own over the measured iterations, or with `--pc-budget-smoothing r` the
 //! average over its measured neighbours within `r`: a pixel's own mean of two iterations,
-//! squared, is biased up by their variance, which weighs the noisiest pixels least (on
-//! `staircase2`, with independence 1, the budget in use looked 2.7× less noisy than with
-//! `r = 2`, and no connections was predicted 5.2× as noisy as four connections, against
-//! 2.7× with `r = 2` and 1.8× in renders). Smoothed means with the measured independence
-//! predict better without a fitted factor, but chose no better at equal time
-//! (BENCHMARKS.md). The default is the realized model ([`measure`]) with `r = 2`, which chose
-//! better than the moments at equal time (four seeds). The choice is made from counts alone, never
-//! from clocks, so it is the same on every machine and for every thread count, and a chunk
-//! that re-runs the measured iterations makes it again. Iterations of different budgets are
-//! each unbiased and averaged alike; the film divides every iteration's splats by the same
-//! count of light paths ([`normalise_splats`]).
+//! squared, is biased up by their variance, which weighs the noisiest pixels least and so
+//! makes the plan in use look less noisy than the others. Smoothed means with the measured
+//! independence need no fitted factor. The default is the realized model ([`measure`]) with
+//! `r = 2` (the equal-time renders that chose it: `docs/results/budget.md`). The choice is
+//! made from counts alone, never from clocks, so it is the same on every machine and for
+//! every thread count, and a chunk that re-runs the measured iterations makes it again.
+//! Iterations of different budgets are each unbiased and averaged alike; the film divides
+//! every iteration's splats by the same count of light paths ([`normalise_splats`]).
 //!
 //! **Horizon.** Every moment is the one a render of `--pc-budget-horizon` samples per pixel
 //! typically shows (the render's `--spp` but at least [`DEFAULT_HORIZON`], 256): a path
 //! that a candidate samples far less densely than the plan in use counts only as often as
 //! such a render finds it ([`measure::typical`]). Without it the paths that connections find
-//! and the path tracer reaches through tiny densities made path tracing look up to 2.5× worse
-//! than renders measure on `veach-ajar`, 1.8× on `veach-mis` and `staircase2` and 1.5× on
-//! `sunlit-room` (BENCHMARKS.md).
+//! and the path tracer reaches through tiny densities make path tracing look worse than its
+//! renders are.
 //!
 //! **Rarity** (`--pc-budget-rarity`, on by default). The horizon counts every sample as a
 //! region the measured iterations found about once; a sample the measured plan found by
 //! luck is rarer than that. Each measured pixel's largest contribution ([`Top`]) is
 //! re-counted with the floor raised by `v / (t · mean)`, the mean the larger of the
 //! pixel's smoothed mean and its own without that contribution ([`Budget::recount_rare_tops`]).
-//! In seed 1 of `staircase2` one such sample of the measured plan held 43% of what path
-//! tracing's prediction added to the plan's variance, put it at 2.76 times that variance
-//! (renders: 1.57) and made both integrators take a plan with light tracing at about 1.5
-//! times the path tracer's relMSE × time; with the recount, 1.92 and path tracing.
+//! One such sample can hold much of what path tracing's prediction adds to the plan's
+//! variance and turn the choice away from path tracing where it renders best.
 //!
-//! **Known error.** Both models find more light tracing more useful than renders do: from
-//! the pool's 735 light paths to 14 400 on `staircase2` the realized model predicts 13–20%
-//! less variance (three seeds) and the moments 20%, renders 8%. Neither knows that the
-//! path-tracing plan renders with the path tracer (the power heuristic between next-event
-//! estimation and BSDF sampling), not with the camera pass's balance heuristic: on
-//! `staircase2` it has less variance than the camera pass with the pool's light tracing.
-//! The rarity recount lowers path tracing's prediction on `veach-mis` too, where the
-//! contributions that stand out are part of its real heavy tail (at most 2.99 times the
-//! measured plan's variance in nine seeds, renders 4.0), without changing a plan there.
+//! **Known error.** Both models find more light tracing more useful than renders do
+//! (`docs/results/budget.md`). Neither knows that the path-tracing plan renders with the
+//! path tracer (the power heuristic between next-event estimation and BSDF sampling), not
+//! with the camera pass's balance heuristic, which can have less variance than the camera
+//! pass with the pool's light tracing. The rarity recount also lowers path tracing's
+//! prediction where the contributions that stand out are part of its real heavy tail, not
+//! luck.
 
 pub mod cost;
 pub mod measure;
 mod options;
+pub mod shares;
 pub use options::*;
 
-pub use crate::integrator::bidir::pool::SplatShares;
 pub use cost::{Operations, PRICES, Prices, SPCBPT_PRICES, SPCBPT_RESAMPLING_PRICES, SPCBPT_SUBSPACE_PRICES};
 pub use measure::{BudgetSink, Realized, Spread, TileMoments, Top};
 use measure::{RealizedSums, Weighing, accumulate, own_moment, typical};
+pub use shares::{ShareRecorder, Shares, SplatShares, mis_shares, mis_shares_with};
 
 use crate::film::{Splat, Tile};
 use crate::integrator::Counters;
 use crate::integrator::bidir::Sink;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector};
-use crate::integrator::bidir::mis::{Shares, StrategyCounts};
+use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::pool::{LightPool, PoolPlan, PoolSampler, PoolSelection};
 use crate::integrator::path::PathTracer;
 use crate::integrator::render_loop::{Ctx, TileResult, Warmup, sample_tile};
@@ -127,7 +119,7 @@ impl Plan {
 /// iteration's splats by the same count of light paths, so each iteration's light tracing
 /// stays an estimate of its share of the image whatever the plan (dividing by the paths
 /// actually traced would weigh iterations by their light paths, and the camera pass's share
-/// by iterations: a bias of a few percent when the plan changes the share of light tracing).
+/// by iterations: a bias whenever the plan changes the share of light tracing).
 pub(crate) fn normalise_splats(splats: &mut [Splat], plan: &Plan, reference: usize) -> u64 {
     if plan.splat_paths > 0 && plan.splat_paths != reference {
         let k = reference as f32 / plan.splat_paths as f32;
@@ -467,8 +459,15 @@ impl Budget {
     ) -> TracedPool {
         let measures = self.measures(first);
         let splat = (keep || measures).then_some((conn, bdpt, ctx.layers));
-        let (pool, mut splats, counters, splat_shares) =
-            LightPool::trace_plan(ctx.scene, &bdpt.limits, self.plan.pool(), ctx.seed, first as u64, splat, measures);
+        let (pool, mut splats, counters, splat_shares) = LightPool::trace_plan(
+            ctx.scene,
+            &bdpt.limits,
+            self.plan.pool(),
+            ctx.seed,
+            first as u64,
+            splat,
+            measures.then_some(&ShareRecorder),
+        );
         let splat_paths = normalise_splats(&mut splats, &self.plan, m);
         let operations = Operations {
             light_rays: counters.camera_rays + counters.extension_rays,
@@ -771,8 +770,8 @@ impl Budget {
 /// The candidate a budget takes, from each candidate's predicted efficiency over the
 /// measured plan's (`gains`; that of `current`, the measured plan, is 1): the greatest gain,
 /// the measured plan's counted `margin` times. Its variance is measured, the others'
-/// predicted, and the predictions came within about a third of renders (BENCHMARKS.md), so a
-/// gain within the margin is within their error and the plan stays (and with it the image of
+/// only predicted (their error against renders: `docs/results/budget.md`), so a gain within
+/// the margin is within that error and the plan stays (and with it the image of
 /// the render without a budget). A candidate whose gain is not finite is never taken.
 pub(crate) fn pick(gains: &[f64], current: usize, margin: f64) -> usize {
     let credited = |k: usize| match gains[k] {

@@ -81,9 +81,9 @@ pub const CONNECTION_CHOICES: [u32; 5] = [0, 1, 2, 4, 8];
 /// Samples per pixel the choice plans for without `--pc-budget-horizon`: with `--time`, and
 /// the least with `--spp`. [`measure::typical`] treats each measured sample as a region of
 /// its own, and where many such samples carry a pixel's light together a short render misses
-/// all of them more often than it predicts: planned for 8 samples per pixel, PCBPT's budget
-/// took path tracing on `veach-ajar` (from 32 on, four connections). The floor was measured
-/// against renders at 256.
+/// all of them more often than it predicts, so a horizon of a few samples per pixel gives up
+/// connections that pay. The predictions were checked against renders at this horizon
+/// (`docs/results/budget.md`).
 pub const DEFAULT_HORIZON: u32 = 256;
 
 /// The budget's options, shared by PCBPT and SPCBPT (`--budget*`; the `--pc-budget*` names

@@ -4,17 +4,17 @@
 //! The contract (`memlt.md`) has the direct light handled as Mitsuba 0.6
 //! does, by a separate path-traced estimate of `--direct-samples` samples per pixel. A fixed
 //! sample count suits a fixed budget of mutations; under `--time` it leaves the split of the
-//! time to chance: on a scene lit mostly directly (a room under the sky) 16 samples per pixel
-//! took half a second of 45 and their noise was most of the image's, on a caustic the
-//! chains' noise is. Each part's noise is measured here as a relative variance per second
-//! `V` (the relMSE it would have after one second: a part given `t` seconds has `V / t`), each
-//! from two independent halves of itself: the direct pass's first `--direct-samples` against
-//! a second pass of as many, the chains' first half against their second half after a tenth
-//! of their time ([`MEASURE_SHARE`]). The sum `V_d / t_d + V_c / t_c` over a fixed
-//! `t_d + t_c = W` is least at `t_d = W √V_d / (√V_d + √V_c)`; the direct pass then goes on
-//! for what it lacks of that, at most half of the time left ([`MAX_SHARE_OF_REST`]). The
-//! chains' noise measured early includes their start-up, so `V_c` errs high and the direct
-//! pass's share low.
+//! time to chance: on a scene lit mostly directly (a room under the sky) a few samples per
+//! pixel take a small share of the time and their noise can be most of the image's, on a
+//! caustic the chains' noise is (`docs/results/memlt.md`). Each part's noise is measured
+//! here as a relative variance per second `V` (the relMSE it would have after one second: a
+//! part given `t` seconds has `V / t`), each from two independent halves of itself: the
+//! direct pass's first `--direct-samples` against a second pass of as many, the chains' first
+//! half against their second half after a tenth of their time ([`MEASURE_SHARE`]).
+//! The sum `V_d / t_d + V_c / t_c` over a fixed `t_d + t_c = W` is least at
+//! `t_d = W √V_d / (√V_d + √V_c)`; the direct pass then goes on for what it lacks of that,
+//! at most half of the time left ([`MAX_SHARE_OF_REST`]). The chains' noise measured early
+//! includes their start-up, so `V_c` errs high and the direct pass's share low.
 
 use crate::compare::relative_square;
 use crate::film::Film;

@@ -142,7 +142,8 @@ pub const AUTO_INDEPENDENT_SHARE: f64 = 0.015;
 /// (`None`) where a share `walk_only` of at least [`AUTO_INDEPENDENT_SHARE`] of the light
 /// that camera walks to the first light find is in paths that only such a walk makes (no
 /// edge takes a shadow ray: [`path::joined_nowhere`]); the split generator proposes those
-/// at its one length's `s = 0` rate, the camera walks at a path tracer's (BENCHMARKS.md).
+/// at its one length's `s = 0` rate, the camera walks at a path tracer's (what it buys:
+/// `docs/results/memlt.md`).
 pub fn independent_mutation_on(option: Option<bool>, walk_only: f64) -> bool {
     option.unwrap_or(walk_only >= AUTO_INDEPENDENT_SHARE)
 }

@@ -157,7 +157,7 @@ impl Evaluator<'_> {
         c.samples += 1;
         match self.base {
             MltBase::Bdpt => {
-                let conn = Connector { scene, heuristic: self.heuristic, counts: &Counts::Bdpt, roulette: None };
+                let conn = Connector::new(scene, self.heuristic, &Counts::Bdpt);
                 self.bdpt.sample(&conn, out.pos, rng, scratch, out, c);
             }
             MltBase::Path => {

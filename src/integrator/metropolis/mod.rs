@@ -1,6 +1,6 @@
-//! What the Markov-chain integrators (PSSMLT, MEMLT) share: the independent samples that
-//! estimate the normalisation and seed the chains ([`bootstrap`]), two-stage Metropolis's
-//! importance map ([`two_stage`]), the chains' longest stays ([`stays`]), the points of
+//! What the Markov-chain integrators (PSSMLT, MEMLT; contract §6) share: the independent
+//! samples that estimate the normalisation and seed the chains ([`bootstrap`]), two-stage
+//! Metropolis's importance map ([`two_stage`]), the chains' longest stays ([`stays`]), the points of
 //! primary sample space ([`primary`]), the options of the chains ([`ChainOptions`]) and the
 //! loop that runs them ([`run_chains`]).
 

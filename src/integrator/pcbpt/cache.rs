@@ -1,4 +1,4 @@
-//! PCBPT's cache (Popov et al. 2015, contract §3, steps 1–3): the record pixels' camera
+//! PCBPT's cache (Popov et al. 2015, contract §3, steps 2–4): the record pixels' camera
 //! vertices, every record's CMF over the light pool, and the lookup that blends the CMFs of
 //! a camera vertex's nearest records and draws pool vertices from the blend.
 

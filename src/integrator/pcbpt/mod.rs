@@ -30,6 +30,7 @@
 //! times more often the cache's draws reach a vertex than uniform ones would.
 
 pub mod cache;
+pub mod correlation;
 pub mod fit;
 
 use crate::bsdf::TransportMode;
@@ -38,7 +39,7 @@ use crate::film::Tile;
 use crate::integrator::RenderOptions;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
-use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, StrategyCounts};
+use crate::integrator::bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
     concentration_depth, draw_one_by_one, pass_concentration, pool_line,
@@ -58,6 +59,7 @@ use std::ops::Range;
 use std::time::Instant;
 
 pub use crate::integrator::pcbpt::cache::{Blend, Cache, MAX_NEIGHBOURS, Nearest, Neighbours, Record, trace_records};
+pub use crate::integrator::pcbpt::correlation::Correlation;
 
 /// The distance term `D_i` of the interpolation weights (supplemental Eq. 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
@@ -82,7 +84,7 @@ pub enum PcMis {
     /// uniform over the vertices they reach.
     Harmonic,
     /// `harmonic`'s counts corrected for the correlation of the `N` connections that share
-    /// one camera vertex's prefix ([`crate::integrator::bidir::mis::Correlation`]).
+    /// one camera vertex's prefix ([`Correlation`]).
     Correlated,
     /// SPCBPT only: `n = N M Γ_ij / V_j`, the selection density with the draw within the
     /// light subspace taken as uniform over its `V_j` vertices (no light throughputs).
@@ -377,8 +379,14 @@ impl StrategyCounts for PcCounts<'_> {
         self.previous.is_some()
     }
 
-    fn correlation(&self) -> Option<Correlation> {
-        self.correlation
+    fn density_dependent(&self) -> bool {
+        self.correlation.is_some()
+    }
+
+    fn density_factors(&self, n: usize, pl: impl Fn(usize) -> f32, pe: impl Fn(usize) -> f32, out: &mut [f32]) {
+        if let Some(c) = self.correlation {
+            c.factors(n, pl, pe, out);
+        }
     }
 
     /// Counts of a whole path with one pass for the light throughputs.
@@ -594,7 +602,7 @@ impl Iterative for PcbptRender {
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<PcPass> {
         let t = Instant::now();
         let counts = self.counts(ctx.scene);
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
         let traced = self.budget().trace_pool(ctx, &conn, &self.pc.bdpt, first, keep, self.light_paths);
         let TracedPool { pool, splats, mut counters, splat_shares, mut operations, splat_paths } = traced;
         work.phases.light_pool += t.elapsed().as_secs_f64();
@@ -612,7 +620,7 @@ impl Iterative for PcbptRender {
     fn render_tile(&self, ctx: &Ctx, pass: &PcPass, tile: Tile, first: u32, count: u32) -> TileResult<PoolTile<()>> {
         let (pool, cache) = (&pass.pool, &pass.cache);
         let counts = self.counts(ctx.scene);
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
         let budget = self.budget();
         let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.pc.opts.sampling };
         let connections = budget.plan().connections;

@@ -21,8 +21,9 @@
 //! 4. **Budget** (`--pc-budget auto`, [`crate::integrator::budget`]). It measures the last two training
 //!    iterations (`--sp-budget-in-training`; `false`: the two after training), their
 //!    training samples kept as in any other ([`TrainingSampler`], carried in the tile's
-//!    moments), and chooses once `Γ` is trained: on `staircase2`, where it takes path
-//!    tracing, the four iterations with connections before the choice instead of six.
+//!    moments), and chooses once `Γ` is trained: where it takes path tracing, only the
+//!    training iterations render with connections before the choice (four by default, not
+//!    six).
 //!
 //! MIS counts (`--sp-mis`, as PCBPT's `--pc-mis`): `N / V̄` (uniform), `N κ_t / V̄`
 //! (harmonic, `κ_t` measured on the previous iteration's unoccluded draws), `N M P(y | z)`
@@ -43,15 +44,16 @@ use crate::error::Error;
 use crate::film::Tile;
 use crate::integrator::RenderOptions;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
-use crate::integrator::bidir::mis::{Correlation, Counts, FullPath, Heuristic, Shares, StrategyCounts};
+use crate::integrator::bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
     concentration_depth, pass_concentration, pool_line,
 };
-use crate::integrator::bidir::{Sink, Vertex, VertexKind};
+use crate::integrator::bidir::{Delivery, Sink, Vertex, VertexKind};
 use crate::integrator::budget::{
     Budget, BudgetMode, BudgetStats, CameraSample, Operations, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
 };
+use crate::integrator::pcbpt::Correlation;
 use crate::integrator::pcbpt::cache::{Record, trace_records};
 use crate::integrator::pcbpt::{
     PcMis, PcOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
@@ -139,13 +141,13 @@ impl Model {
     }
 
     /// Labels `v` with its eye and light subspaces for either side of its shading normal
-    /// ([`Vertex::classes`]), so that the path-dependent MIS counts, which classify every
+    /// ([`Vertex::label`]), so that the path-dependent MIS counts, which classify every
     /// vertex of a path for each of its strategies, read them instead.
     pub fn label(&self, scene: &Scene, v: &mut Vertex) {
         let n = v.frame.n;
         let f = [features(scene, v, n), features(scene, v, -n)];
         let class = |tree: &SubspaceTree, f: &[f32; FEATURES]| tree.classify(f) as u16;
-        v.classes = Some([
+        v.label = Some([
             class(&self.eye, &f[0]),
             class(&self.eye, &f[1]),
             class(&self.light, &f[0]),
@@ -167,7 +169,7 @@ impl Model {
     /// (Always inlined: called with `towards` through memory, the call waited for it.)
     #[inline(always)]
     fn class(&self, scene: &Scene, tree: usize, v: &Vertex, towards: Vec3) -> usize {
-        match v.classes {
+        match v.label {
             Some(c) => c[2 * tree + usize::from(v.frame.n.dot(towards) < 0.0)] as usize,
             None => self.classify(scene, tree, v, towards),
         }
@@ -363,8 +365,14 @@ impl StrategyCounts for SpCounts<'_> {
         self.resampling.is_some()
     }
 
-    fn correlation(&self) -> Option<Correlation> {
-        self.correlation
+    fn density_dependent(&self) -> bool {
+        self.correlation.is_some()
+    }
+
+    fn density_factors(&self, n: usize, pl: impl Fn(usize) -> f32, pe: impl Fn(usize) -> f32, out: &mut [f32]) {
+        if let Some(c) = self.correlation {
+            c.factors(n, pl, pe, out);
+        }
     }
 
     /// Counts of a whole path with one pass for the light throughputs.
@@ -458,12 +466,12 @@ impl<S: Sink> Sink for TrainingSink<'_, S> {
         self.inner.add_connection(light, camera, c, w);
     }
 
-    fn wants_shares(&self) -> bool {
-        self.inner.wants_shares()
+    fn observes(&self) -> bool {
+        self.inner.observes()
     }
 
-    fn note_shares(&mut self, shares: Shares) {
-        self.inner.note_shares(shares);
+    fn observe<C: StrategyCounts>(&mut self, delivery: &Delivery<'_, C>) {
+        self.inner.observe(delivery);
     }
 }
 
@@ -662,7 +670,7 @@ impl Iterative for SpcbptRender {
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<SpPass> {
         let t = Instant::now();
         let counts = self.counts(ctx.scene);
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
         let traced = self.budget().trace_pool(ctx, &conn, &self.sp.bdpt, first, keep, self.light_paths);
         let TracedPool { mut pool, splats, counters, splat_shares, operations, splat_paths } = traced;
         work.phases.light_pool += t.elapsed().as_secs_f64();
@@ -680,7 +688,7 @@ impl Iterative for SpcbptRender {
     fn render_tile(&self, ctx: &Ctx, pass: &SpPass, tile: Tile, first: u32, count: u32) -> TileResult<SpTile> {
         let scene = ctx.scene;
         let counts = self.counts(scene);
-        let conn = Connector { scene, heuristic: self.heuristic, counts: &counts, roulette: None };
+        let conn = Connector::new(scene, self.heuristic, &counts);
         let model = self.model();
         let (subspaces, paths) = (&pass.subspaces, pass.pool.paths.max(1) as f64);
         let select = SubspaceSelection { scene, model, subspaces, paths, label: counts.labels() };
@@ -957,7 +965,7 @@ mod tests {
             model.label(&scene, &mut labelled);
             // Negative control: a label with the normal's two sides swapped.
             let mut swapped = labelled;
-            swapped.classes = labelled.classes.map(|[a, b, c, d]| [b, a, d, c]);
+            swapped.label = labelled.label.map(|[a, b, c, d]| [b, a, d, c]);
             for _ in 0..8 {
                 let towards = crate::sampling::square_to_uniform_sphere(rng.next_2d());
                 turned += (v.frame.n.dot(towards) < 0.0) as usize;

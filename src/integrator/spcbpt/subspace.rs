@@ -309,8 +309,7 @@ struct Alias {
 /// may take (the column's own member and its alias), their `P(y | j)`, and the share that
 /// keeps the first. The choice between them is an index, not a branch. (Inverting running
 /// sums instead took a guide lookup, a scan whose length the random number set, and the
-/// flux's division; on `veach-ajar` the draws within a subspace and by `Γ` were a sixth of
-/// SPCBPT's time.)
+/// flux's division, on a path every connection takes.)
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
 struct Column {
@@ -347,8 +346,7 @@ impl Alias {
 /// exceeds `k / K`, so a draw `u` starts its search at entry `⌊u K⌋` and steps on at most a
 /// few indices. `u K` and `k / K` are exact in floating point (`K` is a power of two), so the
 /// index found is the one a binary search finds, bit for bit; the draws cost a load or two
-/// where the search took one dependent load per halving (on `staircase2`, SPCBPT with eight
-/// connections spent a fifth of its time in the two searches of each draw).
+/// where the search took one dependent load per halving, twice in every draw.
 struct Guide;
 
 impl Guide {

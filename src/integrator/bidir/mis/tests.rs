@@ -9,6 +9,8 @@ use crate::integrator::Counters;
 use crate::integrator::bidir::mis::*;
 use crate::integrator::bidir::pool::LightPool;
 use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
+use crate::integrator::budget::{Shares, mis_shares};
+use crate::integrator::lvc::LvcCounts;
 use crate::integrator::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, PoolOptions, trace_records};
 use crate::integrator::spcbpt::{Measured, Model, SpCounts, test_model};
 use crate::light::{Light, LightSampler};
@@ -332,7 +334,7 @@ fn check_shares(scene: &Scene, x: &[Vertex], counts: &impl StrategyCounts, what:
 
 fn check_variant(variant: Variant, seed: u64) {
     let scene = scene(variant);
-    let pool = Counts::Pool { light_trace: 0.37, connect: 2.5 };
+    let pool = LvcCounts { light_trace: 0.37, connect: 2.5 };
     // Light paths from infinity mostly meet the box's outside: more of them fill the pool.
     let k = if matches!(variant, Variant::Envmap | Variant::Directional | Variant::Sunsky) { 6 } else { 1 };
     let caches = [pc_cache(&scene, 120 * k, DistanceTerm::Falloff), pc_cache(&scene, 40 * k, DistanceTerm::Printed)];
@@ -645,7 +647,7 @@ fn unit_count_walk_is_the_general_walk_with_unit_counts() {
 /// the footprint's area is `A = 1 / (100 pE(x_4))`.
 #[test]
 fn correlation_factors_follow_the_prefixes_randomness() {
-    use crate::integrator::bidir::mis::Correlation;
+    use crate::integrator::pcbpt::Correlation;
     let corr = Correlation { pixels: 100.0, connections: 4.0 };
     let factors = |pl: [f32; 6], pe: [f32; 6]| {
         let mut out = [0.0f32; 6];
