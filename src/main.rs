@@ -489,11 +489,10 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         let c = &s.counters;
         let cache = s.phases.cache > 0.0 || s.shadow_rays.cache > 0;
         eprintln!(
-            "  {} light paths, {} connections traced ({} occluded, {} repeated draws merged); time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",
+            "  {} light paths, {} connections traced ({} occluded); time: light pool {:.2} s, {}camera pass {:.2} s, merge and splats {:.2} s; shadow rays: pool {}, {}camera pass {}",
             c.light_paths,
             c.connections,
             c.connections_occluded,
-            c.draws_merged,
             s.phases.light_pool,
             if cache { format!("cache {:.2} s, ", s.phases.cache) } else { String::new() },
             s.phases.camera_pass,

@@ -1,26 +1,24 @@
 //! Light-vertex-cache BDPT (Davidovic et al. 2014; contract §5): `M` light subpaths per
 //! iteration in a pool, light tracing (`t = 1`) from all of them, and `N` connections per
-//! camera vertex to pool vertices chosen uniformly — PCBPT without its cached PMFs.
+//! camera vertex to pool vertices chosen uniformly — PCBPT without its cached PMFs: the
+//! pool integrators' base ([`crate::integrator::pool_base`]) with uniform selection and its
+//! counts.
 
 use crate::error::Error;
 use crate::film::Tile;
 use crate::integrator::RenderOptions;
-use crate::integrator::bidir::Sink;
 use crate::integrator::bidir::Vertex;
-use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
+use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::{FullPath, Heuristic, StrategyCounts};
-use crate::integrator::bidir::pool::{
-    LightPool, PILOT_ITERATION, PoolPass, PoolSelection, check_pool_memory, pool_line,
-};
+use crate::integrator::bidir::pool::{LightPool, PoolCounters, PoolSelection};
+use crate::integrator::pool_base::{PoolBase, PoolStats};
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
-use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
+use crate::integrator::{Details, IntegratorStats, RenderStats};
 use crate::sampling::Random;
 use crate::scene::Scene;
-use glam::Vec2;
 use serde::Serialize;
 use std::ops::Range;
-use std::time::Instant;
 
 /// Options of light-vertex-cache BDPT (`--integrator lvc`).
 #[derive(Clone, Debug, Serialize, clap::Args)]
@@ -42,36 +40,6 @@ pub struct LvcOptions {
 impl Default for LvcOptions {
     fn default() -> LvcOptions {
         LvcOptions { heuristic: Heuristic::default(), light_paths: 0, connections: 1, max_pool_mb: 4096 }
-    }
-}
-
-/// Light-vertex-cache BDPT: BDPT's `s = 0` and `s = 1` strategies per camera vertex, and
-/// `N` connections to uniformly chosen pool vertices, `F = (1/N) Σ w C(v, z) V / M`.
-#[derive(Clone, Debug)]
-pub struct Lvc {
-    pub bdpt: Bdpt,
-    /// Light paths per iteration (`M`).
-    pub light_paths: usize,
-    /// Connections per camera vertex (`N`).
-    pub connections: u32,
-}
-
-impl Lvc {
-    #[allow(clippy::too_many_arguments)]
-    pub fn sample<R: Random, C: StrategyCounts>(
-        &self,
-        conn: &Connector<C>,
-        pool: &LightPool,
-        pos: Vec2,
-        rng: &mut R,
-        scratch: &mut Scratch,
-        sink: &mut impl Sink,
-        counters: &mut Counters,
-    ) {
-        let v = pool.connectible.len();
-        let select = Uniform { v, scale: v as f32 / (pool.paths.max(1) as f32 * self.connections as f32) };
-        let pass = PoolPass { bdpt: &self.bdpt, connections: self.connections, conn, pool };
-        pass.sample(&select, pos, rng, scratch, sink, counters);
     }
 }
 
@@ -112,40 +80,38 @@ impl PoolSelection for Uniform {
     }
 }
 
-/// LVC in the render loop: one pool per iteration; the strategy counts use `V̄` of the
-/// previous iteration's pool (of a pilot pool before the first), so a chunk that starts at
-/// iteration `A` re-traces pool `A - 1`.
+/// LVC in the render loop, on the pool integrators' base: BDPT's `s = 0` and `s = 1`
+/// strategies per camera vertex and `N` connections to uniformly chosen pool vertices,
+/// `F = (1/N) Σ w C(v, z) V / M`. One pool per iteration; the strategy counts use `V̄` of
+/// the previous iteration's pool (of the pilot pool before the first), so a chunk that
+/// starts at iteration `A` re-traces pool `A - 1`.
 pub struct LvcRender {
-    pub lvc: Lvc,
-    pub heuristic: Heuristic,
-    pub max_pool_mb: usize,
+    pub base: PoolBase,
+    /// Connections per camera vertex (`N`).
+    pub connections: u32,
     vbar: f32,
-    pool_size: Option<(usize, usize)>,
 }
 
 impl LvcRender {
-    pub fn new(lvc: Lvc, heuristic: Heuristic, max_pool_mb: usize) -> LvcRender {
-        LvcRender { lvc, heuristic, max_pool_mb, vbar: 0.0, pool_size: None }
+    pub fn new(base: PoolBase, connections: u32) -> LvcRender {
+        LvcRender { base, connections, vbar: 0.0 }
     }
 
     fn counts(&self, scene: &Scene) -> LvcCounts {
         let pixels = scene.film.width as f32 * scene.film.height as f32;
         LvcCounts {
-            light_trace: self.lvc.light_paths as f32 / pixels,
-            connect: if self.vbar > 0.0 { self.lvc.connections as f32 / self.vbar } else { 0.0 },
+            light_trace: self.base.light_paths as f32 / pixels,
+            connect: if self.vbar > 0.0 { self.connections as f32 / self.vbar } else { 0.0 },
         }
     }
 }
 
 impl Iterative for LvcRender {
     type Pass = LightPool;
-    type TileData = ();
+    type TileData = PoolCounters;
 
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
-        let (m, limits) = (self.lvc.light_paths, &self.lvc.bdpt.limits);
-        let (pilot, _, _) = LightPool::trace::<LvcCounts>(ctx.scene, limits, m, ctx.seed, PILOT_ITERATION, None);
-        check_pool_memory(m, &pilot, self.max_pool_mb, "--lvc-light-paths")?;
-        self.vbar = pilot.mean_vertices();
+        self.vbar = self.base.pilot(ctx, 0)?.mean_vertices();
         Ok(())
     }
 
@@ -158,47 +124,44 @@ impl Iterative for LvcRender {
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<LightPool> {
-        let t = Instant::now();
         let counts = self.counts(ctx.scene);
-        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
-        let splat = keep.then_some((&conn, &self.lvc.bdpt, ctx.layers));
-        let (pool, splats, counters) =
-            LightPool::trace(ctx.scene, &self.lvc.bdpt.limits, self.lvc.light_paths, ctx.seed, first as u64, splat);
-        work.phases.light_pool += t.elapsed().as_secs_f64();
-        work.shadow.light_pool += counters.shadow_rays;
-        Prepared { pass: pool, splats, counters, splat_paths: None }
+        let conn = Connector::new(ctx.scene, self.base.heuristic, &counts);
+        let traced = self.base.trace(ctx, &conn, None, first, keep, work);
+        Prepared { pass: traced.pool, splats: traced.splats, counters: traced.counters, splat_paths: None }
     }
 
-    fn render_tile(&self, ctx: &Ctx, pool: &LightPool, tile: Tile, first: u32, count: u32) -> TileResult {
+    fn render_tile(&self, ctx: &Ctx, pool: &LightPool, tile: Tile, first: u32, count: u32) -> TileResult<PoolCounters> {
         let counts = self.counts(ctx.scene);
-        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
-        let mut scratch = Scratch::default();
-        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-            self.lvc.sample(&conn, pool, pos, rng, &mut scratch, sink, counters);
+        let conn = Connector::new(ctx.scene, self.base.heuristic, &counts);
+        let v = pool.connectible.len();
+        let select = Uniform { v, scale: v as f32 / (pool.paths.max(1) as f32 * self.connections as f32) };
+        let mut sampler = self.base.sampler(&conn, pool, self.connections, &select);
+        let result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+            sampler.sample(pos, rng, sink, counters);
             true
-        })
+        });
+        result.map(|()| sampler.draws)
     }
 
-    fn finish(&mut self, _: &Ctx, pool: LightPool, _: Range<u32>, _: &[TileResult]) {
+    fn finish(&mut self, ctx: &Ctx, pool: LightPool, iterations: Range<u32>, results: &[TileResult<PoolCounters>]) {
         self.vbar = pool.mean_vertices();
-        self.pool_size = Some((pool.paths, pool.connectible.len()));
+        self.base.finish(ctx, &pool, &iterations, results.iter().map(|r| &r.data));
     }
 
     fn details(&self) -> Details {
-        Details::of(LvcStats { pool: self.pool_size })
+        Details::of(LvcStats { pool: self.base.stats })
     }
 }
 
-/// LVC's statistics: the last iteration's pool.
+/// LVC's statistics: its pools.
 #[derive(Clone, Debug, Serialize)]
 pub struct LvcStats {
-    /// Light paths and connectible vertices of the last pool.
-    pub pool: Option<(usize, usize)>,
+    pub pool: PoolStats,
 }
 
 impl IntegratorStats for LvcStats {
     fn lines(&self, _: &RenderStats) -> Vec<String> {
-        self.pool.iter().map(|&p| pool_line(p)).collect()
+        self.pool.line().into_iter().collect()
     }
 }
 
@@ -211,8 +174,8 @@ impl Integrator for LvcOptions {
         }
         let pixels = scene.film.width as usize * scene.film.height as usize;
         let m = if self.light_paths == 0 { pixels } else { self.light_paths };
-        let lvc = Lvc { bdpt: Bdpt::for_scene(scene, false), light_paths: m, connections: self.connections };
-        let method = LvcRender::new(lvc, self.heuristic, self.max_pool_mb);
+        let base = PoolBase::new(Bdpt::for_scene(scene, false), self.heuristic, self.max_pool_mb, m);
+        let method = LvcRender::new(base, self.connections);
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 

@@ -12,6 +12,7 @@ pub mod memlt;
 pub mod metropolis;
 pub mod path;
 pub mod pcbpt;
+pub mod pool_base;
 pub mod pssmlt;
 pub mod registry;
 pub(crate) mod render_loop;

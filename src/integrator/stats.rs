@@ -2,7 +2,6 @@
 //! the statistics of a finished render, and the interface through which an integrator adds
 //! its own ([`IntegratorStats`]: serialized into `--stats` JSON, printed in the summary).
 
-use crate::integrator::bidir::pool::CONCENTRATION_DEPTHS;
 use crate::integrator::{IntegratorKind, Method, RenderOptions};
 use crate::scene::Scene;
 use serde::Serialize;
@@ -76,40 +75,6 @@ pub struct Counters {
     pub connections: u64,
     /// Of those, connections found occluded.
     pub connections_occluded: u64,
-    /// Pool draws of a camera vertex that repeated an earlier draw of it and were merged
-    /// into that connection (its weight counts both).
-    pub draws_merged: u64,
-    /// Pool draws whose connection was traced and found unoccluded, by the depth of the
-    /// camera vertex (`[t - 2]` for `z_{t-1}`, deeper ones in the last entry).
-    pub pool_hits: [u64; CONCENTRATION_DEPTHS],
-    /// Sum over those draws of `1 / (V · PMF)`, the inverse of their selection probability
-    /// relative to uniform selection (1 for uniform draws), by the same depths.
-    pub pool_hits_inverse_concentration: [f64; CONCENTRATION_DEPTHS],
-    /// Shadow rays of pool connections (of `shadow_rays`).
-    pub pool_shadow_rays: u64,
-    /// Camera vertices that drew pool connections.
-    pub pool_lookups: u64,
-}
-
-impl Counters {
-    /// The harmonic mean of `V · PMF` over the unoccluded pool connections, over all depths
-    /// and per camera depth (a depth without such connections gets the overall one); `None`
-    /// without any.
-    pub fn concentration(&self) -> Option<(f64, [f64; CONCENTRATION_DEPTHS])> {
-        let hits: u64 = self.pool_hits.iter().sum();
-        let inverse: f64 = self.pool_hits_inverse_concentration.iter().sum();
-        if hits == 0 || inverse <= 0.0 {
-            return None;
-        }
-        let all = hits as f64 / inverse;
-        let mut by_depth = [all; CONCENTRATION_DEPTHS];
-        for (k, c) in by_depth.iter_mut().enumerate() {
-            if self.pool_hits[k] > 0 && self.pool_hits_inverse_concentration[k] > 0.0 {
-                *c = self.pool_hits[k] as f64 / self.pool_hits_inverse_concentration[k];
-            }
-        }
-        Some((all, by_depth))
-    }
 }
 
 impl std::ops::AddAssign for Counters {
@@ -121,13 +86,6 @@ impl std::ops::AddAssign for Counters {
         self.light_paths += o.light_paths;
         self.connections += o.connections;
         self.connections_occluded += o.connections_occluded;
-        self.draws_merged += o.draws_merged;
-        self.pool_shadow_rays += o.pool_shadow_rays;
-        self.pool_lookups += o.pool_lookups;
-        for k in 0..CONCENTRATION_DEPTHS {
-            self.pool_hits[k] += o.pool_hits[k];
-            self.pool_hits_inverse_concentration[k] += o.pool_hits_inverse_concentration[k];
-        }
     }
 }
 

@@ -9,12 +9,12 @@ use crate::integrator::Counters;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::{Delivery, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
-use crate::integrator::render_loop::TileResult;
 use crate::math::Rgb;
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
+use serde::Serialize;
 
 /// Camera depths the concentration of pool draws is measured for: `z_1 .. z_15` each, deeper
 /// vertices together.
@@ -24,6 +24,56 @@ pub const CONCENTRATION_DEPTHS: usize = 16;
 #[inline]
 pub fn concentration_depth(t: usize) -> usize {
     (t - 2).min(CONCENTRATION_DEPTHS - 1)
+}
+
+/// What a camera pass counts of its pool draws.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PoolCounters {
+    /// Camera vertices that drew pool connections.
+    pub lookups: u64,
+    /// Draws of a camera vertex that repeated an earlier draw of it and were merged into
+    /// that connection (its weight counts both).
+    pub draws_merged: u64,
+    /// Shadow rays of pool connections.
+    pub shadow_rays: u64,
+    /// Draws whose connection was traced and found unoccluded, by the depth of the camera
+    /// vertex ([`concentration_depth`]).
+    pub hits: [u64; CONCENTRATION_DEPTHS],
+    /// Sum over those draws of `1 / (V · PMF)`, the inverse of their selection probability
+    /// relative to uniform selection (1 for uniform draws), by the same depths.
+    pub hits_inverse_concentration: [f64; CONCENTRATION_DEPTHS],
+}
+
+impl PoolCounters {
+    /// The harmonic mean of `V · PMF` over the unoccluded draws, over all depths and per
+    /// camera depth (a depth without such draws gets the overall one); `None` without any.
+    pub fn concentration(&self) -> Option<(f64, [f64; CONCENTRATION_DEPTHS])> {
+        let hits: u64 = self.hits.iter().sum();
+        let inverse: f64 = self.hits_inverse_concentration.iter().sum();
+        if hits == 0 || inverse <= 0.0 {
+            return None;
+        }
+        let all = hits as f64 / inverse;
+        let mut by_depth = [all; CONCENTRATION_DEPTHS];
+        for (k, c) in by_depth.iter_mut().enumerate() {
+            if self.hits[k] > 0 && self.hits_inverse_concentration[k] > 0.0 {
+                *c = self.hits[k] as f64 / self.hits_inverse_concentration[k];
+            }
+        }
+        Some((all, by_depth))
+    }
+}
+
+impl std::ops::AddAssign for PoolCounters {
+    fn add_assign(&mut self, o: PoolCounters) {
+        self.lookups += o.lookups;
+        self.draws_merged += o.draws_merged;
+        self.shadow_rays += o.shadow_rays;
+        for k in 0..CONCENTRATION_DEPTHS {
+            self.hits[k] += o.hits[k];
+            self.hits_inverse_concentration[k] += o.hits_inverse_concentration[k];
+        }
+    }
 }
 
 /// Key word that separates pool random streams from camera-sample streams.
@@ -252,11 +302,21 @@ pub fn draw_one_by_one<P: PoolSelection + ?Sized, R: Random>(
     }
 }
 
-/// A [`PoolPass`] with its selection and scratch, as one camera sample at a time.
+/// A [`PoolPass`] with its selection and scratch, as one camera sample at a time, counting
+/// its draws.
 pub(crate) struct PoolSampler<'a, C, P> {
     pub pass: PoolPass<'a, C>,
     pub select: &'a P,
     pub scratch: Scratch,
+    pub draws: PoolCounters,
+}
+
+impl<C: StrategyCounts, P: PoolSelection> PoolSampler<'_, C, P> {
+    /// The camera sample at film position `pos`.
+    #[inline]
+    pub fn sample<R: Random>(&mut self, pos: Vec2, rng: &mut R, sink: &mut impl Sink, counters: &mut Counters) {
+        self.pass.sample(self.select, pos, rng, &mut self.scratch, sink, counters, &mut self.draws);
+    }
 }
 
 /// The camera pass of the pool integrators: per camera sample, BDPT's `s = 0` and `s = 1`
@@ -270,6 +330,7 @@ pub struct PoolPass<'a, C> {
 }
 
 impl<C: StrategyCounts> PoolPass<'_, C> {
+    #[allow(clippy::too_many_arguments)]
     pub fn sample<R: Random, P: PoolSelection>(
         &self,
         select: &P,
@@ -278,6 +339,7 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
         scratch: &mut Scratch,
         sink: &mut impl Sink,
         counters: &mut Counters,
+        draws: &mut PoolCounters,
     ) {
         let (conn, bdpt) = (self.conn, self.bdpt);
         camera_subpath(conn.scene, pos, &bdpt.limits, rng, &mut scratch.camera, counters);
@@ -296,19 +358,19 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
             if self.connections == 0 || self.pool.connectible.is_empty() || !camera[t - 1].is_connectible() {
                 continue;
             }
-            counters.pool_lookups += 1;
+            draws.lookups += 1;
             let lookup = select.lookup(&camera[t - 1]);
             // Draws that repeat an earlier one (a peaked PMF and stratified draws) make the
             // same connection: it is evaluated and traced once with the factors summed.
             scratch.draws.clear();
-            let draws = &mut scratch.draws;
-            select.draw_all(&lookup, self.connections, rng, |i, scale| match draws.iter_mut().find(|d| d.0 == i) {
+            let drawn = &mut scratch.draws;
+            select.draw_all(&lookup, self.connections, rng, |i, scale| match drawn.iter_mut().find(|d| d.0 == i) {
                 Some(d) => {
                     d.1 += scale;
                     d.2 += 1;
-                    counters.draws_merged += 1;
+                    draws.draws_merged += 1;
                 }
-                None => draws.push((i, scale, 1)),
+                None => drawn.push((i, scale, 1)),
             });
             // The drawn pool vertices lie anywhere in the pool: their reads are started
             // together here rather than one connection after another.
@@ -323,27 +385,25 @@ impl<C: StrategyCounts> PoolPass<'_, C> {
                 let light = self.pool.prefix(i);
                 if bdpt.allowed(light.len(), t) && conn.connect(light, &camera[..t], scale, pos, rng, sink, counters) {
                     let k = concentration_depth(t);
-                    counters.pool_hits[k] += repeats as u64;
-                    counters.pool_hits_inverse_concentration[k] += scale as f64 / uniform_scale;
+                    draws.hits[k] += repeats as u64;
+                    draws.hits_inverse_concentration[k] += scale as f64 / uniform_scale;
                 }
             }
-            counters.pool_shadow_rays += counters.shadow_rays - shadow_before;
+            draws.shadow_rays += counters.shadow_rays - shadow_before;
         }
     }
 }
 /// The concentration `κ` by camera depth of a camera pass's unoccluded pool draws
-/// ([`Counters::concentration`], summed in tile order); `None` without any.
-pub(crate) fn pass_concentration<D>(results: &[TileResult<D>]) -> Option<[f32; CONCENTRATION_DEPTHS]> {
-    let mut counters = Counters::default();
-    for r in results {
-        counters += r.counters;
+/// ([`PoolCounters::concentration`], its tiles' `draws` summed in tile order); `None`
+/// without any.
+pub(crate) fn pass_concentration<'a>(
+    draws: impl IntoIterator<Item = &'a PoolCounters>,
+) -> Option<[f32; CONCENTRATION_DEPTHS]> {
+    let mut sum = PoolCounters::default();
+    for d in draws {
+        sum += *d;
     }
-    counters.concentration().map(|(_, by_depth)| by_depth.map(|c| c as f32))
-}
-
-/// The summary's line on a light pool of `(paths, connectible vertices)`.
-pub fn pool_line((paths, vertices): (usize, usize)) -> String {
-    format!("  light pool: {paths} paths with {vertices} connectible vertices (the last iteration's)")
+    sum.concentration().map(|(_, by_depth)| by_depth.map(|c| c as f32))
 }
 
 /// Key of the pilot pool that measures `V̄` before the first iteration.

@@ -1,7 +1,7 @@
 //! The cost model of a budget ([`super`]): the operations an iteration counts and their
 //! prices, from which the cost of an iteration under another plan is predicted.
 
-use crate::integrator::budget::Plan;
+use crate::integrator::budget::{Plan, PoolTile};
 use crate::integrator::render_loop::TileResult;
 use serde::Serialize;
 
@@ -77,13 +77,13 @@ impl std::ops::AddAssign for Operations {
 
 impl Operations {
     /// These operations with those of a camera pass's tiles added.
-    pub(crate) fn with_camera_pass<D>(mut self, results: &[TileResult<D>]) -> Operations {
+    pub(crate) fn with_camera_pass<L>(mut self, results: &[TileResult<PoolTile<L>>]) -> Operations {
         for r in results {
-            let c = &r.counters;
+            let (c, d) = (&r.counters, &r.data.draws);
             self.camera_rays += c.camera_rays + c.extension_rays;
-            self.camera_shadow += c.shadow_rays - c.pool_shadow_rays;
-            self.pool_shadow += c.pool_shadow_rays;
-            self.lookups += c.pool_lookups;
+            self.camera_shadow += c.shadow_rays - d.shadow_rays;
+            self.pool_shadow += d.shadow_rays;
+            self.lookups += d.lookups;
         }
         self
     }

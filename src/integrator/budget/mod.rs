@@ -81,7 +81,7 @@ use crate::integrator::Counters;
 use crate::integrator::bidir::Sink;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::StrategyCounts;
-use crate::integrator::bidir::pool::{LightPool, PoolPlan, PoolSampler, PoolSelection};
+use crate::integrator::bidir::pool::{LightPool, PoolCounters, PoolPlan, PoolSampler, PoolSelection};
 use crate::integrator::path::PathTracer;
 use crate::integrator::render_loop::{Ctx, TileResult, Warmup, sample_tile};
 use crate::sampling::Sampler;
@@ -163,27 +163,30 @@ pub(crate) trait CameraSample {
 
     /// What the integrator learned from the tile's samples, taken once the tile is done.
     fn learned(&mut self) -> Option<Self::Learned>;
+
+    /// The tile's pool draws, taken once the tile is done.
+    fn draws(&mut self) -> PoolCounters;
 }
 
 /// What a pool integrator's tile gives back ([`TileResult::data`]): the budget's moments
-/// when it measured the tile, and what the integrator learned from it
-/// ([`CameraSample::learned`]).
+/// when it measured the tile, what the integrator learned from it
+/// ([`CameraSample::learned`]), and its pool draws.
 pub(crate) struct PoolTile<L> {
     pub moments: Option<TileMoments>,
     pub learned: Option<L>,
+    pub draws: PoolCounters,
 }
 
 impl PoolTile<()> {
-    /// The moments of a tile that learned nothing, as the data of an integrator that learns
-    /// `L` from other tiles.
+    /// The tile of an integrator that learns `L` from other tiles.
     pub fn nothing_learned<L>(self) -> PoolTile<L> {
-        PoolTile { moments: self.moments, learned: None }
+        PoolTile { moments: self.moments, learned: None, draws: self.draws }
     }
 }
 
 impl<L> Default for PoolTile<L> {
     fn default() -> PoolTile<L> {
-        PoolTile { moments: None, learned: None }
+        PoolTile { moments: None, learned: None, draws: PoolCounters::default() }
     }
 }
 
@@ -215,7 +218,7 @@ fn budget_tile<S: CameraSample>(
         true
     });
     moments.end_vertex();
-    Some(result.map(|()| PoolTile { moments: Some(moments), learned: sample.learned() }))
+    Some(result.map(|()| PoolTile { moments: Some(moments), learned: sample.learned(), draws: sample.draws() }))
 }
 
 /// A tile of iteration `first` of a pool integrator with `sampler`'s camera samples: the
@@ -236,8 +239,8 @@ pub(crate) fn pool_tile<S: CameraSample>(
         sampler.sample(pos, rng, sink, counters);
         true
     });
-    let learned = sampler.learned();
-    result.map(|()| PoolTile { moments: None, learned })
+    let (learned, draws) = (sampler.learned(), sampler.draws());
+    result.map(|()| PoolTile { moments: None, learned, draws })
 }
 
 /// A tile of a plan that [`Plan::path_tracing`]: the path tracer's samples (next-event
@@ -789,11 +792,15 @@ impl<C: StrategyCounts, P: PoolSelection> CameraSample for PoolSampler<'_, C, P>
 
     #[inline]
     fn sample(&mut self, pos: Vec2, rng: &mut Sampler, sink: &mut impl Sink, counters: &mut Counters) {
-        self.pass.sample(self.select, pos, rng, &mut self.scratch, sink, counters);
+        PoolSampler::sample(self, pos, rng, sink, counters);
     }
 
     fn learned(&mut self) -> Option<()> {
         None
+    }
+
+    fn draws(&mut self) -> PoolCounters {
+        std::mem::take(&mut self.draws)
     }
 }
 

@@ -38,16 +38,16 @@ use crate::error::Error;
 use crate::film::Tile;
 use crate::integrator::RenderOptions;
 use crate::integrator::bidir::Vertex;
-use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
-use crate::integrator::bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
+use crate::integrator::bidir::bdpt::{Bdpt, Connector};
+use crate::integrator::bidir::mis::{FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
-    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
-    concentration_depth, draw_one_by_one, pass_concentration, pool_line,
+    CONCENTRATION_DEPTHS, LightPool, PoolSelection, concentration_depth, draw_one_by_one, pass_concentration,
 };
 use crate::integrator::budget::{
     Budget, BudgetOptions, BudgetStats, Operations, PRICES, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
 };
 use crate::integrator::pcbpt::fit::CacheFit;
+use crate::integrator::pool_base::{PoolBase, PoolStats};
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
@@ -237,18 +237,6 @@ impl PcOptions {
         let per_axis = |n: u32| n.div_ceil(self.stride) as usize;
         per_axis(width) * per_axis(height) * self.cache_depth as usize
     }
-}
-
-/// Light paths per iteration: at least `floor`, and enough for about `target` pool vertices
-/// at `vbar` vertices per path, but no more than one per pixel (beyond that the pool would
-/// cost more than BDPT's light subpaths). A `target` of 0, or a pilot with no vertices,
-/// keeps `floor`.
-pub fn light_paths_for(floor: usize, target: usize, vbar: f32, pixels: usize) -> usize {
-    if target == 0 || vbar.is_nan() || vbar <= 0.0 {
-        return floor;
-    }
-    let want = (target as f64 / vbar as f64).ceil() as usize;
-    floor.max(want.min(pixels))
 }
 
 /// The throughputs `α_L(x_k)`, `1 <= k < out.len()`, that a light subpath along the full
@@ -456,17 +444,10 @@ fn with_throughput_buffer<T>(n: usize, f: impl FnOnce(&mut [Rgb]) -> T) -> T {
     if n <= SHORT { f(&mut [Rgb::ZERO; SHORT][..n]) } else { f(&mut [Rgb::ZERO; CAP][..n]) }
 }
 
-/// PCBPT's per-sample estimator: BDPT's `s = 0` and NEE per camera vertex, and connections to
-/// pool vertices drawn from the cache (`--pc-connections`, or the budget's), by [`PoolPass`]
-/// with `CacheSelection`.
-#[derive(Clone, Debug)]
-pub struct Pcbpt {
-    pub bdpt: Bdpt,
-    pub opts: PcOptions,
-}
-
-/// PCBPT in the render loop. Per iteration: a light pool, the cache's records and PMFs over
-/// it, then the camera pass. What the counts of iteration `i` take from iteration `i - 1`
+/// PCBPT in the render loop, on the pool integrators' base ([`PoolBase`]). Per iteration: a
+/// light pool, the cache's records and PMFs over it, then the camera pass: BDPT's `s = 0`
+/// and NEE per camera vertex, and connections to pool vertices drawn from the cache
+/// (`--pc-connections`, or the budget's) with `CacheSelection`. What the counts of iteration `i` take from iteration `i - 1`
 /// (`V̄`, the concentration `κ` of its camera pass's unoccluded draws, and its cache for the
 /// resampling weights; a pilot pool's `V̄` before the first) is kept here; a chunk that
 /// starts at `A` re-runs iteration `A - 1` for it (its camera pass only when `κ` is used),
@@ -474,16 +455,12 @@ pub struct Pcbpt {
 /// depend on the seed and `A - 1` alone, not on the counts. With `--pc-budget auto` the
 /// iterations of the budget's window are measured, and a chunk re-runs them too.
 pub struct PcbptRender {
-    pub pc: Pcbpt,
-    pub heuristic: Heuristic,
-    pub max_pool_mb: usize,
+    pub base: PoolBase,
+    pub opts: PcOptions,
     vbar: f32,
     concentration: [f32; CONCENTRATION_DEPTHS],
     previous: Option<Cache>,
-    pool_size: Option<(usize, usize)>,
     cache_stats: Option<CacheStats>,
-    /// Light paths per iteration (`M`), fixed by the pilot (see [`light_paths_for`]).
-    light_paths: usize,
     /// Connections and light tracing per iteration (set in `begin`).
     budget: Option<Budget>,
 }
@@ -498,18 +475,16 @@ pub struct PcPass {
 }
 
 impl PcbptRender {
-    pub fn new(pc: Pcbpt, heuristic: Heuristic, max_pool_mb: usize) -> PcbptRender {
+    /// PCBPT with options `opts` on `base`, whose light paths are the option's.
+    pub fn new(base: PoolBase, opts: PcOptions) -> PcbptRender {
         PcbptRender {
-            heuristic,
-            max_pool_mb,
+            base,
+            opts,
             vbar: 0.0,
             concentration: [1.0; CONCENTRATION_DEPTHS],
             previous: None,
-            pool_size: None,
             cache_stats: None,
-            light_paths: pc.opts.pool.light_paths,
             budget: None,
-            pc,
         }
     }
 
@@ -520,16 +495,16 @@ impl PcbptRender {
     fn counts<'a>(&'a self, scene: &'a Scene) -> PcCounts<'a> {
         let pixels = scene.film.width as f32 * scene.film.height as f32;
         let (plan, vbar, kappa) = (self.budget().plan(), self.vbar, &self.concentration);
-        PcCounts::for_plan(scene, &self.pc.opts, &plan, pixels, vbar, kappa, self.previous.as_ref())
+        PcCounts::for_plan(scene, &self.opts, &plan, pixels, vbar, kappa, self.previous.as_ref())
     }
 
     /// Traces the record pixels of iteration `iteration` and evaluates their PMFs over
     /// `pool`. Records beyond what `--pc-max-cache-mb` holds (possible only when a pool is
     /// much larger than the pilot promised) are left out: lookups then blend fewer records.
     fn build_cache(&self, scene: &Scene, pool: &LightPool, seed: u64, iteration: u64) -> (Cache, CacheStats, Counters) {
-        let o = &self.pc.opts;
+        let o = &self.opts;
         let (mut records, mut counters) = if self.budget().plan().connections > 0 {
-            trace_records(scene, &self.pc.bdpt.limits, o, seed, iteration)
+            trace_records(scene, &self.base.bdpt.limits, o, seed, iteration)
         } else {
             (Vec::new(), Counters::default())
         };
@@ -558,19 +533,9 @@ impl Iterative for PcbptRender {
     /// Measures `V̄` on a pilot pool, sets `M` from it, and checks the pool and the cache
     /// against their memory limits.
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
-        let o = &self.pc.opts;
-        let (pilot, _, _) = LightPool::trace::<Counts>(
-            ctx.scene,
-            &self.pc.bdpt.limits,
-            o.pool.light_paths,
-            ctx.seed,
-            PILOT_ITERATION,
-            None,
-        );
+        let pilot = self.base.pilot(ctx, self.opts.pool.pool_vertices)?;
+        let (o, m) = (&self.opts, self.base.light_paths);
         let (w, h) = (ctx.scene.film.width, ctx.scene.film.height);
-        let m =
-            light_paths_for(o.pool.light_paths, o.pool.pool_vertices, pilot.mean_vertices(), w as usize * h as usize);
-        check_pool_memory(m, &pilot, self.max_pool_mb, "--light-paths")?;
         let fit = CacheFit { opts: o, light_paths: m, mean_vertices: pilot.mean_vertices() as f64, w, h };
         let (records, v, mb) = fit.size(o.stride, o.cache_depth, m);
         if mb > o.max_cache_mb as f64 {
@@ -582,7 +547,6 @@ impl Iterative for PcbptRender {
             )));
         }
         self.vbar = pilot.mean_vertices();
-        self.light_paths = m;
         // Iteration 0's counts have no measured concentration: the budget measures from 1.
         let plan = Plan { connections: o.pool.connections, pool_paths: m, splat_paths: m };
         let window = 1..1 + o.budget.iterations;
@@ -595,18 +559,15 @@ impl Iterative for PcbptRender {
     }
 
     fn warmup(&self, first: u32) -> Warmup {
-        let kappa = matches!(self.pc.opts.mis, PcMis::Harmonic | PcMis::Correlated);
-        crate::integrator::budget::warmup(self.pc.opts.budget.mode, self.pc.opts.budget.iterations + 1, first, kappa)
+        let kappa = matches!(self.opts.mis, PcMis::Harmonic | PcMis::Correlated);
+        crate::integrator::budget::warmup(self.opts.budget.mode, self.opts.budget.iterations + 1, first, kappa)
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<PcPass> {
-        let t = Instant::now();
         let counts = self.counts(ctx.scene);
-        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
-        let traced = self.budget().trace_pool(ctx, &conn, &self.pc.bdpt, first, keep, self.light_paths);
+        let conn = Connector::new(ctx.scene, self.base.heuristic, &counts);
+        let traced = self.base.trace(ctx, &conn, Some(self.budget()), first, keep, work);
         let TracedPool { pool, splats, mut counters, splat_shares, mut operations, splat_paths } = traced;
-        work.phases.light_pool += t.elapsed().as_secs_f64();
-        work.shadow.light_pool += counters.shadow_rays;
         let t = Instant::now();
         let (cache, stats, c) = self.build_cache(ctx.scene, &pool, ctx.seed, first as u64);
         operations.cache_entries = (stats.records * stats.pool_vertices) as u64;
@@ -620,22 +581,20 @@ impl Iterative for PcbptRender {
     fn render_tile(&self, ctx: &Ctx, pass: &PcPass, tile: Tile, first: u32, count: u32) -> TileResult<PoolTile<()>> {
         let (pool, cache) = (&pass.pool, &pass.cache);
         let counts = self.counts(ctx.scene);
-        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
+        let conn = Connector::new(ctx.scene, self.base.heuristic, &counts);
         let budget = self.budget();
-        let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.pc.opts.sampling };
-        let connections = budget.plan().connections;
-        let pass = PoolPass { bdpt: &self.pc.bdpt, connections, conn: &conn, pool };
-        let sampler = PoolSampler { pass, select: &select, scratch: Scratch::default() };
+        let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.opts.sampling };
+        let sampler = self.base.sampler(&conn, pool, budget.plan().connections, &select);
         pool_tile(ctx, tile, first, count, budget, sampler)
     }
 
     /// Keeps `V̄`, the cache and the concentration of the camera pass's draws (summed in
     /// tile order) for the next iteration, and gives a measured iteration to the budget.
-    fn finish(&mut self, _: &Ctx, pass: PcPass, iterations: Range<u32>, results: &[TileResult<PoolTile<()>>]) {
+    fn finish(&mut self, ctx: &Ctx, pass: PcPass, iterations: Range<u32>, results: &[TileResult<PoolTile<()>>]) {
         let PcPass { pool, cache, stats, splat_shares, operations } = pass;
         self.vbar = pool.mean_vertices();
-        self.pool_size = Some((pool.paths, pool.connectible.len()));
-        if let Some(kappa) = pass_concentration(results) {
+        self.base.finish(ctx, &pool, &iterations, results.iter().map(|r| &r.data.draws));
+        if let Some(kappa) = pass_concentration(results.iter().map(|r| &r.data.draws)) {
             self.concentration = kappa;
         }
         self.cache_stats = Some(stats);
@@ -646,7 +605,7 @@ impl Iterative for PcbptRender {
 
     fn details(&self) -> Details {
         Details::of(PcbptStats {
-            pool: self.pool_size,
+            pool: self.base.stats,
             cache: self.cache_stats,
             budget: self.budget.as_ref().and_then(Budget::chosen_stats),
         })
@@ -730,16 +689,15 @@ pub struct CacheStats {
 /// PCBPT's statistics: the last iteration's pool and cache, and the budget's choice.
 #[derive(Clone, Debug, Serialize)]
 pub struct PcbptStats {
-    /// Light paths and connectible vertices of the last pool.
-    pub pool: Option<(usize, usize)>,
+    pub pool: PoolStats,
     pub cache: Option<CacheStats>,
     /// The budget's choice (`--budget auto`).
     pub budget: Option<BudgetStats>,
 }
 
 impl IntegratorStats for PcbptStats {
-    fn lines(&self, render: &RenderStats) -> Vec<String> {
-        let mut lines: Vec<String> = self.pool.iter().map(|&p| pool_line(p)).collect();
+    fn lines(&self, _: &RenderStats) -> Vec<String> {
+        let mut lines: Vec<String> = self.pool.line().into_iter().collect();
         if let Some(k) = &self.cache {
             lines.push(format!(
                 "  PCBPT cache: {} records ({} empty, {} dropped for the memory limit) × {} pool vertices, {:.1} MiB; unoccluded draws' harmonic mean V·PMF {:.2}",
@@ -748,7 +706,7 @@ impl IntegratorStats for PcbptStats {
                 k.dropped_records,
                 k.pool_vertices,
                 k.megabytes,
-                render.counters.concentration().map_or(1.0, |(all, _)| all)
+                self.pool.draws.concentration().map_or(1.0, |(all, _)| all)
             ));
         }
         lines.extend(self.budget.as_ref().and_then(BudgetStats::line));
@@ -761,32 +719,13 @@ impl Integrator for PcbptOptions {
 
     fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         self.pc.validate().map_err(Error::Usage)?;
-        let pc = Pcbpt { bdpt: Bdpt::for_scene(scene, false), opts: self.pc.clone() };
-        let method = PcbptRender::new(pc, self.heuristic, self.pc.pool.max_pool_mb);
+        let (bdpt, pool) = (Bdpt::for_scene(scene, false), &self.pc.pool);
+        let base = PoolBase::new(bdpt, self.heuristic, pool.max_pool_mb, pool.light_paths);
+        let method = PcbptRender::new(base, self.pc.clone());
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 
     fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
         Some(&mut self.heuristic)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::light_paths_for;
-
-    #[test]
-    fn light_paths_reach_the_pool_target_between_the_floor_and_one_per_pixel() {
-        // veach-ajar's 4.4 vertices per path: the floor already gives 2 000.
-        assert_eq!(light_paths_for(500, 2000, 4.4, 57_600), 500);
-        // sunlit-room's 0.62 (most paths from the sky miss the room): 3 226 paths.
-        assert_eq!(light_paths_for(500, 2000, 0.62, 57_600), 3226);
-        // At most one per pixel; a target of 0 or an empty pilot keeps the floor.
-        assert_eq!(light_paths_for(500, 2000, 0.01, 57_600), 57_600);
-        assert_eq!(light_paths_for(500, 0, 0.62, 57_600), 500);
-        assert_eq!(light_paths_for(500, 2000, 0.0, 57_600), 500);
-        assert_eq!(light_paths_for(500, 2000, f32::NAN, 57_600), 500);
-        // The floor wins over the pixel cap.
-        assert_eq!(light_paths_for(500, 2000, 0.01, 100), 500);
     }
 }

@@ -43,11 +43,11 @@ pub use options::*;
 use crate::error::Error;
 use crate::film::Tile;
 use crate::integrator::RenderOptions;
-use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
+use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
-    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolPass, PoolSampler, PoolSelection, check_pool_memory,
-    concentration_depth, pass_concentration, pool_line,
+    CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolCounters, PoolSelection, concentration_depth,
+    pass_concentration,
 };
 use crate::integrator::bidir::{Delivery, Sink, Vertex, VertexKind};
 use crate::integrator::budget::{
@@ -55,9 +55,8 @@ use crate::integrator::budget::{
 };
 use crate::integrator::pcbpt::Correlation;
 use crate::integrator::pcbpt::cache::{Record, trace_records};
-use crate::integrator::pcbpt::{
-    PcMis, PcOptions, connection_counts, fill_counts, light_paths_for, light_throughputs, throughput_at,
-};
+use crate::integrator::pcbpt::{PcMis, PcOptions, connection_counts, fill_counts, light_throughputs, throughput_at};
+use crate::integrator::pool_base::{PoolBase, PoolStats};
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::spcbpt::subspace::{
@@ -505,6 +504,10 @@ impl<S: CameraSample> CameraSample for TrainingSampler<'_, S> {
     fn learned(&mut self) -> Option<Vec<TrainingSample>> {
         Some(std::mem::take(&mut self.samples))
     }
+
+    fn draws(&mut self) -> PoolCounters {
+        self.inner.draws()
+    }
 }
 
 /// The iterations the budget measures, `iterations` of them: the last training iterations
@@ -522,13 +525,6 @@ fn training_stride(pixels: usize) -> usize {
     pixels.div_ceil(TRAINING_PIXELS).max(1)
 }
 
-/// SPCBPT's per-sample estimator.
-#[derive(Clone, Debug)]
-pub struct Spcbpt {
-    pub bdpt: Bdpt,
-    pub opts: SpOptions,
-}
-
 /// One iteration's pool and its vertices by light subspace, and what the budget measures of
 /// its preparation.
 pub struct SpPass {
@@ -538,41 +534,38 @@ pub struct SpPass {
     operations: Operations,
 }
 
-/// SPCBPT in the render loop.
+/// SPCBPT in the render loop, on the pool integrators' base ([`PoolBase`]): per iteration a
+/// light pool sorted by light subspace, then the camera pass with connections drawn by
+/// subspace (`SubspaceSelection`); the training iterations keep training samples.
 pub struct SpcbptRender {
-    pub sp: Spcbpt,
-    pub heuristic: Heuristic,
-    pub max_pool_mb: usize,
+    pub base: PoolBase,
+    pub opts: SpOptions,
     model: Option<Model>,
     measured: Option<Measured>,
     samples: Vec<TrainingSample>,
-    light_paths: usize,
     stats: SubspaceStats,
-    pool_size: Option<(usize, usize)>,
     /// Connections and light tracing per iteration (set in `begin`).
     budget: Option<Budget>,
 }
 
 impl SpcbptRender {
-    pub fn new(sp: Spcbpt, heuristic: Heuristic, max_pool_mb: usize) -> SpcbptRender {
+    /// SPCBPT with options `opts` on `base`, whose light paths are the option's.
+    pub fn new(base: PoolBase, opts: SpOptions) -> SpcbptRender {
         SpcbptRender {
-            heuristic,
-            max_pool_mb,
+            base,
+            opts,
             model: None,
             measured: None,
             samples: Vec::new(),
-            light_paths: sp.opts.pool.light_paths,
             stats: SubspaceStats::default(),
-            pool_size: None,
             budget: None,
-            sp,
         }
     }
 
     fn counts<'a>(&'a self, scene: &'a Scene) -> SpCounts<'a> {
         let measured = self.measured.as_ref().expect("begin measured the pilot");
         let plan = self.budget().plan();
-        SpCounts::for_iteration(scene, self.sp.opts.mis, plan.connections, plan.splat_paths, measured, self.model())
+        SpCounts::for_iteration(scene, self.opts.mis, plan.connections, plan.splat_paths, measured, self.model())
     }
 
     fn budget(&self) -> &Budget {
@@ -582,8 +575,8 @@ impl SpcbptRender {
     /// The end of the iterations that change the state: training, the iteration after it,
     /// and the budget's window.
     fn state_end(&self) -> u32 {
-        let o = &self.sp.opts;
-        match self.sp.opts.budget.mode {
+        let o = &self.opts;
+        match self.opts.budget.mode {
             BudgetMode::Off => o.training_iterations + 1,
             BudgetMode::Auto => (o.training_iterations + 1).max(self.budget().window.end),
         }
@@ -595,7 +588,7 @@ impl SpcbptRender {
 
     /// Whether iteration `i` trains `Γ`.
     fn training(&self, i: u32) -> bool {
-        i < self.sp.opts.training_iterations
+        i < self.opts.training_iterations
     }
 }
 
@@ -607,13 +600,12 @@ impl Iterative for SpcbptRender {
     /// from pilot vertices.
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
         let t = Instant::now();
-        let o = &self.sp.opts;
+        let pilot = self.base.pilot(ctx, self.opts.pool.pool_vertices)?;
+        let m = self.base.light_paths;
+        let o = &self.opts;
         let pc = &o.pool;
-        let (scene, limits) = (ctx.scene, &self.sp.bdpt.limits);
-        let (pilot, _, _) = LightPool::trace::<Counts>(scene, limits, pc.light_paths, ctx.seed, PILOT_ITERATION, None);
+        let (scene, limits) = (ctx.scene, &self.base.bdpt.limits);
         let (w, h) = (scene.film.width as usize, scene.film.height as usize);
-        let m = light_paths_for(pc.light_paths, pc.pool_vertices, pilot.mean_vertices(), w * h);
-        check_pool_memory(m, &pilot, self.max_pool_mb, "--light-paths")?;
         // Training keeps at most one sample per connection of every camera vertex it watches.
         let per_iteration = (w * h).min(2 * TRAINING_PIXELS) as f64 * PILOT_DEPTH as f64 * pc.connections as f64;
         let samples_mb = per_iteration * o.training_iterations as f64 * SAMPLE_BYTES / (1024.0 * 1024.0);
@@ -638,7 +630,6 @@ impl Iterative for SpcbptRender {
         let (light_pilot, _, _) =
             LightPool::trace::<Counts>(scene, limits, m * PILOT_POOLS, ctx.seed, PILOT_ITERATION - 1, None);
         self.model = Some(Model::new(scene, &records, &light_pilot, o.eye_subspaces, o.light_subspaces));
-        self.light_paths = m;
         // The budget measures the last training iterations, or those after `Γ` is trained.
         let plan = Plan { connections: pc.connections, pool_paths: m, splat_paths: m };
         let window = budget_window(o, o.budget.iterations);
@@ -668,13 +659,10 @@ impl Iterative for SpcbptRender {
     }
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<SpPass> {
-        let t = Instant::now();
         let counts = self.counts(ctx.scene);
-        let conn = Connector::new(ctx.scene, self.heuristic, &counts);
-        let traced = self.budget().trace_pool(ctx, &conn, &self.sp.bdpt, first, keep, self.light_paths);
+        let conn = Connector::new(ctx.scene, self.base.heuristic, &counts);
+        let traced = self.base.trace(ctx, &conn, Some(self.budget()), first, keep, work);
         let TracedPool { mut pool, splats, counters, splat_shares, operations, splat_paths } = traced;
-        work.phases.light_pool += t.elapsed().as_secs_f64();
-        work.shadow.light_pool += counters.shadow_rays;
         let t = Instant::now();
         if counts.labels() {
             self.model().label_connectible(ctx.scene, &mut pool.vertices);
@@ -688,14 +676,12 @@ impl Iterative for SpcbptRender {
     fn render_tile(&self, ctx: &Ctx, pass: &SpPass, tile: Tile, first: u32, count: u32) -> TileResult<SpTile> {
         let scene = ctx.scene;
         let counts = self.counts(scene);
-        let conn = Connector::new(scene, self.heuristic, &counts);
+        let conn = Connector::new(scene, self.base.heuristic, &counts);
         let model = self.model();
         let (subspaces, paths) = (&pass.subspaces, pass.pool.paths.max(1) as f64);
         let select = SubspaceSelection { scene, model, subspaces, paths, label: counts.labels() };
         let budget = self.budget();
-        let connections = budget.plan().connections;
-        let pool_pass = PoolPass { bdpt: &self.sp.bdpt, connections, conn: &conn, pool: &pass.pool };
-        let sampler = PoolSampler { pass: pool_pass, select: &select, scratch: Scratch::default() };
+        let sampler = self.base.sampler(&conn, &pass.pool, budget.plan().connections, &select);
         if self.training(first) {
             let width = scene.film.width as usize;
             let every = training_stride(width * scene.film.height as usize);
@@ -709,17 +695,17 @@ impl Iterative for SpcbptRender {
     /// Until the state is fixed: keeps the pool's subspace totals and the concentration of
     /// the draws for the next iteration's counts, and retrains `Γ` on every training sample
     /// so far (in tile order).
-    fn finish(&mut self, _: &Ctx, pass: SpPass, iterations: Range<u32>, results: &[TileResult<SpTile>]) {
+    fn finish(&mut self, ctx: &Ctx, pass: SpPass, iterations: Range<u32>, results: &[TileResult<SpTile>]) {
         let i = iterations.start;
-        self.pool_size = Some((pass.pool.paths, pass.pool.connectible.len()));
+        self.base.finish(ctx, &pass.pool, &iterations, results.iter().map(|r| &r.data.draws));
         self.stats.light_subspaces_used = pass.subspaces.used();
         let budget = self.budget.as_mut().expect("begin set the budget");
         budget.finish(i, results, &pass.splat_shares, pass.operations);
-        if i > self.sp.opts.training_iterations {
+        if i > self.opts.training_iterations {
             return;
         }
         let previous = self.measured.as_ref().map_or([1.0; CONCENTRATION_DEPTHS], |m| m.concentration);
-        let concentration = pass_concentration(results).unwrap_or(previous);
+        let concentration = pass_concentration(results.iter().map(|r| &r.data.draws)).unwrap_or(previous);
         self.measured =
             Some(Measured::of_pool(&pass.subspaces, pass.pool.paths, pass.pool.mean_vertices(), concentration));
         if !self.training(i) {
@@ -732,18 +718,18 @@ impl Iterative for SpcbptRender {
             }
         }
         let model = self.model.as_mut().expect("begin built the model");
-        model.matrix = Matrix::train(model.eye.len(), model.light.len(), &self.samples, self.sp.opts.uniform);
+        model.matrix = Matrix::train(model.eye.len(), model.light.len(), &self.samples, self.opts.uniform);
         self.stats.trained_rows = model.matrix.trained_rows;
         self.stats.training_samples = self.samples.len();
         self.stats.training_seconds += t.elapsed().as_secs_f64();
-        if i + 1 == self.sp.opts.training_iterations {
+        if i + 1 == self.opts.training_iterations {
             self.samples = Vec::new();
         }
     }
 
     fn details(&self) -> Details {
         Details::of(SpcbptStats {
-            pool: self.pool_size,
+            pool: self.base.stats,
             subspaces: self.stats,
             budget: self.budget.as_ref().and_then(Budget::chosen_stats),
         })
@@ -753,8 +739,7 @@ impl Iterative for SpcbptRender {
 /// SPCBPT's statistics: the last pool, the subspaces and matrix, the budget's choice.
 #[derive(Clone, Debug, Serialize)]
 pub struct SpcbptStats {
-    /// Light paths and connectible vertices of the last pool.
-    pub pool: Option<(usize, usize)>,
+    pub pool: PoolStats,
     pub subspaces: SubspaceStats,
     /// The budget's choice (`--budget auto`).
     pub budget: Option<BudgetStats>,
@@ -762,7 +747,7 @@ pub struct SpcbptStats {
 
 impl IntegratorStats for SpcbptStats {
     fn lines(&self, _: &RenderStats) -> Vec<String> {
-        let mut lines: Vec<String> = self.pool.iter().map(|&p| pool_line(p)).collect();
+        let mut lines: Vec<String> = self.pool.line().into_iter().collect();
         lines.extend(self.budget.as_ref().and_then(BudgetStats::line));
         let k = &self.subspaces;
         lines.push(format!(
@@ -814,8 +799,9 @@ impl Integrator for SpcbptOptions {
 
     fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
         self.sp.validate().map_err(Error::Usage)?;
-        let sp = Spcbpt { bdpt: Bdpt::for_scene(scene, false), opts: self.sp.clone() };
-        let method = SpcbptRender::new(sp, self.heuristic, self.sp.pool.max_pool_mb);
+        let (bdpt, pool) = (Bdpt::for_scene(scene, false), &self.sp.pool);
+        let base = PoolBase::new(bdpt, self.heuristic, pool.max_pool_mb, pool.light_paths);
+        let method = SpcbptRender::new(base, self.sp.clone());
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 
