@@ -1,98 +1,11 @@
-//! Bump and normal mapping (`scenes/bumpmap/`) against Mitsuba 3 path-tracer references: a
-//! plane under a grazing area light, its shading normal perturbed by a bump map
-//! (`scene.xml`) or a normal map (`normalmap.xml`), rendered by the path tracer, by light
-//! tracing (the adjoint BSDF alone, with its shading-normal correction) and by BDPT. Each
-//! check averages two renders with different seeds: image mean within 1% and relMSE within
-//! 1.3× of what the renders' noise and the reference's explain. The same scenes without
-//! the perturbation must fail that check.
+//! Bump and normal mapping (`scenes/bumpmap/`): BDPT against the path tracer on the bump
+//! map, and Mitsuba 0.6's `scale` texture around the height. Their renders against the
+//! Mitsuba 3 references, with and without the perturbation, are rows of `tests/reference.rs`.
 
 mod common;
 
 use common::*;
 use pcbpt::integrator::IntegratorKind;
-
-/// The references carry the path tracer's relMSE noise at their 2048 spp, measured on these
-/// scenes: one render's noise at 64 spp (from a pair of seeds) scaled by 64 / 2048, 8.2e-4 →
-/// 2.6e-5 with the bump map and 5.7e-4 → 1.8e-5 with the normal map.
-const BUMPMAP: Case = Case {
-    name: "bumpmap",
-    scene: "scenes/bumpmap/scene.xml",
-    defines: &[],
-    reference: "bumpmap.exr",
-    ref_noise: 2.6e-5,
-    mean_cutoff: None,
-    resolution: None,
-    mean_tol: 0.01,
-};
-
-const NORMALMAP: Case = Case {
-    name: "normalmap",
-    scene: "scenes/bumpmap/normalmap.xml",
-    defines: &[],
-    reference: "normalmap.exr",
-    ref_noise: 1.8e-5,
-    mean_cutoff: None,
-    resolution: None,
-    mean_tol: 0.01,
-};
-
-fn check(case: &Case, kind: IntegratorKind, spp: u32) {
-    let scene = case.scene();
-    let a = image(render(&scene, kind, spp, 1, 0));
-    let b = image(render(&scene, kind, spp, 2, 0));
-    case.check(&a, &b, &format!("{kind:?}, 2 × {spp} spp"));
-}
-
-/// The check of [`check`] on the scene loaded with `defines` that remove the perturbation:
-/// it must fail.
-fn check_fails_without_perturbation(case: &Case, defines: &[(&str, &str)], spp: u32) {
-    let scene = load(&root().join(case.scene), defines, pcbpt::accel::Backend::Embree);
-    let a = image(render(&scene, IntegratorKind::Path, spp, 1, 0));
-    let b = image(render(&scene, IntegratorKind::Path, spp, 2, 0));
-    let (v, _) = Verdict::averaged(&reference(case.reference), &a, &b, case.ref_noise);
-    let verdict = v.check(&format!("{} without the perturbation", case.name), case.mean_tol, 1.3);
-    assert!(verdict.is_err(), "the check cannot tell the perturbation is missing");
-}
-
-#[test]
-fn bumpmap_path() {
-    check(&BUMPMAP, IntegratorKind::Path, 64);
-}
-
-#[test]
-fn bumpmap_lighttrace() {
-    check(&BUMPMAP, IntegratorKind::Lighttrace, 64);
-}
-
-#[test]
-fn bumpmap_bdpt() {
-    check(&BUMPMAP, IntegratorKind::Bdpt, 32);
-}
-
-#[test]
-fn bumpmap_missing_fails() {
-    check_fails_without_perturbation(&BUMPMAP, &[("bump_scale", "0")], 64);
-}
-
-#[test]
-fn normalmap_path() {
-    check(&NORMALMAP, IntegratorKind::Path, 64);
-}
-
-#[test]
-fn normalmap_lighttrace() {
-    check(&NORMALMAP, IntegratorKind::Lighttrace, 64);
-}
-
-#[test]
-fn normalmap_bdpt() {
-    check(&NORMALMAP, IntegratorKind::Bdpt, 32);
-}
-
-#[test]
-fn normalmap_missing_fails() {
-    check_fails_without_perturbation(&NORMALMAP, &[("normals", "textures/flat.png")], 64);
-}
 
 #[test]
 fn bdpt_and_path_tracer_agree_on_the_bump_map() {

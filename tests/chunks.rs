@@ -146,7 +146,7 @@ fn the_merge_refuses_mixed_renders_gaps_and_overlaps() {
 }
 
 /// PSSMLT's chunks are chains of their own; merged, they converge to the reference as one
-/// process does (as in `tests/mlt_reference.rs`: two merged renders, seeds 1 and 2, averaged).
+/// process does (as in `tests/reference.rs`: two merged renders, seeds 1 and 2, averaged).
 /// With two-stage Metropolis (the default) every chunk builds the same first-stage map.
 #[test]
 fn pssmlt_chunks_merge_to_the_reference() {

@@ -1,10 +1,11 @@
 //! MEMLT (path-space Metropolis with the bidirectional mutation and the lens, caustic and
-//! manifold perturbations) against the Mitsuba 3 references, with the direct light separate (the default) and in the
-//! chains, and its determinism.
+//! manifold perturbations): where its chains put a caustic's light, its direct-light pass
+//! under a time budget, its determinism, the options it refuses, its bootstrap's share of a
+//! time budget and its longest stay (its reference checks are rows of `tests/reference.rs`).
 //!
 //! Two renders with different seeds (independent chains and bootstraps) are averaged; the
 //! image mean must agree within 1% and the relMSE stay within 1.3× of what the two renders'
-//! noise and the reference's own noise explain (as `tests/mlt_reference.rs` does for PSSMLT).
+//! noise and the reference's own noise explain.
 
 mod common;
 
@@ -20,84 +21,6 @@ fn memlt(scene: &Scene, spp: u32, seed: u64, direct_samples: i32) -> RenderOutpu
 
 fn memlt_with(scene: &Scene, spp: u32, seed: u64, set: &dyn Fn(&mut RenderOptions)) -> RenderOutput {
     render_with(scene, IntegratorKind::Memlt, spp, seed, 2, set)
-}
-
-fn check(scene: &Scene, reference_name: &str, ref_noise: f64, spp: u32, direct_samples: i32, what: &str) {
-    check_with(scene, reference_name, ref_noise, spp, &|o| o.method.memlt_mut().direct_samples = direct_samples, what);
-}
-
-fn check_with(
-    scene: &Scene,
-    reference_name: &str,
-    ref_noise: f64,
-    spp: u32,
-    set: &dyn Fn(&mut RenderOptions),
-    what: &str,
-) {
-    let reference = reference(reference_name);
-    let a = image(memlt_with(scene, spp, 1, set));
-    let b = image(memlt_with(scene, spp, 2, set));
-    let (v, _) = Verdict::averaged(&reference, &a, &b, ref_noise);
-    v.check(what, 0.01, 1.3).unwrap();
-}
-
-/// Two renders (seeds 1 and 2, the direct light separate) of a test case of `common`
-/// against its reference ([`Case::check`]).
-fn check_case(case: &Case, spp: u32, what: &str) {
-    let scene = case.scene();
-    let a = image(memlt(&scene, spp, 1, 16));
-    let b = image(memlt(&scene, spp, 2, 16));
-    case.check(&a, &b, what);
-}
-
-const CORNELL: &str = "cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr";
-
-fn cornell_ply() -> Scene {
-    load(&root().join("scenes/cornell-ply/cornell_mi.xml"), &[], Backend::Embree)
-}
-
-#[test]
-fn memlt_cornell_ply() {
-    check(&cornell_ply(), CORNELL, 8.0e-5, 64, 16, "cornell-ply, MEMLT, 2 × 64 spp");
-}
-
-#[test]
-fn memlt_cornell_ply_single_stage() {
-    // The chains' target the plain luminance (two-stage Metropolis off).
-    let what = "cornell-ply, MEMLT in one stage, 2 × 64 spp";
-    check_with(&cornell_ply(), CORNELL, 8.0e-5, 64, &|o| *o.method.two_stage_mut() = false, what);
-}
-
-#[test]
-fn memlt_cornell_ply_direct_light_in_the_chains() {
-    let what = "cornell-ply, MEMLT with the direct light in the chains, 2 × 64 spp";
-    check(&cornell_ply(), CORNELL, 8.0e-5, 64, -1, what);
-}
-
-#[test]
-fn memlt_veach_ajar() {
-    let scene = load(
-        &root().join("scenes/veach-ajar/scene.xml"),
-        &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
-        Backend::Embree,
-    );
-    check(&scene, "veach-ajar.exr", 4.5e-3, 256, 16, "veach-ajar, MEMLT, 2 × 256 spp");
-}
-
-#[test]
-fn memlt_spot_point() {
-    // A point light and a spot light: light positions no ray finds, taken by their
-    // discrete probability, with the direct light in the chains and separate.
-    let scene = SPOT_POINT.scene();
-    check(
-        &scene,
-        "spot-point.exr",
-        1.45e-3,
-        128,
-        -1,
-        "spot-point, MEMLT with the direct light in the chains, 2 × 128 spp",
-    );
-    check(&scene, "spot-point.exr", 1.45e-3, 128, 16, "spot-point, MEMLT, 2 × 128 spp");
 }
 
 #[test]
@@ -154,21 +77,6 @@ fn memlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
     assert_eq!(s.chains, 64);
     assert_eq!(s.mutations, 4 * 48 * 40);
     assert_eq!(s.mutators.iter().map(|m| m.proposed).sum::<u64>(), s.mutations);
-}
-
-#[test]
-fn memlt_living_room() {
-    // An envmap through windows, leaves cut out by a texture's alpha, glass, glossy
-    // surfaces: Bitterli's file as published, at 320×180.
-    check_case(&LIVING_ROOM, 64, "MEMLT, 2 × 64 spp");
-}
-
-#[test]
-fn memlt_sunlit_room() {
-    // The sun and the sky through a window: paths whose light vertex lies at infinity,
-    // started from the disk facing the sun or the sky, found by camera walks leaving the
-    // room, joined to moved vertices by the lens and multi-chain perturbations.
-    check_case(&SUNLIT_ROOM, 64, "MEMLT, 2 × 64 spp");
 }
 
 #[test]
@@ -254,7 +162,7 @@ fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     // path of this diffuse box suits (it needs a specular vertex between rough ones): the
     // chain keeps its start path, every mutation splats it into one pixel, and that
     // pixel's light is all the stay's.
-    let scene = cornell_ply();
+    let scene = CORNELL_PLY.scene();
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
     o.seed = 3;
     o.threads = 2;

@@ -1,8 +1,9 @@
-//! PSSMLT (over BDPT) against the Mitsuba 3 references, and its determinism.
+//! PSSMLT (over BDPT) in two stages against the Mitsuba 3 reference, its determinism and
+//! its longest stay (its other reference checks are rows of `tests/reference.rs`).
 //!
 //! Two renders with different seeds (independent chains) are averaged; the image mean must
 //! agree within 1% and the relMSE stay within 1.3× of what the two renders' noise and the
-//! reference's own noise explain (see `tests/bidir_reference.rs` for the reference noise).
+//! reference's own noise explain.
 
 mod common;
 
@@ -10,70 +11,20 @@ use common::*;
 use pcbpt::accel::Backend;
 use pcbpt::integrator::pssmlt::PssmltStats;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput};
-use pcbpt::scene::Scene;
-
-fn check(scene: &Scene, reference_name: &str, ref_noise: f64, spp: u32, what: &str) {
-    let reference = reference(reference_name);
-    let a = image(render(scene, IntegratorKind::Pssmlt, spp, 1, 2));
-    let b = image(render(scene, IntegratorKind::Pssmlt, spp, 2, 2));
-    let (v, _) = Verdict::averaged(&reference, &a, &b, ref_noise);
-    v.check(what, 0.01, 1.3).unwrap();
-}
-
-#[test]
-fn pssmlt_cornell_ply() {
-    let scene = load(&root().join("scenes/cornell-ply/cornell_mi.xml"), &[], Backend::Embree);
-    check(&scene, "cornell-ply_mitsuba3-path_4096spp_maxdepth8_box.exr", 8.0e-5, 16, "cornell-ply, PSSMLT, 2 × 16 spp");
-}
-
-fn veach_ajar() -> Scene {
-    load(
-        &root().join("scenes/veach-ajar/scene.xml"),
-        &[("resx", "160"), ("resy", "90"), ("max_depth", "-1")],
-        Backend::Embree,
-    )
-}
-
-#[test]
-fn pssmlt_veach_ajar() {
-    check(&veach_ajar(), "veach-ajar.exr", 4.5e-3, 64, "veach-ajar, PSSMLT, 2 × 64 spp");
-}
 
 #[test]
 fn pssmlt_veach_ajar_two_stage() {
     // Two-stage Metropolis (MEMLT's default): the chains' target luminance over a first
     // stage's map, the image scaled to the bootstrap's mean luminance.
-    let scene = veach_ajar();
-    let reference = reference("veach-ajar.exr");
+    let scene = VEACH_AJAR.scene();
+    let reference = reference(VEACH_AJAR.reference);
     let run = |seed| {
         let out = render_with(&scene, IntegratorKind::Pssmlt, 64, seed, 2, &|o| *o.method.two_stage_mut() = true);
         assert!(out.stats.details.get::<PssmltStats>().unwrap().mlt.first_stage_samples > 0);
         image(out)
     };
-    let (v, _) = Verdict::averaged(&reference, &run(1), &run(2), 4.5e-3);
+    let (v, _) = Verdict::averaged(&reference, &run(1), &run(2), VEACH_AJAR.noise());
     v.check("veach-ajar, PSSMLT in two stages, 2 × 64 spp", 0.01, 1.3).unwrap();
-}
-
-#[test]
-fn pssmlt_staircase2() {
-    // Bitterli's Mitsuba 0.5 export as published, at 320×180 (`--resolution`).
-    let scene = STAIRCASE2.scene();
-    check(&scene, STAIRCASE2.reference, STAIRCASE2.ref_noise, 16, "staircase2, PSSMLT, 2 × 16 spp");
-}
-
-#[test]
-fn pssmlt_sunlit_room() {
-    // Sky and sun through a window (whole-image mean: the sky seen through it counts).
-    let scene = SUNLIT_ROOM.scene();
-    check(&scene, SUNLIT_ROOM.reference, SUNLIT_ROOM.ref_noise, 16, "sunlit-room, PSSMLT, 2 × 16 spp");
-}
-
-#[test]
-fn pssmlt_living_room() {
-    // Bitterli's "The Grey & White Room" as published, at 320×180: the envmap through the
-    // windows, the leaves' cut-outs.
-    let scene = LIVING_ROOM.scene();
-    check(&scene, LIVING_ROOM.reference, LIVING_ROOM.ref_noise, 32, "living-room, PSSMLT, 2 × 32 spp");
 }
 
 #[test]
