@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 
 #[cfg(feature = "oiio")]
 pub mod oiio;
+pub mod tonemap;
 
 /// Which library reads and writes image files; [`Library::from_env`] reads the choice from
 /// `PCBPT_IMAGE_IO`.
@@ -210,6 +211,17 @@ pub(crate) fn encode_srgb8(image: &Image) -> Vec<u8> {
 /// atomically, with the library `PCBPT_IMAGE_IO` picks.
 pub fn write(path: &Path, image: &Image) -> Result<()> {
     write_with(path, image, Library::from_env()?)
+}
+
+/// [`write`], except that a PNG is tonemapped as `ldr` describes (a scene's `ldrfilm`); an
+/// EXR keeps the linear values.
+pub fn write_film(path: &Path, image: &Image, ldr: Option<&tonemap::Ldr>) -> Result<()> {
+    match ldr {
+        Some(ldr) if Format::from_path(path)? == Format::Png => {
+            write_png_rgb8(path, image.width, image.height, &ldr.encode8(image))
+        }
+        _ => write(path, image),
+    }
 }
 
 /// Writes `image` to `path` (format by extension) atomically, with `library`.

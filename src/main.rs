@@ -88,8 +88,9 @@ struct ExperimentArgs {
 struct RenderArgs {
     /// The scene file (Mitsuba 3 XML; version 0.x files are upgraded).
     scene: PathBuf,
-    /// Output image; `.exr` (linear float RGB) or `.png` (sRGB), and `.tif` (linear float RGB) in a
-    /// build with `--features oiio`. Default: the scene's name with `.exr`.
+    /// Output image; `.exr` (linear float RGB) or `.png` (sRGB, or tonemapped as the scene's
+    /// `ldrfilm` says), and `.tif` (linear float RGB) in a build with `--features oiio`.
+    /// Default: the scene's name with `.exr` (`.png` for an `ldrfilm`).
     #[arg(short, long)]
     output: Option<PathBuf>,
     /// Integrator (default: the one the scene names).
@@ -390,10 +391,12 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         (Some(s), None) => Budget::Spp(s),
         (None, None) => Budget::Spp(scene.sampler.spp),
     };
+    // By default the film's format: a PNG for an `ldrfilm`, an EXR otherwise.
     let output = a.output.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
-            "{}.exr",
-            a.scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into())
+            "{}.{}",
+            a.scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into()),
+            if scene.film.ldr.is_some() { "png" } else { "exr" }
         ))
     });
     image_io::Format::from_path(&output)?;
@@ -454,7 +457,7 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         }
         // An interrupted chunk writes no part: a merge would take it for a whole one.
         Some(_) => {}
-        None => image_io::write(&output, &Image::new(out.width, out.height, out.image))?,
+        None => image_io::write_film(&output, &Image::new(out.width, out.height, out.image), scene.film.ldr.as_ref())?,
     }
     if let Some(path) = &a.stats {
         let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "load": { "read_seconds": scene.stats.read_seconds, "bvh_seconds": scene.stats.bvh_seconds, "vertices": scene.stats.vertices, "mesh_bytes": scene.stats.mesh_bytes }, "degenerate_triangles": scene.stats.degenerate_triangles, "embree_version": embree_version, "render": s });

@@ -12,6 +12,7 @@ use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work,
 use crate::math::{Rgb, max_component};
 use crate::sampling::{Random, power_heuristic};
 use crate::scene::{IntegratorSpec, Scene};
+use glam::Vec3;
 use std::ops::Range;
 
 #[derive(Clone, Debug)]
@@ -23,6 +24,8 @@ pub struct PathTracer {
     /// Emission reached from a surface through a Dirac lobe counts (`true` but in MEMLT's
     /// direct-light pass, whose chains take those paths).
     pub dirac_emission: bool,
+    /// Mitsuba 0.5/0.6's `strictNormals` ([`IntegratorSpec::strict_normals`]).
+    pub strict_normals: bool,
 }
 
 impl PathTracer {
@@ -32,6 +35,7 @@ impl PathTracer {
             rr_depth: spec.rr_depth,
             hide_emitters: spec.hide_emitters,
             dirac_emission: true,
+            strict_normals: spec.strict_normals,
         }
     }
 
@@ -103,6 +107,12 @@ impl PathTracer {
 
             let bsdf = scene.bsdf(&si);
             let wo = si.shading.to_local(si.wo);
+            // With strict normals a direction counts only where the geometric and the shading
+            // normal put it on the same side.
+            let agree = |w: Vec3, local_z: f32| !self.strict_normals || w.dot(si.ng) * local_z > 0.0;
+            if !agree(si.wo, wo.z) {
+                break;
+            }
 
             // Next-event estimation.
             let u_light = sampler.next_1d();
@@ -115,7 +125,7 @@ impl PathTracer {
                 if let Some(ls) = light.sample_li(&scene.shapes, &scene.bounds, si.p, u_light1, u_light2) {
                     let wi = si.shading.to_local(ls.wi);
                     let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
-                    if f != Rgb::ZERO {
+                    if f != Rgb::ZERO && agree(ls.wi, wi.z) {
                         counters.shadow_rays += 1;
                         if !scene.occluded(&si.spawn_ray_to(ls.p)) {
                             let pdf_light = pmf * ls.pdf;
@@ -136,6 +146,10 @@ impl PathTracer {
             let Some(bs) = bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance) else {
                 break;
             };
+            let wi_world = si.shading.to_world(bs.wi);
+            if !agree(wi_world, bs.wi.z) {
+                break;
+            }
             beta *= bs.weight;
             if beta == Rgb::ZERO {
                 break;
@@ -151,7 +165,7 @@ impl PathTracer {
                 }
                 beta /= q;
             }
-            ray = si.spawn_ray(si.shading.to_world(bs.wi));
+            ray = si.spawn_ray(wi_world);
         }
         l
     }

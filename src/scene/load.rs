@@ -148,6 +148,7 @@ impl Scene {
             max_depth: -1,
             rr_depth: 3,
             hide_emitters: false,
+            strict_normals: false,
         });
         if b.lights.is_empty() {
             return Err(Error::input(&root.loc, "the scene has no emitters: the image would be black"));
@@ -254,6 +255,20 @@ impl<'d> Builder<'d> {
 
     /// Accepts property `name` of `node`, if given, without reading it; it is named in the
     /// warning about ignored properties.
+    /// [`Document::check_unused`], except that a Mitsuba 0.5/0.6 file's unused properties are
+    /// ignored with a warning naming each (Mitsuba 0.6 warned of them and rendered); a
+    /// Mitsuba 3 file's are errors.
+    fn check_unused(&mut self, id: NodeId) -> Result<()> {
+        let node = self.doc.node(id);
+        if node.legacy {
+            for p in node.props.iter().filter(|p| !p.used.get()) {
+                self.ignore(node, &p.name);
+                p.used.set(true);
+            }
+        }
+        self.doc.check_unused(id)
+    }
+
     fn ignore(&mut self, node: &Node, name: &str) {
         if let Some(p) = node.prop(name) {
             self.ignored.push((name.to_string(), format!("{} \"{}\"", node.tag, node.plugin), p.loc.clone()));
@@ -416,13 +431,24 @@ impl<'d> Builder<'d> {
 
     /// Conductor parameters: a named `material` or `eta` and `k` (default: a perfect mirror),
     /// relative to the exterior medium's index `ext_eta` (Mitsuba 0.6's `extEta`, a number
-    /// or a named index; default 1): both are divided by it, as Mitsuba 0.6 did.
-    fn conductor(&self, id: NodeId) -> Result<(Vec3, Vec3)> {
+    /// or a named index; default 1): both are divided by it, as Mitsuba 0.6 did. A version
+    /// 0.x file's `eta` may have negative channels (RGB fits of measured data do), which
+    /// Mitsuba 0.6 rendered: its Fresnel term, like this renderer's, depends on `eta²` alone,
+    /// so the channel's magnitude is taken, with a warning.
+    fn conductor(&mut self, id: NodeId) -> Result<(Vec3, Vec3)> {
         let node = self.doc.node(id);
         let (eta, k) = match (node.string("material")?, node.rgb("eta")?, node.rgb("k")?) {
             (Some(m), None, None) => lookup_conductor(m).ok_or_else(|| {
                 Error::input(&node.prop_loc("material"), format!("unknown conductor material \"{m}\""))
             })?,
+            (None, Some(eta), Some(k)) if node.legacy && eta.is_finite() && eta.min_element() < 0.0 => {
+                self.stats.warnings.push(format!(
+                    "{}: the conductor's eta {eta} has a negative channel; its magnitude is used (the Fresnel term \
+                     depends on eta² alone, as in Mitsuba 0.6)",
+                    node.prop_loc("eta")
+                ));
+                (eta.abs(), non_negative_rgb(node, "k", k)?)
+            }
             (None, Some(eta), Some(k)) => (non_negative_rgb(node, "eta", eta)?, non_negative_rgb(node, "k", k)?),
             (None, None, None) => (Vec3::ZERO, Vec3::ONE),
             _ => return Err(Error::input(&node.loc, "give either \"material\" or both \"eta\" and \"k\"")),
@@ -457,7 +483,7 @@ impl<'d> Builder<'d> {
                     [one] => {
                         let mut b = self.bsdf_value(*one)?;
                         b.two_sided = true;
-                        self.doc.check_unused(id)?;
+                        self.check_unused(id)?;
                         Ok(b)
                     }
                     [] => Err(Error::input(&self.node(id).loc, "twosided needs a nested <bsdf>")),
@@ -518,7 +544,7 @@ impl<'d> Builder<'d> {
             "mask" => return self.mask(id),
             _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),
         };
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         Ok(Bsdf::new(model))
     }
 
@@ -675,7 +701,7 @@ impl<'d> Builder<'d> {
             shape.light = Some(self.lights.len());
             self.lights.push(light);
         }
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         self.shapes.push(shape);
         Ok(())
     }
@@ -773,7 +799,7 @@ impl<'d> Builder<'d> {
                 ));
             }
         };
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         Ok(light)
     }
 }

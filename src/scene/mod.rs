@@ -22,6 +22,9 @@ pub struct FilmSpec {
     pub width: u32,
     pub height: u32,
     pub filter: Filter,
+    /// The 8-bit output of a low-dynamic-range film (`ldrfilm`): its tonemapping, and the
+    /// format its default output takes (`png`); `None` for `hdrfilm`.
+    pub ldr: Option<crate::image_io::tonemap::Ldr>,
 }
 
 /// The integrator the scene asks for, with the parameters all integrators share.
@@ -35,6 +38,10 @@ pub struct IntegratorSpec {
     pub rr_depth: u32,
     /// Emitters seen directly by the camera are not shown.
     pub hide_emitters: bool,
+    /// Mitsuba 0.5/0.6's `strictNormals` of the `path` integrator: a path ends where the
+    /// geometric and the shading normal put the incident direction on different sides, and a
+    /// light sample or a BSDF sample counts only where they agree on the outgoing one.
+    pub strict_normals: bool,
 }
 
 /// Sample count and seed (`independent` sampler).

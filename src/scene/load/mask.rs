@@ -30,7 +30,7 @@ impl Builder<'_> {
             return Err(Error::input(&self.doc.node(inner[0]).loc, "a mask inside a mask is not supported"));
         }
         bsdf.opacity = Some(Arc::new(opacity));
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         Ok(bsdf)
     }
 
@@ -99,7 +99,7 @@ impl Builder<'_> {
                 let to_uv = Mat3::from_mat4(node.transform("to_uv")?.unwrap_or(Mat4::IDENTITY));
                 // `raw` changes how colour is decoded; alpha is linear either way.
                 node.boolean_or("raw", false)?;
-                self.doc.check_unused(id)?;
+                self.check_unused(id)?;
                 self.stats.files.push(path);
                 let bitmap = Arc::new(AlphaBitmap { width, height, texels, filter, wrap });
                 return Ok(Opacity::Alpha { bitmap, to_uv });

@@ -64,7 +64,7 @@ impl Builder<'_> {
             ));
         }
         bsdf.perturbation = Some(Box::new(Perturbation { kind, shadowing }));
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         Ok(bsdf)
     }
 
@@ -82,7 +82,7 @@ impl Builder<'_> {
                 return Err(Error::input(&node.prop_loc("scale"), "\"scale\" must be a finite number"));
             }
             let (texture, inner_scale) = self.height_texture(*t)?;
-            self.doc.check_unused(id)?;
+            self.check_unused(id)?;
             return Ok((texture, scale * inner_scale));
         }
         let loc = node.loc.clone();

@@ -5,6 +5,7 @@ use super::{Builder, INTEGRATOR_PLUGINS, MAX_PIXELS, positive};
 use crate::camera::{Camera, FovAxis};
 use crate::error::{Error, Result};
 use crate::film::Filter;
+use crate::image_io::tonemap::{Ldr, Tonemap, Transfer};
 use crate::integrator::IntegratorKind;
 use crate::math::Transform;
 use crate::scene::xml::{NodeId, Value};
@@ -13,7 +14,15 @@ use glam::Mat4;
 
 /// Film properties of Mitsuba 0.5/0.6 (and of other films) that mean nothing to this
 /// renderer: accepted, and named in one warning.
-const IGNORED_FILM_PROPERTIES: &[&str] = &["high_quality_edges", "banner", "attach_log", "gamma"];
+const IGNORED_FILM_PROPERTIES: &[&str] = &["high_quality_edges", "banner", "attach_log"];
+
+/// Mitsuba's samplers other than `independent`: each read for its sample count (and seed),
+/// and rendered with this renderer's independent random streams, named in one warning.
+const MAPPED_SAMPLERS: &[&str] =
+    &["stratified", "ldsampler", "halton", "hammersley", "sobol", "multijitter", "orthogonal"];
+
+/// Properties of the mapped samplers that only shape their point sets.
+const MAPPED_SAMPLER_PROPERTIES: &[&str] = &["dimension", "scramble", "jitter", "strength"];
 
 /// The film's output-format properties and the values that agree with what this renderer
 /// writes (the format follows the output file's extension). In a Mitsuba 3 file an agreeing
@@ -106,7 +115,7 @@ impl Builder<'_> {
         let film = match self.single_child(id, "film", "a sensor")? {
             None => {
                 let (width, height) = self.film_size(768, 576)?;
-                FilmSpec { width, height, filter: Filter::Gaussian { stddev: 0.5 } }
+                FilmSpec { width, height, filter: Filter::Gaussian { stddev: 0.5 }, ldr: None }
             }
             Some(n) => self.film(n)?,
         };
@@ -114,16 +123,21 @@ impl Builder<'_> {
             None => SamplerSpec { spp: 4, seed: 0 },
             Some(n) => self.sampler(n)?,
         };
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         let camera = Camera::new(Transform::new(to_world), fov, axis, (film.width, film.height), near, far);
         Ok((camera, film, sampler))
     }
 
     fn film(&mut self, id: NodeId) -> Result<FilmSpec> {
         let node = self.doc.node(id);
-        if node.plugin != "hdrfilm" {
-            return Err(self.unknown_plugin(id, &["hdrfilm"]));
-        }
+        let ldr = match node.plugin.as_str() {
+            "hdrfilm" => {
+                self.ignore(node, "gamma");
+                None
+            }
+            "ldrfilm" => Some(self.ldr(id)?),
+            _ => return Err(self.unknown_plugin(id, &["hdrfilm", "ldrfilm"])),
+        };
         let dim = |name: &str, default: i64| -> Result<u32> {
             let v = node.integer(name)?.unwrap_or(default);
             if v <= 0 || v > 65536 {
@@ -147,8 +161,8 @@ impl Builder<'_> {
             self.ignore(node, name);
         }
         // Output format options: this renderer writes float RGB (EXR) or sRGB (PNG) by the
-        // output file's extension.
-        for (name, agree) in OUTPUT_FORMAT_PROPERTIES {
+        // output file's extension (an `ldrfilm` read its own).
+        for (name, agree) in OUTPUT_FORMAT_PROPERTIES.iter().filter(|_| ldr.is_none()) {
             let agrees = match node.prop(name).map(|p| &p.value) {
                 None => continue,
                 Some(Value::String(v)) => agree.contains(&v.to_ascii_lowercase().as_str()),
@@ -165,8 +179,79 @@ impl Builder<'_> {
             None => Filter::Gaussian { stddev: 0.5 },
             Some(n) => self.rfilter(n)?,
         };
-        self.doc.check_unused(id)?;
-        Ok(FilmSpec { width, height, filter })
+        self.check_unused(id)?;
+        Ok(FilmSpec { width, height, filter, ldr })
+    }
+
+    /// An `ldrfilm`'s 8-bit output, as Mitsuba 0.5/0.6 writes it: the tonemap (`gamma` with an
+    /// `exposure` in f-stops, or `reinhard` with `key` and `burn`), the transfer curve
+    /// (`gamma`, -1 for sRGB), PNG (a `jpeg` file format and formats other than RGB are
+    /// written as RGB PNG, with a warning).
+    fn ldr(&mut self, id: NodeId) -> Result<Ldr> {
+        let node = self.doc.node(id);
+        let lower = |name: &str, default: &str| -> Result<String> {
+            Ok(node.string(name)?.unwrap_or(default).to_ascii_lowercase())
+        };
+        let file_format = lower("file_format", "png")?;
+        if !matches!(file_format.as_str(), "png" | "jpg" | "jpeg") {
+            return Err(Error::input(
+                &node.prop_loc("file_format"),
+                format!("unknown ldrfilm fileFormat \"{file_format}\" (png, jpeg)"),
+            ));
+        }
+        if file_format != "png" {
+            self.ignore(node, "file_format");
+        }
+        let pixel_format = lower("pixel_format", "rgb")?;
+        if !matches!(pixel_format.as_str(), "rgb" | "rgba" | "luminance" | "luminancealpha") {
+            return Err(Error::input(
+                &node.prop_loc("pixel_format"),
+                format!("unknown ldrfilm pixelFormat \"{pixel_format}\" (rgb, rgba, luminance, luminanceAlpha)"),
+            ));
+        }
+        if pixel_format != "rgb" {
+            self.ignore(node, "pixel_format");
+        }
+        self.ignore(node, "component_format");
+        let gamma = node.float_or("gamma", -1.0)?;
+        let transfer = Transfer::from_gamma(gamma).ok_or_else(|| {
+            Error::input(&node.prop_loc("gamma"), format!("gamma must be -1 (sRGB) or positive, got {gamma}"))
+        })?;
+        let method = lower("tonemap_method", "gamma")?;
+        let tonemap = match method.as_str() {
+            "gamma" => {
+                let exposure = node.float_or("exposure", 0.0)?;
+                if !exposure.is_finite() {
+                    return Err(Error::input(&node.prop_loc("exposure"), "exposure must be a finite number of stops"));
+                }
+                Tonemap::Exposure(exposure)
+            }
+            "reinhard" => {
+                let key = node.float_or("key", 0.18)?;
+                if !(key > 0.0 && key <= 1.0) {
+                    return Err(Error::input(&node.prop_loc("key"), format!("key must lie in (0, 1], got {key}")));
+                }
+                let burn = node.float_or("burn", 0.0)?;
+                if !(0.0..=1.0).contains(&burn) {
+                    return Err(Error::input(&node.prop_loc("burn"), format!("burn must lie in [0, 1], got {burn}")));
+                }
+                Tonemap::Reinhard { key, burn }
+            }
+            _ => {
+                return Err(Error::input(
+                    &node.prop_loc("tonemap_method"),
+                    format!("unknown ldrfilm tonemapMethod \"{method}\" (gamma, reinhard)"),
+                ));
+            }
+        };
+        // The other method's parameters mean nothing under this one, as in Mitsuba.
+        for name in ["exposure", "key", "burn"] {
+            if node.props.iter().any(|p| p.name == name && !p.used.get()) {
+                node.float(name)?;
+                self.ignore(node, name);
+            }
+        }
+        Ok(Ldr { tonemap, transfer })
     }
 
     fn rfilter(&mut self, id: NodeId) -> Result<Filter> {
@@ -180,14 +265,24 @@ impl Builder<'_> {
         if f.radius() > 7.5 {
             return Err(Error::input(&node.loc, "the filter radius may be at most 7.5 pixels"));
         }
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         Ok(f)
     }
 
     fn sampler(&mut self, id: NodeId) -> Result<SamplerSpec> {
         let node = self.doc.node(id);
-        if node.plugin != "independent" {
-            return Err(self.unknown_plugin(id, &["independent"]));
+        if MAPPED_SAMPLERS.contains(&node.plugin.as_str()) {
+            self.stats.warnings.push(format!(
+                "{}: the \"{}\" sampler is rendered with independent random numbers (its sample count and seed apply)",
+                node.loc, node.plugin
+            ));
+            for p in MAPPED_SAMPLER_PROPERTIES.iter().filter_map(|name| node.prop(name)) {
+                p.used.set(true);
+            }
+        } else if node.plugin != "independent" {
+            let mut known = vec!["independent"];
+            known.extend_from_slice(MAPPED_SAMPLERS);
+            return Err(self.unknown_plugin(id, &known));
         }
         let spp = node.integer("sample_count")?.unwrap_or(4);
         if !(1..=1 << 24).contains(&spp) {
@@ -200,7 +295,7 @@ impl Builder<'_> {
         if seed < 0 {
             return Err(Error::input(&node.prop_loc("seed"), "seed must be non-negative"));
         }
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         Ok(SamplerSpec { spp: spp as u32, seed: seed as u64 })
     }
 
@@ -234,6 +329,10 @@ impl Builder<'_> {
             return Err(Error::input(&node.prop_loc("rr_depth"), "rr_depth must be at least 1"));
         }
         let hide_emitters = node.boolean_or("hide_emitters", false)?;
+        // Mitsuba 0.6's path tracer reads it; its other integrators warn of it.
+        let strict_normals = self.options.integrator_override.is_none()
+            && node.plugin == "path"
+            && node.boolean_or("strict_normals", false)?;
         if let Some(chosen) = &self.options.integrator_override {
             let mut rest: Vec<String> = Vec::new();
             for p in node.props.iter().filter(|p| !p.used.get()) {
@@ -264,12 +363,13 @@ impl Builder<'_> {
                 ));
             }
         }
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         Ok(IntegratorSpec {
             plugin: node.plugin.clone(),
             max_depth: max_depth as i32,
             rr_depth: rr_depth.min(1 << 16) as u32,
             hide_emitters,
+            strict_normals,
         })
     }
 }

@@ -146,7 +146,7 @@ impl Builder<'_> {
                 ignored.join(", ")
             ));
         }
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         let params =
             SunSkyParams { to_world, sun_local, turbidity, albedo, sun_scale, sky_scale, sun_aperture, complex_sun };
         if !params.sun_visible() {

@@ -69,7 +69,7 @@ impl Builder<'_> {
             }
             _ => return Err(self.unknown_plugin(id, &["bitmap", "checkerboard"])),
         };
-        self.doc.check_unused(id)?;
+        self.check_unused(id)?;
         self.textures.insert(id, t.clone());
         Ok(t)
     }
