@@ -9,6 +9,7 @@ use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
 use pcbpt::integrator::registry::{self, INTEGRATORS};
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use pcbpt::sampling::SamplerKind;
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -108,6 +109,11 @@ struct RenderArgs {
     /// Seed of the random number streams (default: the scene sampler's seed).
     #[arg(long)]
     seed: Option<u64>,
+    /// Where the path tracer's random numbers come from: independent streams, or an
+    /// Owen-scrambled Sobol sequence per pixel (default: the scene's sampler; the other
+    /// integrators draw independent numbers).
+    #[arg(long, value_enum)]
+    sampler: Option<SamplerKind>,
     /// Render chunk I of N (0-based) of the render's iterations and write a partial render
     /// (an EXR with the film's sums) for `pcbpt merge`.
     #[arg(long, value_name = "I/N", value_parser = parse_chunk, conflicts_with_all = ["time", "iterations"])]
@@ -356,6 +362,9 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
     if let Some(d) = a.rr_depth {
         scene.integrator.rr_depth = d;
     }
+    if let Some(k) = a.sampler {
+        scene.sampler.kind = k;
+    }
     let load_seconds = t0.elapsed().as_secs_f64();
     if !a.quiet {
         for w in &scene.stats.warnings {
@@ -382,6 +391,20 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
             ))
         })?,
     };
+    if scene.sampler.kind == SamplerKind::Sobol && kind != IntegratorKind::Path {
+        if a.sampler.is_some() {
+            return Err(Error::Usage(format!(
+                "--sampler sobol is the path tracer's; {} draws independent random numbers",
+                kind.name()
+            )));
+        }
+        if !a.quiet {
+            eprintln!(
+                "warning: the scene's sobol sampler is the path tracer's; {} draws independent random numbers",
+                kind.name()
+            );
+        }
+    }
     let budget = match (a.spp, a.time) {
         (_, Some(t)) if !(t > 0.0 && t.is_finite()) => {
             return Err(Error::Usage(format!("--time must be a positive number of seconds, got {t}")));

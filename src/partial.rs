@@ -112,7 +112,7 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         Budget::Spp(s) => Some(s),
         Budget::Time(_) => None,
     };
-    serde_json::json!({
+    let mut identity = serde_json::json!({
         "scene": scene_hash,
         "integrator": opts.integrator(),
         "options": opts.method,
@@ -123,7 +123,16 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         "hide_emitters": scene.integrator.hide_emitters,
         "film": [scene.film.width, scene.film.height],
         "backend": scene.accel.backend().to_string(),
-    })
+    });
+    // What only some renders set, named only where set (parts of renders without them keep
+    // their identity).
+    if scene.sampler.kind != crate::sampling::SamplerKind::Independent {
+        identity["sampler"] = serde_json::json!(scene.sampler.kind);
+    }
+    if scene.integrator.strict_normals {
+        identity["strict_normals"] = serde_json::json!(true);
+    }
+    identity
 }
 
 /// The iterations of chunk `index` of `count` of a render of `total` iterations:

@@ -9,6 +9,7 @@ mod common;
 use common::root;
 use pcbpt::image_io::tonemap::{Ldr, Tonemap, Transfer};
 use pcbpt::image_io::{self, Image};
+use pcbpt::sampling::SamplerKind;
 use pcbpt::scene::{LoadOptions, Scene};
 use std::process::Command;
 
@@ -141,18 +142,49 @@ fn load(text: &str) -> pcbpt::error::Result<Scene> {
 }
 
 #[test]
-fn mitsubas_samplers_are_read_for_their_sample_count_with_one_warning() {
-    for plugin in ["sobol", "stratified", "ldsampler", "halton", "hammersley", "multijitter", "orthogonal"] {
-        let sampler = format!(
+fn mitsubas_samplers_are_read_for_their_sample_count_and_rendered_with_sobol() {
+    let sampler = |plugin: &str| {
+        format!(
             r#"<sampler type="{plugin}"><integer name="sampleCount" value="9"/><integer name="scramble" value="-1"/></sampler>"#
-        );
-        let s = load(&small("0.6.0", &sampler, "", "")).unwrap_or_else(|e| panic!("{plugin}: {e}"));
-        assert_eq!(s.sampler.spp, 9, "{plugin}");
+        )
+    };
+    let s = load(&small("0.6.0", &sampler("sobol"), "", "")).unwrap();
+    assert_eq!((s.sampler.spp, s.sampler.kind), (9, SamplerKind::Sobol));
+    assert!(s.stats.warnings.is_empty(), "{:?}", s.stats.warnings);
+    for plugin in ["stratified", "ldsampler", "halton", "hammersley", "multijitter", "orthogonal"] {
+        let s = load(&small("0.6.0", &sampler(plugin), "", "")).unwrap_or_else(|e| panic!("{plugin}: {e}"));
+        assert_eq!((s.sampler.spp, s.sampler.kind), (9, SamplerKind::Sobol), "{plugin}");
         assert_eq!(s.stats.warnings.len(), 1, "{plugin}: {:?}", s.stats.warnings);
         assert!(s.stats.warnings[0].contains(&format!("\"{plugin}\" sampler")), "{:?}", s.stats.warnings);
     }
+    let s = load(&small("0.6.0", r#"<sampler type="independent"/>"#, "", "")).unwrap();
+    assert_eq!(s.sampler.kind, SamplerKind::Independent);
     let e = load(&small("0.6.0", r#"<sampler type="sobbol"/>"#, "", "")).err().unwrap().to_string();
     assert!(e.contains("unknown sampler plugin \"sobbol\"") && e.contains("sobol") && e.contains("test.xml:"), "{e}");
+}
+
+#[test]
+fn the_sobol_sampler_is_the_path_tracers() {
+    let box_scene = root().join("scenes/cornell-box/scene.xml");
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_pcbpt"))
+            .args(["render", box_scene.to_str().unwrap(), "-D", "resx=16", "-D", "resy=16", "--spp", "4", "--quiet"])
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (a, b) = (out("sobol.exr"), out("independent.exr"));
+    assert!(run(&["--sampler", "sobol", "-o", &a]).status.success());
+    assert!(run(&["--sampler", "independent", "-o", &b]).status.success());
+    let (a, b) =
+        (image_io::read_exr(std::path::Path::new(&a)).unwrap(), image_io::read_exr(std::path::Path::new(&b)).unwrap());
+    assert_ne!(a.pixels, b.pixels, "the sampler changes the samples");
+    // Asked for under another integrator, it is an error naming the option.
+    let o = run(&["--sampler", "sobol", "--integrator", "bdpt", "-o", &out("bdpt.exr")]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && e.contains("--sampler sobol") && e.contains("bdpt"), "{e}");
 }
 
 /// The line of `text` that holds `needle`, counting from 1.

@@ -8,9 +8,10 @@ use crate::film::Tile;
 use crate::integrator::Counters;
 use crate::integrator::RenderOptions;
 use crate::integrator::registry::{Integrator, Iterations, Rendered};
-use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_with};
 use crate::math::{Rgb, max_component};
-use crate::sampling::{Random, power_heuristic};
+use crate::sampling::sobol::SobolSampler;
+use crate::sampling::{PixelSampler, Random, Sampler, SamplerKind, power_heuristic};
 use crate::scene::{IntegratorSpec, Scene};
 use glam::Vec3;
 use std::ops::Range;
@@ -26,6 +27,8 @@ pub struct PathTracer {
     pub dirac_emission: bool,
     /// Mitsuba 0.5/0.6's `strictNormals` ([`IntegratorSpec::strict_normals`]).
     pub strict_normals: bool,
+    /// Where each camera sample's random numbers come from.
+    pub sampler: SamplerKind,
 }
 
 impl PathTracer {
@@ -36,6 +39,7 @@ impl PathTracer {
             hide_emitters: spec.hide_emitters,
             dirac_emission: true,
             strict_normals: spec.strict_normals,
+            sampler: SamplerKind::Independent,
         }
     }
 
@@ -179,6 +183,18 @@ fn weighs_against_light_sampling(segments: u32, prev_delta: bool) -> bool {
     segments > 0 && !prev_delta
 }
 
+impl PathTracer {
+    /// A tile's camera samples with their random numbers from `S`.
+    fn tile_with<S: PixelSampler>(&self, ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult {
+        sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
+            let ray = ctx.scene.camera.generate_ray(pos);
+            counters.camera_rays += 1;
+            sink.l = self.li(ctx.scene, ray, sampler, counters);
+            true
+        })
+    }
+}
+
 /// The path tracer in the render loop: no state between iterations.
 impl Iterative for PathTracer {
     type Pass = ();
@@ -189,12 +205,10 @@ impl Iterative for PathTracer {
     }
 
     fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
-        sample_tile(ctx, tile, first, count, |pos, sampler, sink, counters| {
-            let ray = ctx.scene.camera.generate_ray(pos);
-            counters.camera_rays += 1;
-            sink.l = self.li(ctx.scene, ray, sampler, counters);
-            true
-        })
+        match self.sampler {
+            SamplerKind::Independent => self.tile_with::<Sampler>(ctx, tile, first, count),
+            SamplerKind::Sobol => self.tile_with::<SobolSampler>(ctx, tile, first, count),
+        }
     }
 
     fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
@@ -209,6 +223,7 @@ impl Integrator for PathOptions {
     const BIDIRECTIONAL: bool = false;
 
     fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
-        crate::integrator::render_loop::run(scene, opts, PathTracer::new(&scene.integrator), false, iterations)
+        let pt = PathTracer { sampler: scene.sampler.kind, ..PathTracer::new(&scene.integrator) };
+        crate::integrator::render_loop::run(scene, opts, pt, false, iterations)
     }
 }

@@ -28,7 +28,7 @@ use crate::integrator::{
     Budget, Counters, Details, PhaseRays, PhaseTimes, RenderOptions, RenderOutput, RenderStats, take_snapshots,
 };
 use crate::math::Rgb;
-use crate::sampling::Sampler;
+use crate::sampling::{PixelSampler, Sampler};
 use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
@@ -201,7 +201,18 @@ pub(crate) fn sample_tile_in(
     tile: Tile,
     (first, count): (u32, u32),
     strata: Option<u32>,
-    mut sample: impl FnMut(Vec2, &mut Sampler, &mut PixelSink, &mut Counters) -> bool,
+    sample: impl FnMut(Vec2, &mut Sampler, &mut PixelSink, &mut Counters) -> bool,
+) -> TileResult {
+    sample_tile_with(ctx, tile, (first, count), strata, sample)
+}
+
+/// [`sample_tile_in`] with the random numbers of each camera sample from `S`.
+pub(crate) fn sample_tile_with<S: PixelSampler>(
+    ctx: &Ctx,
+    tile: Tile,
+    (first, count): (u32, u32),
+    strata: Option<u32>,
+    mut sample: impl FnMut(Vec2, &mut S, &mut PixelSink, &mut Counters) -> bool,
 ) -> TileResult {
     let n = strata.map_or(0, |spp| (spp as f64).sqrt() as u32);
     let layers = if ctx.layers { STRATEGY_LAYERS } else { 0 };
@@ -214,7 +225,7 @@ pub(crate) fn sample_tile_in(
         for x in tile.x0..tile.x0 + tile.width {
             let pixel = y as u64 * width + x as u64;
             for s in first..first + count {
-                let mut sampler = Sampler::new(&[ctx.seed, pixel, s as u64]);
+                let mut sampler = S::for_sample(ctx.seed, pixel, s);
                 let pos = Vec2::new(x as f32, y as f32) + offset_in_pixel(s, n, sampler.next_2d());
                 sink.l = Rgb::ZERO;
                 sink.parts.clear();

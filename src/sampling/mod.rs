@@ -4,6 +4,7 @@
 
 pub mod chi2;
 pub mod distribution;
+pub mod sobol;
 
 use glam::{Vec2, Vec3};
 use rand_core::Rng;
@@ -24,6 +25,37 @@ pub fn mix64(mut z: u64) -> u64 {
 #[inline]
 pub fn hash_words(words: &[u64]) -> u64 {
     words.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, &w| mix64(h ^ mix64(w.wrapping_add(0x632b_e59b_d9b4_e019))))
+}
+
+/// Where a camera sample's random numbers come from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SamplerKind {
+    /// Independent streams, one per pixel and sample ([`Sampler`]).
+    #[default]
+    Independent,
+    /// An Owen-scrambled Sobol sequence per pixel ([`sobol::SobolSampler`]; the path tracer's).
+    Sobol,
+}
+
+/// The random numbers of camera sample `s` of a pixel, as the render loop makes them.
+pub trait PixelSampler: Random {
+    /// Sample `s` of the pixel whose numbers are keyed by `[seed, pixel]`.
+    fn for_sample(seed: u64, pixel: u64, s: u32) -> Self;
+}
+
+impl PixelSampler for Sampler {
+    #[inline]
+    fn for_sample(seed: u64, pixel: u64, s: u32) -> Sampler {
+        Sampler::new(&[seed, pixel, s as u64])
+    }
+}
+
+impl PixelSampler for sobol::SobolSampler {
+    #[inline]
+    fn for_sample(seed: u64, pixel: u64, s: u32) -> sobol::SobolSampler {
+        sobol::SobolSampler::new(&[seed, pixel], s)
+    }
 }
 
 /// A source of uniform random numbers in `[0, 1)`: the independent [`Sampler`], or a

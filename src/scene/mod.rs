@@ -44,11 +44,12 @@ pub struct IntegratorSpec {
     pub strict_normals: bool,
 }
 
-/// Sample count and seed (`independent` sampler).
+/// Sample count, seed and kind of the scene's sampler.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SamplerSpec {
     pub spp: u32,
     pub seed: u64,
+    pub kind: crate::sampling::SamplerKind,
 }
 
 /// Counts and warnings gathered while loading.

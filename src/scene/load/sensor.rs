@@ -8,6 +8,7 @@ use crate::film::Filter;
 use crate::image_io::tonemap::{Ldr, Tonemap, Transfer};
 use crate::integrator::IntegratorKind;
 use crate::math::Transform;
+use crate::sampling::SamplerKind;
 use crate::scene::xml::{NodeId, Value};
 use crate::scene::{FilmSpec, IntegratorSpec, SamplerSpec};
 use glam::Mat4;
@@ -16,12 +17,12 @@ use glam::Mat4;
 /// renderer: accepted, and named in one warning.
 const IGNORED_FILM_PROPERTIES: &[&str] = &["high_quality_edges", "banner", "attach_log"];
 
-/// Mitsuba's samplers other than `independent`: each read for its sample count (and seed),
-/// and rendered with this renderer's independent random streams, named in one warning.
-const MAPPED_SAMPLERS: &[&str] =
-    &["stratified", "ldsampler", "halton", "hammersley", "sobol", "multijitter", "orthogonal"];
+/// Mitsuba's stratified and low-discrepancy samplers other than `sobol`: each read for its
+/// sample count and seed and rendered with the `sobol` sampler, named in one warning.
+const MAPPED_SAMPLERS: &[&str] = &["stratified", "ldsampler", "halton", "hammersley", "multijitter", "orthogonal"];
 
-/// Properties of the mapped samplers that only shape their point sets.
+/// Properties of Mitsuba's low-discrepancy samplers that only shape their point sets (the
+/// `sobol` sampler scrambles each pixel's sequence by its own seed).
 const MAPPED_SAMPLER_PROPERTIES: &[&str] = &["dimension", "scramble", "jitter", "strength"];
 
 /// The film's output-format properties and the values that agree with what this renderer
@@ -120,7 +121,7 @@ impl Builder<'_> {
             Some(n) => self.film(n)?,
         };
         let sampler = match self.single_child(id, "sampler", "a sensor")? {
-            None => SamplerSpec { spp: 4, seed: 0 },
+            None => SamplerSpec { spp: 4, seed: 0, kind: SamplerKind::Independent },
             Some(n) => self.sampler(n)?,
         };
         self.check_unused(id)?;
@@ -271,18 +272,26 @@ impl Builder<'_> {
 
     fn sampler(&mut self, id: NodeId) -> Result<SamplerSpec> {
         let node = self.doc.node(id);
-        if MAPPED_SAMPLERS.contains(&node.plugin.as_str()) {
-            self.stats.warnings.push(format!(
-                "{}: the \"{}\" sampler is rendered with independent random numbers (its sample count and seed apply)",
-                node.loc, node.plugin
-            ));
+        let kind = match node.plugin.as_str() {
+            "independent" => SamplerKind::Independent,
+            "sobol" => SamplerKind::Sobol,
+            p if MAPPED_SAMPLERS.contains(&p) => {
+                self.stats.warnings.push(format!(
+                    "{}: the \"{p}\" sampler is rendered with the sobol sampler (its sample count and seed apply)",
+                    node.loc
+                ));
+                SamplerKind::Sobol
+            }
+            _ => {
+                let mut known = vec!["independent", "sobol"];
+                known.extend_from_slice(MAPPED_SAMPLERS);
+                return Err(self.unknown_plugin(id, &known));
+            }
+        };
+        if kind == SamplerKind::Sobol {
             for p in MAPPED_SAMPLER_PROPERTIES.iter().filter_map(|name| node.prop(name)) {
                 p.used.set(true);
             }
-        } else if node.plugin != "independent" {
-            let mut known = vec!["independent"];
-            known.extend_from_slice(MAPPED_SAMPLERS);
-            return Err(self.unknown_plugin(id, &known));
         }
         let spp = node.integer("sample_count")?.unwrap_or(4);
         if !(1..=1 << 24).contains(&spp) {
@@ -296,7 +305,7 @@ impl Builder<'_> {
             return Err(Error::input(&node.prop_loc("seed"), "seed must be non-negative"));
         }
         self.check_unused(id)?;
-        Ok(SamplerSpec { spp: spp as u32, seed: seed as u64 })
+        Ok(SamplerSpec { spp: spp as u32, seed: seed as u64, kind })
     }
 
     /// The file's `<integrator>`. When the command line picks the integrator
