@@ -8,6 +8,7 @@ mod common;
 use common::root;
 use pcbpt::Result;
 use pcbpt::scene::mesh::{TriangleMesh, obj_from_bytes, ply_from_bytes};
+use pcbpt::scene::serialized::serialized_from_bytes;
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::{Path, PathBuf};
 
@@ -40,11 +41,17 @@ fn run(target: &str, input: &Path) -> Result<()> {
     let data = std::fs::read(input).unwrap();
     let name = Path::new(match target {
         "obj" => "fuzz-input.obj",
+        "serialized" => "fuzz-input.serialized",
         _ => "fuzz-input.ply",
     });
     let r = match target {
         "scene_xml" => return scene(&data),
         "obj" => mesh(obj_from_bytes(&data, name), name),
+        // Shape 1 as well, as the target reads it (through the dictionary at the end).
+        "serialized" => match serialized_from_bytes(&data, 1, name) {
+            Err(e) if !e.to_string().contains(name.to_str().unwrap()) => panic!("{}: {e}", input.display()),
+            _ => mesh(serialized_from_bytes(&data, 0, name), name),
+        },
         _ => mesh(ply_from_bytes(&data, name), name),
     };
     if let Err(e) = &r {
@@ -55,7 +62,7 @@ fn run(target: &str, input: &Path) -> Result<()> {
 
 #[test]
 fn seeds_load_or_fail_cleanly() {
-    for target in ["scene_xml", "obj", "ply"] {
+    for target in ["scene_xml", "obj", "ply", "serialized"] {
         let seeds = inputs(&format!("fuzz/seeds/{target}"));
         assert!(seeds.len() >= 10, "{target}: {} seeds", seeds.len());
         let loaded = seeds.iter().filter(|s| run(target, s).is_ok()).count();
@@ -68,7 +75,7 @@ fn seeds_load_or_fail_cleanly() {
 #[test]
 fn fuzz_regressions_give_their_errors() {
     let mut count = 0;
-    for target in ["scene_xml", "obj", "ply"] {
+    for target in ["scene_xml", "obj", "ply", "serialized"] {
         // A target that never crashed has no regression folder (git keeps no empty folders).
         if !root().join("fuzz/regressions").join(target).is_dir() {
             continue;

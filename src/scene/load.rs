@@ -555,7 +555,8 @@ impl<'d> Builder<'d> {
         Ok(self.base.join(f))
     }
 
-    /// Reads the mesh file a shape names (a PLY file streamed, with a progress bar).
+    /// Reads the mesh file a shape names (a PLY file streamed, with a progress bar; shape
+    /// `shape_index` of a `.serialized` file).
     fn load_mesh(&mut self, node: &Node) -> Result<TriangleMesh> {
         let path = self.resolve_path(node, "filename")?;
         let size = match std::fs::metadata(&path) {
@@ -571,6 +572,12 @@ impl<'d> Builder<'d> {
         let bar = self.progress.file(&path, size);
         let loaded = if node.plugin == "obj" {
             self.prefetched.take_mesh(&path).unwrap_or_else(|| mesh::load_obj(&path))
+        } else if node.plugin == "serialized" {
+            let index = node.integer("shape_index")?.unwrap_or(0);
+            let index = u32::try_from(index).map_err(|_| {
+                Error::input(&node.prop_loc("shape_index"), format!("shape_index must be non-negative, got {index}"))
+            })?;
+            super::serialized::load_serialized(&path, index)
         } else {
             mesh::load_ply_with_progress(&path, &mut |read| {
                 if let Some(b) = &bar {
@@ -597,7 +604,7 @@ impl<'d> Builder<'d> {
         let flip_normals = node.boolean_or("flip_normals", false)?;
         let name = node.id.clone().unwrap_or_else(|| node.plugin.clone());
         let geometry = match node.plugin.as_str() {
-            "obj" | "ply" => {
+            "obj" | "ply" | "serialized" => {
                 let mut m = self.load_mesh(node)?;
                 if node.boolean_or("face_normals", false)? {
                     m.normals = None;
@@ -637,7 +644,9 @@ impl<'d> Builder<'d> {
                 ShapeGeometry::Sphere { center: c, radius: radius * axes[0] }
             }
             _ => {
-                return Err(self.unknown_plugin(id, &["obj", "ply", "rectangle", "cube", "disk", "sphere"]));
+                return Err(
+                    self.unknown_plugin(id, &["obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere"])
+                );
             }
         };
         let bsdf = match self.single_child(id, "bsdf", "a shape")? {

@@ -5,6 +5,7 @@ pub mod load;
 pub mod mesh;
 pub mod ply;
 pub mod progress;
+pub mod serialized;
 pub mod shape;
 pub mod xml;
 
