@@ -204,7 +204,7 @@ pub(crate) fn write_atomically(
 
 /// The pixels as 8-bit sRGB-encoded RGB, as PNG files store them.
 pub(crate) fn encode_srgb8(image: &Image) -> Vec<u8> {
-    image.pixels.iter().flat_map(|p| [p.x, p.y, p.z]).map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8).collect()
+    tonemap::Ldr::default().encode8(image)
 }
 
 /// Writes `image` to `path` (EXR or PNG, and TIFF with `--features oiio`, by extension)

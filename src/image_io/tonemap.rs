@@ -82,25 +82,19 @@ fn luminance(p: Rgb) -> f32 {
 }
 
 impl Ldr {
-    /// The image's display-linear values: the tonemap applied, before the transfer curve.
-    pub fn display_linear(&self, image: &Image) -> Vec<Rgb> {
+    /// The image as 8-bit RGB code values, row by row: the tonemap, the transfer curve, and
+    /// rounding to the nearest code.
+    pub fn encode8(&self, image: &Image) -> Vec<u8> {
+        let code = |v: f32| (self.transfer.encode(v) * 255.0 + 0.5) as u8;
         match self.tonemap {
             Tonemap::Exposure(stops) => {
                 let m = 2f32.powf(stops);
-                image.pixels.iter().map(|p| *p * m).collect()
+                image.pixels.iter().flat_map(|p| (*p * m).to_array()).map(code).collect()
             }
-            Tonemap::Reinhard { key, burn } => reinhard(&image.pixels, key, burn),
+            Tonemap::Reinhard { key, burn } => {
+                reinhard(&image.pixels, key, burn).iter().flat_map(|p| p.to_array()).map(code).collect()
+            }
         }
-    }
-
-    /// The image as 8-bit RGB code values, row by row.
-    pub fn encode8(&self, image: &Image) -> Vec<u8> {
-        let t = self.transfer;
-        self.display_linear(image)
-            .iter()
-            .flat_map(|p| p.to_array())
-            .map(|v| (t.encode(v) * 255.0 + 0.5) as u8)
-            .collect()
     }
 }
 
@@ -149,9 +143,15 @@ mod tests {
     }
 
     #[test]
-    fn the_default_is_the_srgb_png_encoding() {
+    fn the_default_is_the_srgb_curve_rounded_to_8_bits() {
         let img = image((0..64).map(|i| Rgb::splat(i as f32 / 40.0) * Rgb::new(1.0, 0.5, 0.25)).collect());
-        assert_eq!(Ldr::default().encode8(&img), crate::image_io::encode_srgb8(&img));
+        let srgb = |v: f32| {
+            let v = v.clamp(0.0, 1.0);
+            let e = if v <= 0.003_130_8 { 12.92 * v } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+            (e * 255.0 + 0.5) as u8
+        };
+        let want: Vec<u8> = img.pixels.iter().flat_map(|p| p.to_array()).map(srgb).collect();
+        assert_eq!(Ldr::default().encode8(&img), want);
     }
 
     #[test]

@@ -37,7 +37,7 @@ pub fn serialized_from_bytes(bytes: &[u8], shape_index: u32, path: &Path) -> Res
     let fail = |msg: String| Error::in_file(path, msg);
     let version = header(bytes, 0).map_err(fail)?;
     let offset = if shape_index == 0 { 0 } else { shape_offset(bytes, version, shape_index).map_err(fail)? };
-    if header(bytes, offset).map_err(fail)? != version {
+    if offset != 0 && header(bytes, offset).map_err(fail)? != version {
         return Err(fail(format!("shape {shape_index} has another version than the file's first")));
     }
     let compressed = &bytes[offset + 4..];
