@@ -430,11 +430,11 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
     };
     let mut opts = RenderOptions::new(kind, budget);
     opts.method = (registry::registration(kind).parse)(&matches).map_err(|e| Error::Usage(e.to_string()))?;
-    opts.seed = a.seed.unwrap_or(scene.sampler.seed);
-    opts.threads = a.threads;
-    opts.progress = !a.quiet;
-    opts.stop = Some(stop);
-    opts.strategy_images = a.strategy_images.is_some();
+    opts.run.seed = a.seed.unwrap_or(scene.sampler.seed);
+    opts.run.threads = a.threads;
+    opts.run.progress = !a.quiet;
+    opts.run.stop = Some(stop);
+    opts.run.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {
         if !kind.is_bidirectional() {
             return Err(Error::Usage("--strategy-images needs a bidirectional integrator".into()));
@@ -452,7 +452,7 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
                 (_, Some((start, end))) => start..end,
                 (None, None) => unreachable!(),
             };
-            if opts.strategy_images {
+            if opts.run.strategy_images {
                 return Err(Error::Usage("--strategy-images are not kept in partial renders".into()));
             }
             if image_io::Format::from_path(&output)? != image_io::Format::Exr {

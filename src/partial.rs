@@ -108,7 +108,7 @@ pub fn scene_hash(scene: &Scene, overrides: &[(String, String)]) -> Result<Strin
 /// What identifies a render: the scene's hash and every setting that changes its image
 /// (not the thread count, tile size or time spent).
 pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) -> serde_json::Value {
-    let spp = match opts.budget {
+    let spp = match opts.run.budget {
         Budget::Spp(s) => Some(s),
         Budget::Time(_) => None,
     };
@@ -117,7 +117,7 @@ pub fn render_identity(scene: &Scene, opts: &RenderOptions, scene_hash: &str) ->
         "integrator": opts.integrator(),
         "options": opts.method,
         "spp": spp,
-        "seed": opts.seed,
+        "seed": opts.run.seed,
         "max_depth": scene.integrator.max_depth,
         "rr_depth": scene.integrator.rr_depth,
         "hide_emitters": scene.integrator.hide_emitters,

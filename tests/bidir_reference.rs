@@ -11,8 +11,8 @@ use pcbpt::scene::Scene;
 
 fn render_layers(scene: &Scene, kind: IntegratorKind, spp: u32, seed: u64) -> integrator::RenderOutput {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
-    o.seed = seed;
-    o.strategy_images = true;
+    o.run.seed = seed;
+    o.run.strategy_images = true;
     integrator::render(scene, &o).unwrap()
 }
 

@@ -16,7 +16,7 @@ use pcbpt::scene::Scene;
 /// A render with the budget `budget` and the realized model (the default); prints the plan.
 fn render(scene: &Scene, kind: IntegratorKind, spp: u32, budget: BudgetMode, seed: u64) -> Image {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
-    o.seed = seed;
+    o.run.seed = seed;
     o.method.budget_mut().mode = budget;
     o.method.budget_mut().model = BudgetModel::Realized;
     let out = integrator::render(scene, &o).unwrap();
@@ -65,7 +65,7 @@ fn short_renders_plan_for_the_default_horizon_and_keep_veach_ajars_connections()
     use pcbpt::integrator::budget::DEFAULT_HORIZON;
     let scene = veach_ajar("160", "90");
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(8));
-    o.seed = 1;
+    o.run.seed = 1;
     o.method.budget_mut().mode = BudgetMode::Auto;
     let out = integrator::render(&scene, &o).unwrap();
     let b = budget_of(&out.stats).cloned().expect("a budget's statistics");
@@ -86,7 +86,7 @@ fn a_gain_within_the_margin_keeps_the_measured_plan_and_its_image() {
         load_at(&root().join(VEACH_MIS.scene), VEACH_MIS.defines, Some((96, 54)), pcbpt::accel::Backend::Embree);
     let run = |budget: BudgetMode, margin: f32| {
         let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(6));
-        o.seed = 2;
+        o.run.seed = 2;
         o.method.budget_mut().mode = budget;
         o.method.budget_mut().margin = margin;
         integrator::render(&scene, &o).unwrap()
@@ -121,7 +121,7 @@ fn spcbpt_measures_its_last_training_iterations() {
         load_at(&root().join(VEACH_MIS.scene), VEACH_MIS.defines, Some((96, 54)), pcbpt::accel::Backend::Embree);
     let run = |spp: u32, budget: BudgetMode, in_training: bool| {
         let mut o = RenderOptions::new(IntegratorKind::Spcbpt, Budget::Spp(spp));
-        o.seed = 2;
+        o.run.seed = 2;
         o.method.budget_mut().mode = budget;
         // A margin no prediction reaches keeps the measured plan.
         o.method.budget_mut().margin = 1e9;

@@ -17,14 +17,14 @@ use std::path::Path;
 
 fn options(kind: IntegratorKind, spp: u32, seed: u64) -> RenderOptions {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
-    o.seed = seed;
-    o.threads = 2;
+    o.run.seed = seed;
+    o.run.threads = 2;
     o
 }
 
 /// Renders `range` of the render `o` describes as a part file in `dir`, and reads it back.
 fn part(scene: &Scene, o: &RenderOptions, range: Range<u32>, dir: &Path) -> Part {
-    let Budget::Spp(total) = o.budget else { unreachable!() };
+    let Budget::Spp(total) = o.run.budget else { unreachable!() };
     let out = integrator::render_iterations(scene, o, Some(range.clone())).unwrap();
     let identity = partial::render_identity(scene, o, &partial::scene_hash(scene, &[]).unwrap());
     let info = partial::part_info(&out, identity, total, scene.film.filter).unwrap();

@@ -67,8 +67,8 @@ fn options(kind: IntegratorKind) -> RenderOptions {
         _ => 64,
     };
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
-    o.seed = 5;
-    o.threads = 2;
+    o.run.seed = 5;
+    o.run.threads = 2;
     o
 }
 
@@ -230,15 +230,15 @@ fn interreflections_under_lights_at_infinity_match_the_path_tracer() {
     std::fs::write(&path, xml).unwrap();
     let scene = load(&path, &[], Backend::Embree);
     let mut o = options(IntegratorKind::Path);
-    o.budget = Budget::Spp(2048);
+    o.run.budget = Budget::Spp(2048);
     let reference = integrator::render(&scene, &o).unwrap().image;
     let floor = |_x: u32, y: u32| y >= 16;
     let (r_all, _) = mean_where(&reference, |_, _| true);
     let (r_floor, _) = mean_where(&reference, floor);
     let mut failures = Vec::new();
     for (name, mut o) in methods().into_iter().skip(1) {
-        if let Budget::Spp(s) = o.budget {
-            o.budget = Budget::Spp(s * if name == "Lighttrace" { 16 } else { 2 });
+        if let Budget::Spp(s) = o.run.budget {
+            o.run.budget = Budget::Spp(s * if name == "Lighttrace" { 16 } else { 2 });
         }
         let img = integrator::render(&scene, &o).unwrap().image;
         for r in [
@@ -261,10 +261,10 @@ fn renders_under_lights_at_infinity_do_not_depend_on_the_thread_count() {
     <shape type="sphere"><float name="radius" value="1"/><bsdf type="diffuse"/></shape>"#,
     );
     for (name, mut o) in methods() {
-        o.budget = Budget::Spp(4);
-        o.threads = 1;
+        o.run.budget = Budget::Spp(4);
+        o.run.threads = 1;
         let one = integrator::render(&scene, &o).unwrap().image;
-        o.threads = 2;
+        o.run.threads = 2;
         let two = integrator::render(&scene, &o).unwrap().image;
         let bits = |i: &[Vec3]| i.iter().map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
         // PSSMLT runs one chain per thread: its image depends on the thread count by design

@@ -61,8 +61,8 @@ fn memlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     let run = |seed, threads| {
         let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
-        o.seed = seed;
-        o.threads = threads;
+        o.run.seed = seed;
+        o.run.threads = threads;
         o.method.chain_mut().bootstrap = 5000;
         integrator::render(&scene, &o).unwrap()
     };
@@ -85,7 +85,7 @@ fn memlt_balances_its_direct_light_under_a_time_budget() {
     // sun-lit room is lit mostly directly: the pass takes samples beyond the two passes of
     // 16 that measure its noise, and the image still matches the reference.
     let scene = SUNLIT_ROOM.scene();
-    let timed = |o: &mut RenderOptions| o.budget = Budget::Time(6.0);
+    let timed = |o: &mut RenderOptions| o.run.budget = Budget::Time(6.0);
     let (a, b) = (memlt_with(&scene, 0, 1, &timed), memlt_with(&scene, 0, 2, &timed));
     for out in [&a, &b] {
         let s = &out.stats.details.get::<MemltDetails>().unwrap().memlt;
@@ -96,7 +96,7 @@ fn memlt_balances_its_direct_light_under_a_time_budget() {
     SUNLIT_ROOM.check(&image(a), &image(b), "MEMLT, 2 × 6 s, the direct light balanced");
     // Without the balance, or with a budget of mutations, the pass takes its 16 samples.
     let off = |o: &mut RenderOptions| {
-        o.budget = Budget::Time(1.0);
+        o.run.budget = Budget::Time(1.0);
         o.method.memlt_mut().direct_balance = false;
     };
     for out in [memlt_with(&scene, 0, 1, &off), memlt(&scene, 1, 1, 16)] {
@@ -145,7 +145,7 @@ fn memlt_bootstrap_takes_its_share_of_a_time_budget() {
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Time(1.0));
     o.method.chain_mut().bootstrap = 1000;
     o.method.memlt_mut().bootstrap_fraction = 0.25;
-    o.threads = 2;
+    o.run.threads = 2;
     let out = integrator::render(&scene, &o).unwrap();
     let s = &out.stats.details.get::<MemltDetails>().unwrap().memlt;
     assert!(s.bootstrap_samples > 1000 && s.bootstrap_samples.is_multiple_of(1000), "{} samples", s.bootstrap_samples);
@@ -164,8 +164,8 @@ fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     // pixel's light is all the stay's.
     let scene = CORNELL_PLY.scene();
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
-    o.seed = 3;
-    o.threads = 2;
+    o.run.seed = 3;
+    o.run.threads = 2;
     o.method.memlt_mut().direct_samples = -1;
     o.method.chain_mut().chains = 1;
     o.method.memlt_mut().bidirectional_mutation = false;
@@ -181,8 +181,8 @@ fn memlt_reports_a_chain_that_never_leaves_its_pixel() {
     assert!(stay.dominates());
     // With the usual mutations no stay is that long in so short a render.
     let mut o = RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(4));
-    o.seed = 3;
-    o.threads = 2;
+    o.run.seed = 3;
+    o.run.threads = 2;
     let out = integrator::render(&scene, &o).unwrap();
     let stay = out.stats.details.get::<MemltDetails>().unwrap().memlt.longest_stay.unwrap();
     assert!(!stay.dominates(), "{stay:?}");

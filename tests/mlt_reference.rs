@@ -32,8 +32,8 @@ fn pssmlt_is_deterministic_for_a_seed_whatever_the_thread_count() {
     let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
     let run = |seed, threads, base| {
         let mut o = RenderOptions::new(IntegratorKind::Pssmlt, Budget::Spp(4));
-        o.seed = seed;
-        o.threads = threads;
+        o.run.seed = seed;
+        o.run.threads = threads;
         o.method.chain_mut().bootstrap = 5000;
         o.method.pssmlt_mut().base = base;
         integrator::render(&scene, &o).unwrap()
@@ -62,8 +62,8 @@ fn pssmlt_measures_its_longest_stay_against_the_image() {
     let path = root().join("scenes/cornell-ply/cornell_mi.xml");
     let scene = load_at(&path, &[], Some((1, 1)), Backend::Embree);
     let mut o = RenderOptions::new(IntegratorKind::Pssmlt, Budget::Spp(3000));
-    o.seed = 4;
-    o.threads = 2;
+    o.run.seed = 4;
+    o.run.threads = 2;
     o.method.chain_mut().chains = 1;
     let out = integrator::render(&scene, &o).unwrap();
     let stay = out.stats.details.get::<PssmltStats>().unwrap().mlt.longest_stay.unwrap();

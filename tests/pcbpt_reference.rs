@@ -19,7 +19,7 @@ use pcbpt::scene::Scene;
 
 fn render(scene: &Scene, spp: u32, opts: &PcOptions, seed: u64) -> Image {
     let mut o = RenderOptions::new(IntegratorKind::Pcbpt, Budget::Spp(spp));
-    o.seed = seed;
+    o.run.seed = seed;
     o.method.pcbpt_mut().pc = opts.clone();
     image(integrator::render(scene, &o).unwrap())
 }
@@ -83,7 +83,7 @@ fn harmonic_printed_keeps_the_veach_ajar_mean_on_same_seed_pairs() {
 fn concentration(kind: IntegratorKind, spp: u32) -> (f64, [f64; integrator::CONCENTRATION_DEPTHS]) {
     let scene = VEACH_AJAR.scene();
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
-    o.seed = 5;
+    o.run.seed = 5;
     let details = integrator::render(&scene, &o).unwrap().stats.details;
     let pool = match kind {
         IntegratorKind::Lvc => details.get::<LvcStats>().unwrap().pool,

@@ -471,8 +471,8 @@ impl Row {
         let args: Vec<String> = self.options.split_whitespace().map(String::from).collect();
         let mut o = RenderOptions::new(kind, Budget::Spp(self.spp));
         o.method = registry::parse_options(kind, &args)?;
-        o.seed = seed;
-        o.threads = self.threads;
+        o.run.seed = seed;
+        o.run.threads = self.threads;
         let out = integrator::render(scene, &o).map_err(|e| e.to_string())?;
         if let Some(b) = budget_of(&out.stats) {
             println!("{} seed {seed}: plan {:?}, measured with {:?}", self.name(), b.chosen, b.measured_with);

@@ -19,9 +19,9 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
     use IntegratorKind::*;
     let base = |kind| {
         let mut o = RenderOptions::new(kind, Budget::Spp(5));
-        o.seed = 7;
-        o.threads = 2;
-        o.tile_size = 16;
+        o.run.seed = 7;
+        o.run.threads = 2;
+        o.run.tile_size = 16;
         o
     };
     let with = |kind, f: &dyn Fn(&mut RenderOptions)| {
@@ -40,7 +40,7 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
         ("lighttrace", base(Lighttrace)),
         ("bdpt", base(Bdpt)),
         ("bdpt_balance", with(Bdpt, &|o| *o.method.heuristic_mut().unwrap() = Heuristic::Balance)),
-        ("bdpt_layers", with(Bdpt, &|o| o.strategy_images = true)),
+        ("bdpt_layers", with(Bdpt, &|o| o.run.strategy_images = true)),
         ("eorr_running_mean", with(Eorr, &|o| o.method.eorr_mut().pilot_spp = 0)),
         ("eorr", base(Eorr)),
         ("lvc", base(Lvc)),
@@ -57,7 +57,7 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
                 o.method.pcbpt_mut().pc.distance_term = DistanceTerm::Printed;
             }),
         ),
-        ("pcbpt_layers", pcbpt(&|o| o.strategy_images = true)),
+        ("pcbpt_layers", pcbpt(&|o| o.run.strategy_images = true)),
         ("pcbpt_budget", base(Pcbpt)),
         ("pssmlt", with(Pssmlt, &|o| o.method.chain_mut().bootstrap = 2000)),
         (

@@ -16,7 +16,7 @@ use pcbpt::scene::Scene;
 
 fn render(scene: &Scene, spp: u32, opts: &SpOptions, seed: u64) -> Image {
     let mut o = RenderOptions::new(IntegratorKind::Spcbpt, Budget::Spp(spp));
-    o.seed = seed;
+    o.run.seed = seed;
     o.method.spcbpt_mut().sp = opts.clone();
     // The subspace connections themselves, without a budget.
     o.method.budget_mut().mode = pcbpt::integrator::budget::BudgetMode::Off;

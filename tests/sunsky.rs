@@ -135,8 +135,8 @@ fn every_integrator_converges_to_mitsuba3_under_sun_and_sky() {
     let reference = reference("sunsky.exr");
     let options = |kind: IntegratorKind, spp: u32| {
         let mut o = RenderOptions::new(kind, Budget::Spp(spp));
-        o.seed = 11;
-        o.threads = 2;
+        o.run.seed = 11;
+        o.run.threads = 2;
         o
     };
     let mut methods = vec![

@@ -249,8 +249,8 @@ fn method(file: &Path, m: &MethodEntry) -> Result<Method> {
 fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usize) -> Result<RenderOptions> {
     let mut o = RenderOptions::new(value_enum(file, "integrator", &m.integrator)?, budget);
     o.method = method(file, m)?;
-    o.seed = seed;
-    o.threads = threads;
+    o.run.seed = seed;
+    o.run.threads = threads;
     Ok(o)
 }
 
@@ -383,7 +383,7 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
             }
             let scene = &scenes[&m.backend];
             let mut o = options(path, m, budget, seed, f.threads)?;
-            o.checkpoints = checkpoints.clone();
+            o.run.checkpoints = checkpoints.clone();
             let r: RenderOutput = integrator::render(scene, &o)?;
             let img = Image::new(r.width, r.height, r.image.clone());
             let metrics = compare::metrics(&reference, &img)?;

@@ -16,9 +16,10 @@
 use crate::film::{Film, Tile};
 use crate::integrator::bidir::bdpt::{Bdpt, ConnectionPolicy, Connector, Scratch};
 use crate::integrator::bidir::mis::{Counts, Heuristic};
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, add_results, sample_tile};
-use crate::integrator::{Details, IntegratorStats, RenderOptions, RenderStats};
+use crate::integrator::run::RunOptions;
+use crate::integrator::run::{Integrator, Iterations, Rendered};
+use crate::integrator::stats::{Details, IntegratorStats, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -195,7 +196,7 @@ impl IntegratorStats for EorrStats {
 impl Integrator for EorrOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         use crate::error::Error;
         if self.pilot_spp == 0 && iterations.as_ref().is_some_and(|r| r.start > 0) {
             return Err(Error::Usage(

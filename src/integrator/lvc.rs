@@ -6,15 +6,15 @@
 
 use crate::error::Error;
 use crate::film::Tile;
-use crate::integrator::RenderOptions;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::{FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{LightPool, PoolCounters, PoolSelection};
 use crate::integrator::pool_base::{PoolBase, PoolStats};
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, sample_tile};
-use crate::integrator::{Details, IntegratorStats, RenderStats};
+use crate::integrator::run::RunOptions;
+use crate::integrator::run::{Integrator, Iterations, Rendered};
+use crate::integrator::stats::{Details, IntegratorStats, RenderStats};
 use crate::sampling::Random;
 use crate::scene::Scene;
 use serde::Serialize;
@@ -168,7 +168,7 @@ impl IntegratorStats for LvcStats {
 impl Integrator for LvcOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         if self.connections == 0 {
             return Err(Error::Usage("--connections must be at least 1".into()));
         }

@@ -16,106 +16,34 @@ pub mod pool_base;
 pub mod pssmlt;
 pub mod registry;
 pub(crate) mod render_loop;
+pub mod run;
 pub mod spcbpt;
 pub mod stats;
 
-use crate::film::Film;
-use crate::math::Rgb;
 use crate::scene::Scene;
 pub use bidir::pool::CONCENTRATION_DEPTHS;
-pub use registry::{Integrator, IntegratorKind, Method};
+pub use registry::{IntegratorKind, Method};
+pub use run::{Budget, Integrator, RenderOutput, RunOptions, Snapshot};
 pub use stats::{Counters, Details, IntegratorStats, PhaseRays, PhaseTimes, RenderStats};
 use std::ops::Range;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
-/// How much to render.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Budget {
-    /// Samples per pixel.
-    Spp(u32),
-    /// Wall-clock seconds (whole passes of one sample per pixel).
-    Time(f64),
-}
-
-#[derive(Clone)]
+/// A render: the integrator with its options, and the run's other settings.
+#[derive(Clone, Debug)]
 pub struct RenderOptions {
     /// The integrator and its options.
     pub method: Method,
-    pub budget: Budget,
-    pub seed: u64,
-    /// Worker threads (0 = all cores).
-    pub threads: usize,
-    pub tile_size: u32,
-    pub progress: bool,
-    /// Set from outside (a signal handler) to stop after the current pass.
-    pub stop: Option<Arc<AtomicBool>>,
-    /// Keep one image per strategy `(s,t)` (bidirectional integrators).
-    pub strategy_images: bool,
-    /// Wall-clock times (seconds, ascending) at which to keep a snapshot of the image: the
-    /// first pass that ends at or after each time is developed.
-    pub checkpoints: Vec<f64>,
+    pub run: RunOptions,
 }
 
 impl RenderOptions {
+    /// `integrator` with its default options, and [`RunOptions::new`]`(budget)`.
     pub fn new(integrator: IntegratorKind, budget: Budget) -> RenderOptions {
-        RenderOptions {
-            method: Method::default_for(integrator),
-            budget,
-            seed: 0,
-            threads: 0,
-            tile_size: 32,
-            progress: false,
-            stop: None,
-            strategy_images: false,
-            checkpoints: Vec::new(),
-        }
+        RenderOptions { method: Method::default_for(integrator), run: RunOptions::new(budget) }
     }
 
     pub fn integrator(&self) -> IntegratorKind {
         self.method.kind()
     }
-}
-
-/// The image as it stood at a checkpoint.
-#[derive(Clone, Debug)]
-pub struct Snapshot {
-    pub seconds: f64,
-    /// Samples (or mutations) per pixel done.
-    pub spp: u32,
-    pub image: Vec<Rgb>,
-}
-
-/// Takes the snapshots whose checkpoint time has come.
-pub(crate) fn take_snapshots(
-    checkpoints: &[f64],
-    snapshots: &mut Vec<Snapshot>,
-    seconds: f64,
-    spp: u32,
-    develop: impl FnOnce() -> Vec<Rgb>,
-) {
-    let due = checkpoints.iter().filter(|&&t| t <= seconds).count();
-    if due > snapshots.len() {
-        let image = develop();
-        // Checkpoints passed within one pass share its image.
-        while snapshots.len() < due {
-            snapshots.push(Snapshot { seconds, spp, image: image.clone() });
-        }
-    }
-}
-
-/// A finished render.
-pub struct RenderOutput {
-    pub image: Vec<Rgb>,
-    /// Per-strategy images `(name, pixels)` when asked for; they sum to `image`.
-    pub strategy_images: Vec<(String, Vec<Rgb>)>,
-    /// Images at the requested checkpoints.
-    pub snapshots: Vec<Snapshot>,
-    pub width: u32,
-    pub height: u32,
-    pub stats: RenderStats,
-    /// The film's sums (what a chunk of a distributed render keeps).
-    pub film: Option<Film>,
 }
 
 /// Renders the scene's image.
@@ -133,7 +61,7 @@ pub fn render_iterations(
 ) -> Result<RenderOutput, crate::error::Error> {
     use crate::error::Error;
     if let Some(r) = &iterations {
-        let Budget::Spp(spp) = opts.budget else {
+        let Budget::Spp(spp) = opts.run.budget else {
             return Err(Error::Usage("a chunk of iterations needs a sample count, not a time budget".into()));
         };
         if r.start >= r.end || r.end > spp {
@@ -147,5 +75,5 @@ pub fn render_iterations(
     if kind.is_bidirectional() {
         bidir::bdpt::check_lights(scene, kind.name()).map_err(Error::Usage)?;
     }
-    opts.method.render(scene, opts, iterations)
+    opts.method.render(scene, &opts.run, iterations)
 }

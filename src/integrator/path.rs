@@ -5,10 +5,10 @@
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
-use crate::integrator::Counters;
-use crate::integrator::RenderOptions;
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_with};
+use crate::integrator::run::RunOptions;
+use crate::integrator::run::{Integrator, Iterations, Rendered};
+use crate::integrator::stats::Counters;
 use crate::math::{Rgb, max_component};
 use crate::sampling::sobol::SobolSampler;
 use crate::sampling::{PixelSampler, Random, Sampler, SamplerKind, power_heuristic};
@@ -222,7 +222,7 @@ pub struct PathOptions {}
 impl Integrator for PathOptions {
     const BIDIRECTIONAL: bool = false;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         let pt = PathTracer { sampler: scene.sampler.kind, ..PathTracer::new(&scene.integrator) };
         crate::integrator::render_loop::run(scene, opts, pt, false, iterations)
     }

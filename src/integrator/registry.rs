@@ -1,10 +1,9 @@
 //! The integrators in one table ([`integrators!`]): one line each names the integrator,
 //! its options type (one struct, read alike by the command line, experiment files and the
-//! library; the type implements [`Integrator`], which renders with them) and the scene-file
+//! library; the type implements [`Integrator`](crate::integrator::run::Integrator), which renders with them) and the scene-file
 //! plugins that select it. From that table come [`IntegratorKind`], [`Method`] (an integrator
 //! with its options, what a render is given), [`INTEGRATORS`] and the dispatch of a render.
 
-use crate::error::Error;
 use crate::integrator::bidir::mis::Heuristic;
 use crate::integrator::budget::BudgetOptions;
 use crate::integrator::eorr::EorrOptions;
@@ -13,40 +12,10 @@ use crate::integrator::memlt::MemltOptions;
 use crate::integrator::metropolis::ChainOptions;
 use crate::integrator::pcbpt::{PcbptOptions, PoolOptions};
 use crate::integrator::pssmlt::PssmltOptions;
+use crate::integrator::run::{Integrator, Iterations, Rendered, RunOptions};
 use crate::integrator::spcbpt::SpcbptOptions;
-use crate::integrator::{RenderOptions, RenderOutput};
 use crate::scene::Scene;
 use serde::Serialize;
-use std::ops::Range;
-
-/// The iterations of a render to render (all of them when `None`).
-pub type Iterations = Option<Range<u32>>;
-
-/// What rendering gives.
-pub type Rendered = Result<RenderOutput, Error>;
-
-/// An integrator's options type, and how the integrator renders with them.
-pub trait Integrator:
-    clap::Args + clap::FromArgMatches + Default + Clone + std::fmt::Debug + Serialize + Send + Sync + 'static
-{
-    /// Whether the integrator samples with the bidirectional core's strategies (it needs a
-    /// light to start light subpaths from, and reports connections and light paths).
-    const BIDIRECTIONAL: bool;
-
-    /// Renders iterations `iterations` (all of them when `None`) of the render `opts`
-    /// describes, whose method is this integrator with these options.
-    fn render(
-        &self,
-        scene: &Scene,
-        opts: &RenderOptions,
-        iterations: Option<Range<u32>>,
-    ) -> Result<RenderOutput, Error>;
-
-    /// The MIS heuristic, for an integrator that weighs strategies.
-    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
-        None
-    }
-}
 
 /// One integrator's entry in [`INTEGRATORS`].
 pub struct Registration {
@@ -78,6 +47,9 @@ macro_rules! integrators {
                     _ => None,
                 }
             }
+
+            /// Every scene-file plugin that selects an integrator.
+            pub const PLUGINS: &'static [&'static str] = &[$($($plugin,)*)*];
 
             /// The name `--integrator` takes.
             pub fn name(self) -> &'static str {
@@ -126,16 +98,15 @@ macro_rules! integrators {
                 }
             }
 
-            /// Renders with the integrator (see [`Integrator::render`]).
-            pub(crate) fn render(
-                &self,
-                scene: &Scene,
-                opts: &RenderOptions,
-                iterations: Option<Range<u32>>,
-            ) -> Result<RenderOutput, Error> {
-                match self {
-                    $(Method::$variant(o) => o.render(scene, opts, iterations),)*
-                }
+            /// Renders with the integrator (see [`Integrator::render`]); the statistics
+            /// name it and its options.
+            pub(crate) fn render(&self, scene: &Scene, run: &RunOptions, iterations: Iterations) -> Rendered {
+                let mut out = match self {
+                    $(Method::$variant(o) => o.render(scene, run, iterations),)*
+                }?;
+                out.stats.integrator = self.kind().name();
+                out.stats.options = serde_json::to_value(self).unwrap_or(serde_json::Value::Null);
+                Ok(out)
             }
         }
     };

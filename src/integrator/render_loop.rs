@@ -24,9 +24,8 @@
 
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
-use crate::integrator::{
-    Budget, Counters, Details, PhaseRays, PhaseTimes, RenderOptions, RenderOutput, RenderStats, take_snapshots,
-};
+use crate::integrator::run::{Budget, RenderOutput, RunOptions, take_snapshots};
+use crate::integrator::stats::{Counters, Details, PhaseRays, PhaseTimes, RenderStats};
 use crate::math::Rgb;
 use crate::sampling::{PixelSampler, Sampler};
 use crate::scene::Scene;
@@ -147,17 +146,19 @@ pub(crate) struct PixelSink<'a> {
     splats: &'a mut Vec<Splat>,
 }
 
-impl crate::integrator::bidir::Sink for PixelSink<'_> {
+impl PixelSink<'_> {
+    /// Strategy `(s, t)`'s contribution to the pixel.
     #[inline]
-    fn add(&mut self, s: usize, t: usize, value: Rgb) {
+    pub fn add(&mut self, s: usize, t: usize, value: Rgb) {
         self.l += value;
         if self.layers {
             self.parts.push((strategy_layer(s, t) as u16, value));
         }
     }
 
+    /// Strategy `(s, t)`'s contribution to the film at `pos` (light tracing).
     #[inline]
-    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
+    pub fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
         self.splats.push(Splat::of_strategy(s, t, pos, value, self.layers));
     }
 }
@@ -301,7 +302,7 @@ fn next_pass<M: Iterative>(method: &M, first: u32, range_end: u32, per: u32) -> 
 /// Renders iterations `iterations` (all of the budget when `None`) with `method`.
 pub(crate) fn run<M: Iterative>(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     mut method: M,
     bidirectional: bool,
     iterations: Option<Range<u32>>,
@@ -447,7 +448,7 @@ pub(crate) fn run<M: Iterative>(
         shadow_rays: work.shadow,
         iterations: Some(range.start..first),
         details: method.details(),
-        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
+        ..RenderStats::new(scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
     let strategy_images =
         (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
@@ -456,7 +457,7 @@ pub(crate) fn run<M: Iterative>(
 
 /// The render's progress bar on a terminal: in tiles rendered times their samples per
 /// pixel (`tiles` per pass), or in thousandths of the time budget.
-fn progress_bar(opts: &RenderOptions, w: u32, h: u32, tiles: usize, spp: u32) -> Option<indicatif::ProgressBar> {
+fn progress_bar(opts: &RunOptions, w: u32, h: u32, tiles: usize, spp: u32) -> Option<indicatif::ProgressBar> {
     use std::io::IsTerminal;
     if !opts.progress || !std::io::stderr().is_terminal() {
         return None;

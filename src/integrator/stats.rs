@@ -2,7 +2,6 @@
 //! the statistics of a finished render, and the interface through which an integrator adds
 //! its own ([`IntegratorStats`]: serialized into `--stats` JSON, printed in the summary).
 
-use crate::integrator::{IntegratorKind, Method, RenderOptions};
 use crate::scene::Scene;
 use serde::Serialize;
 use std::any::Any;
@@ -115,7 +114,8 @@ pub struct PhaseRays {
 /// Statistics of a finished render.
 #[derive(Clone, Debug, Serialize)]
 pub struct RenderStats {
-    pub integrator: IntegratorKind,
+    /// The integrator's name (filled by the registry's dispatch).
+    pub integrator: &'static str,
     pub backend: String,
     pub threads: usize,
     pub width: u32,
@@ -128,8 +128,8 @@ pub struct RenderStats {
     pub counters: Counters,
     pub phases: PhaseTimes,
     pub shadow_rays: PhaseRays,
-    /// The integrator's options.
-    pub options: Method,
+    /// The integrator's options (filled by the registry's dispatch).
+    pub options: serde_json::Value,
     /// The integrator's own statistics (their fields join these in the JSON).
     #[serde(flatten)]
     pub details: Details,
@@ -145,9 +145,7 @@ pub struct RenderStats {
 
 impl RenderStats {
     /// The statistics every render loop reports; the rest start empty.
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
-        opts: &RenderOptions,
         scene: &Scene,
         threads: usize,
         counters: Counters,
@@ -158,7 +156,7 @@ impl RenderStats {
     ) -> RenderStats {
         let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
         RenderStats {
-            integrator: opts.integrator(),
+            integrator: "",
             backend: scene.accel.backend().to_string(),
             threads,
             width: scene.film.width,
@@ -171,7 +169,7 @@ impl RenderStats {
             counters,
             phases: PhaseTimes::default(),
             shadow_rays: PhaseRays::default(),
-            options: opts.method.clone(),
+            options: serde_json::Value::Null,
             details: Details::default(),
             invalid_samples,
             interrupted,

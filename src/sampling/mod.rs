@@ -215,6 +215,17 @@ pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
     Vec2::new(1.0 - t, u.y * t)
 }
 
+/// The MIS heuristic of the integrators that weigh several strategies.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Heuristic {
+    /// β = 1.
+    Balance,
+    /// β = 2.
+    #[default]
+    Power,
+}
+
 /// Power heuristic (β = 2) weight of a strategy with density `a` against one with `b`.
 #[inline]
 pub fn power_heuristic(a: f32, b: f32) -> f32 {

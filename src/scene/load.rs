@@ -49,9 +49,6 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "normalmap",
 ];
 
-/// Integrator plugins a scene file may name (those [`crate::integrator::IntegratorKind::from_plugin`] knows).
-pub const INTEGRATOR_PLUGINS: &[&str] = &["path", "ptracer", "bdpt", "pssmlt"];
-
 /// The largest image this renderer accepts (pixels).
 pub const MAX_PIXELS: u64 = 1 << 28;
 

@@ -40,8 +40,8 @@ pub fn render_with(
     set: &dyn Fn(&mut RenderOptions),
 ) -> RenderOutput {
     let mut o = RenderOptions::new(kind, Budget::Spp(spp));
-    o.seed = seed;
-    o.threads = threads;
+    o.run.seed = seed;
+    o.run.threads = threads;
     set(&mut o);
     integrator::render(scene, &o).unwrap()
 }

@@ -5,15 +5,15 @@
 
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
-use crate::integrator::Counters;
-use crate::integrator::RenderOptions;
 use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_weight_with};
 use crate::integrator::bidir::{
     Connection, Delivery, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath,
     visible,
 };
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
+use crate::integrator::run::RunOptions;
+use crate::integrator::run::{Integrator, Iterations, Rendered};
+use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -426,7 +426,7 @@ impl Bdpt {
 impl Integrator for LighttraceOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         let method = BdptRender { bdpt: Bdpt::for_scene(scene, true), heuristic: Default::default() };
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
@@ -435,7 +435,7 @@ impl Integrator for LighttraceOptions {
 impl Integrator for BdptOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         let method = BdptRender { bdpt: Bdpt::for_scene(scene, false), heuristic: self.heuristic };
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }

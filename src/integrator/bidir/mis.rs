@@ -16,16 +16,7 @@ pub const CAP: usize = 2 * crate::integrator::bidir::MAX_VERTICES;
 /// Paths up to this many vertices use a small array.
 pub const SHORT: usize = 16;
 
-/// The MIS heuristic.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Heuristic {
-    /// β = 1.
-    Balance,
-    /// β = 2.
-    #[default]
-    Power,
-}
+pub use crate::sampling::Heuristic;
 
 /// The densities of one full path as seen by one strategy, copied out of its vertices and
 /// patched where the connection changes them.

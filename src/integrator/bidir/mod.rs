@@ -13,7 +13,8 @@ pub mod pool;
 
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
-use crate::integrator::Counters;
+use crate::integrator::render_loop::PixelSink;
+use crate::integrator::stats::Counters;
 use crate::math::{Frame, Rgb, max_component, offset_origin};
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -771,6 +772,19 @@ pub trait Sink {
     /// The path of the contribution delivered next, with what weighs it.
     #[inline]
     fn observe<C: mis::StrategyCounts>(&mut self, _delivery: &Delivery<'_, C>) {}
+}
+
+/// A camera sample's pixel in the render loop receives the strategies' contributions.
+impl Sink for PixelSink<'_> {
+    #[inline]
+    fn add(&mut self, s: usize, t: usize, value: Rgb) {
+        PixelSink::add(self, s, t, value)
+    }
+
+    #[inline]
+    fn splat(&mut self, s: usize, t: usize, pos: Vec2, value: Rgb) {
+        PixelSink::splat(self, s, t, pos, value)
+    }
 }
 
 /// The path of a strategy about to be delivered to a sink, with what weighs it

@@ -5,10 +5,10 @@
 
 use crate::error::Error;
 use crate::film::Splat;
-use crate::integrator::Counters;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::{Delivery, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
+use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;

@@ -77,13 +77,13 @@ use measure::{RealizedSums, Weighing, accumulate, own_moment, typical};
 pub use shares::{ShareRecorder, Shares, SplatShares, mis_shares, mis_shares_with};
 
 use crate::film::{Splat, Tile};
-use crate::integrator::Counters;
 use crate::integrator::bidir::Sink;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::pool::{LightPool, PoolCounters, PoolPlan, PoolSampler, PoolSelection};
 use crate::integrator::path::PathTracer;
 use crate::integrator::render_loop::{Ctx, TileResult, Warmup, sample_tile};
+use crate::integrator::stats::Counters;
 use crate::sampling::Sampler;
 use glam::Vec2;
 use serde::Serialize;

@@ -14,10 +14,10 @@
 //! its reverse. The proposal density sums over every split that could have produced the
 //! new stretch ([`stretch_density`]).
 
-use crate::integrator::Counters;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::memlt::path::{Measured, contribution, regenerate, stretch_density};
 use crate::integrator::metropolis::bootstrap::ChainPaths;
+use crate::integrator::stats::Counters;
 use crate::sampling::Random;
 use crate::scene::Scene;
 

@@ -15,11 +15,11 @@
 //! angle at `x_m` (the chain's geometric factors, the Dirac lobes' coefficients left to `f`)
 //! complete the transition densities.
 
-use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::integrator::memlt::bidirectional::Proposal;
 use crate::integrator::memlt::lens::Radii;
 use crate::integrator::memlt::path::{area_factor, connectible, contribution, join, ray_from, retrace};
+use crate::integrator::stats::Counters;
 use crate::math::Frame;
 use crate::sampling::Random;
 use crate::scene::Scene;

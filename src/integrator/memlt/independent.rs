@@ -27,9 +27,9 @@
 //! density adds the share times the walk's density (the camera-only split's, for a path with
 //! no interior vertex on an emitter).
 
-use crate::integrator::Counters;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::memlt::bidirectional::{Lengths, Proposal};
+use crate::integrator::stats::Counters;
 use crate::sampling::Random;
 use crate::scene::Scene;
 

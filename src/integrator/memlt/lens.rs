@@ -10,12 +10,12 @@
 //! re-traced vertices' areas: the camera walk's density of those vertices with the Dirac
 //! lobes' discrete probabilities taken out. Only that Jacobian enters the acceptance.
 
-use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::integrator::memlt::bidirectional::Proposal;
 use crate::integrator::memlt::path::{
     connectible, contribution, join, pdf_from_camera, pdf_from_lobe, retrace, settle_sky,
 };
+use crate::integrator::stats::Counters;
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::Vec2;

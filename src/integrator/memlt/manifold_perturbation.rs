@@ -53,7 +53,6 @@
 
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
-use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf};
 use crate::integrator::manifold::{self, Half, Scatter, TracedChain};
 use crate::integrator::memlt::bidirectional::Proposal;
@@ -61,6 +60,7 @@ use crate::integrator::memlt::path::{
     area_factor, as_light, connectible, contribution, hittable_light, join, lobe_pdf, pdf_from_light, ray_from,
     reflects, retrace, settle_sky, sky_vertex, surface_vertex,
 };
+use crate::integrator::stats::Counters;
 use crate::math::Frame;
 use crate::sampling::{Random, square_to_gaussian_2d, square_to_gaussian_2d_pdf, square_to_von_mises_fisher};
 use crate::scene::Scene;

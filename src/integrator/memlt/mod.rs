@@ -49,8 +49,9 @@ use crate::integrator::bidir::Vertex;
 use crate::integrator::metropolis::bootstrap::Keys;
 use crate::integrator::metropolis::stays::{LongestStay, Stay, Stays, near, pixel_of};
 use crate::integrator::metropolis::two_stage::Importance;
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
-use crate::integrator::{Budget, Counters, Details, RenderOptions, RenderOutput};
+use crate::integrator::run::{Budget, RenderOutput, RunOptions};
+use crate::integrator::run::{Integrator, Iterations, Rendered};
+use crate::integrator::stats::{Counters, Details};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Random, Sampler};
 use crate::scene::Scene;
@@ -403,7 +404,7 @@ const BOOTSTRAP_STREAM: u64 = 0x626f_6f74;
 #[allow(clippy::too_many_arguments)]
 fn normalisation(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     mo: &MemltOptions,
     pool: &rayon::ThreadPool,
     lengths: Lengths,
@@ -480,7 +481,7 @@ struct Measurement<'a> {
 /// figures and the work the added samples took.
 fn balance(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     key: Keys,
     light: &mut SeparateLight,
     measured: &Measurement,
@@ -555,7 +556,7 @@ fn check_options(scene: &Scene, mo: &MemltOptions) -> Result<(), crate::error::E
 /// bootstrap (streams keyed by `A` as well).
 pub fn render(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     mo: &MemltOptions,
     iterations: Option<std::ops::Range<u32>>,
 ) -> Result<RenderOutput, crate::error::Error> {
@@ -837,13 +838,13 @@ fn tally(chains: &[Chain], counters: &mut Counters, stats: &mut MemltStats) {
 #[allow(clippy::too_many_arguments)]
 fn finish(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     threads: usize,
     mut film: Film,
     mut stats: MemltStats,
     counters: Counters,
     start: Instant,
-    snapshots: Vec<crate::integrator::Snapshot>,
+    snapshots: Vec<crate::integrator::run::Snapshot>,
     interrupted: bool,
     done: u64,
     iterations: Option<std::ops::Range<u32>>,
@@ -877,7 +878,7 @@ fn finish(
 impl Integrator for MemltOptions {
     const BIDIRECTIONAL: bool = false;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)
     }
 

@@ -22,13 +22,13 @@
 //! manifold perturbation's walk fails: like a primary-sample-space step, `f / T` stays
 //! bounded there, both holding the chain's singular geometric factor.
 
-use crate::integrator::Counters;
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::integrator::memlt::bidirectional::Proposal;
 use crate::integrator::memlt::lens::Radii;
 use crate::integrator::memlt::path::{
     area_factor, as_light, connectible, contribution, hittable_light, join, ray_from, retrace, settle_sky,
 };
+use crate::integrator::stats::Counters;
 use crate::math::Frame;
 use crate::sampling::Random;
 use crate::scene::Scene;

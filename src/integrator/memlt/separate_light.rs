@@ -12,7 +12,9 @@ use crate::film::Film;
 use crate::integrator::memlt::specular_pass::SpecularPass;
 use crate::integrator::metropolis::bootstrap::Keys;
 use crate::integrator::path::PathTracer;
-use crate::integrator::{Budget, Counters, RenderOptions, render_loop};
+use crate::integrator::render_loop;
+use crate::integrator::run::{Budget, RunOptions};
+use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::scene::Scene;
 use std::time::Instant;
@@ -40,7 +42,7 @@ impl SeparateLight {
     /// the specular pass. Also their work.
     pub fn render(
         scene: &Scene,
-        opts: &RenderOptions,
+        opts: &RunOptions,
         key: Keys,
         direct: i32,
         balance: bool,
@@ -83,7 +85,7 @@ impl SeparateLight {
     pub fn more_direct(
         &mut self,
         scene: &Scene,
-        opts: &RenderOptions,
+        opts: &RunOptions,
         key: Keys,
         spp: u32,
     ) -> Result<(Film, Counters), Error> {
@@ -113,7 +115,7 @@ impl SeparateLight {
 }
 
 /// A pass's options: its sample count and its own stream.
-fn pass(opts: &RenderOptions, key: Keys, spp: u32, stream: u64) -> RenderOptions {
+fn pass(opts: &RunOptions, key: Keys, spp: u32, stream: u64) -> RunOptions {
     let mut o = opts.clone();
     o.budget = Budget::Spp(spp);
     o.seed = crate::sampling::hash_words(&key(stream, 0));

@@ -13,8 +13,8 @@
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
-use crate::integrator::Counters;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_in};
+use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;

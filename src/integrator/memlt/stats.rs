@@ -5,7 +5,7 @@ use super::Mutator;
 use super::{direct_balance, manifold_perturbation};
 use crate::integrator::metropolis::first_stage_line;
 use crate::integrator::metropolis::stays::LongestStay;
-use crate::integrator::{IntegratorStats, RenderStats};
+use crate::integrator::stats::{IntegratorStats, RenderStats};
 use serde::Serialize;
 
 /// Proposals and acceptances of one mutator.

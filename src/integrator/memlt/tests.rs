@@ -681,7 +681,7 @@ fn the_direct_and_specular_passes_and_the_chains_share_every_path() {
     fn pass<M: Iterative + Clone>(scene: &Scene, method: M, spp: u32) -> (f64, f64) {
         let means: Vec<f64> = (0..4)
             .map(|seed| {
-                let mut o = RenderOptions::new(crate::integrator::IntegratorKind::Path, Budget::Spp(spp));
+                let mut o = RunOptions::new(Budget::Spp(spp));
                 (o.threads, o.progress, o.seed) = (2, false, 43 + seed);
                 let out = run(scene, &o, method.clone(), false, None).unwrap();
                 let image = out.film.unwrap().develop();

@@ -18,7 +18,8 @@ use crate::integrator::bidir::{Sink, Vertex, WalkLimits};
 use crate::integrator::metropolis::primary::PrimarySampler;
 use crate::integrator::metropolis::two_stage::{Grid, Importance};
 use crate::integrator::metropolis::{ChainOptions, MltBase};
-use crate::integrator::{Budget, Counters, RenderOptions};
+use crate::integrator::run::{Budget, RunOptions};
+use crate::integrator::stats::Counters;
 use crate::math::{Rgb, luminance};
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -283,7 +284,7 @@ pub(crate) fn bdpt_normalisation(
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn first_stage(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     pool: &rayon::ThreadPool,
     (heuristic, chain): (Heuristic, &ChainOptions),
     paths: ChainPaths,
@@ -329,7 +330,7 @@ pub(crate) fn first_stage(
 
 /// Runs `batch(0)`, `batch(1)`, … : one batch, and with a time budget more until `fraction`
 /// of it has passed since `start` (or the render is stopped). The number of batches.
-pub(crate) fn in_batches(opts: &RenderOptions, start: Instant, fraction: f64, mut batch: impl FnMut(u64)) -> u64 {
+pub(crate) fn in_batches(opts: &RunOptions, start: Instant, fraction: f64, mut batch: impl FnMut(u64)) -> u64 {
     let until = match opts.budget {
         Budget::Time(t) => t * fraction,
         Budget::Spp(_) => 0.0,

@@ -10,9 +10,8 @@ pub mod stays;
 pub mod two_stage;
 
 use crate::film::Film;
-use crate::integrator::{
-    Budget, Counters, Details, RenderOptions, RenderOutput, RenderStats, Snapshot, take_snapshots,
-};
+use crate::integrator::run::{Budget, RenderOutput, RunOptions, Snapshot, take_snapshots};
+use crate::integrator::stats::{Counters, Details, RenderStats};
 use crate::math::Rgb;
 use crate::scene::Scene;
 use serde::Serialize;
@@ -99,7 +98,7 @@ pub(crate) struct ChainRun {
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_chains<C: Send>(
     pool: &rayon::ThreadPool,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     start: std::time::Instant,
     pixels: u64,
     total: u64,
@@ -164,7 +163,7 @@ pub(crate) fn run_chains<C: Send>(
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn chains_output(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     threads: usize,
     counters: Counters,
     seconds: f64,
@@ -182,7 +181,7 @@ pub(crate) fn chains_output(
             Budget::Time(_) => None,
         },
         details,
-        ..RenderStats::new(opts, scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
+        ..RenderStats::new(scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
     let (width, height) = (scene.film.width, scene.film.height);
     RenderOutput { image, strategy_images: Vec::new(), snapshots, width, height, stats, film: Some(film) }

@@ -4,11 +4,11 @@
 
 use crate::bsdf::TransportMode;
 use crate::film::tiles;
-use crate::integrator::Counters;
 use crate::integrator::bidir::mis::FullPath;
 use crate::integrator::bidir::pool::LightPool;
 use crate::integrator::bidir::{Vertex, VertexKind, WalkLimits, camera_subpath, visible};
 use crate::integrator::pcbpt::{DistanceTerm, PcOptions, PcSampling};
+use crate::integrator::stats::Counters;
 use crate::math::{Rgb, luminance};
 use crate::sampling::Sampler;
 use crate::scene::Scene;

@@ -36,7 +36,6 @@ pub mod fit;
 use crate::bsdf::TransportMode;
 use crate::error::Error;
 use crate::film::Tile;
-use crate::integrator::RenderOptions;
 use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::{FullPath, Heuristic, StrategyCounts};
@@ -48,9 +47,10 @@ use crate::integrator::budget::{
 };
 use crate::integrator::pcbpt::fit::CacheFit;
 use crate::integrator::pool_base::{PoolBase, PoolStats};
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
-use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
+use crate::integrator::run::RunOptions;
+use crate::integrator::run::{Integrator, Iterations, Rendered};
+use crate::integrator::stats::{Counters, Details, IntegratorStats, RenderStats};
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;
@@ -717,7 +717,7 @@ impl IntegratorStats for PcbptStats {
 impl Integrator for PcbptOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         self.pc.validate().map_err(Error::Usage)?;
         let (bdpt, pool) = (Bdpt::for_scene(scene, false), &self.pc.pool);
         let base = PoolBase::new(bdpt, self.heuristic, pool.max_pool_mb, pool.light_paths);

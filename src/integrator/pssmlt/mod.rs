@@ -25,9 +25,10 @@ use crate::integrator::metropolis::bootstrap::{
 use crate::integrator::metropolis::primary::PrimarySampler;
 use crate::integrator::metropolis::stays::{self, LongestStay, Stay, Stays, pixel_of, share_in};
 use crate::integrator::metropolis::{ChainOptions, MltBase, first_stage_line};
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
-use crate::integrator::{Budget, Counters, RenderOptions, RenderOutput};
-use crate::integrator::{Details, IntegratorStats, RenderStats};
+use crate::integrator::run::{Budget, RenderOutput, RunOptions};
+use crate::integrator::run::{Integrator, Iterations, Rendered};
+use crate::integrator::stats::Counters;
+use crate::integrator::stats::{Details, IntegratorStats, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Distribution1D, Sampler};
 use crate::scene::Scene;
@@ -240,7 +241,7 @@ const CHAIN_STREAM: u64 = 0x6368_6169;
 /// bootstrap (streams keyed by `A` as well), whose films merge by their normalisations.
 pub fn render(
     scene: &Scene,
-    opts: &RenderOptions,
+    opts: &RunOptions,
     mo: &PssmltOptions,
     iterations: Option<std::ops::Range<u32>>,
 ) -> Result<RenderOutput, crate::error::Error> {
@@ -407,7 +408,7 @@ pub fn render(
 impl Integrator for PssmltOptions {
     const BIDIRECTIONAL: bool = false;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)
     }
 

@@ -23,9 +23,9 @@ fn two_stage_normalisation_is_the_image_over_the_map() {
     let pixels = 256.0;
     let sums: Vec<f64> = [1.0, 20.0, 5.0, 0.5].iter().map(|m| m * 64.0 / pixels).collect();
     let map = Importance::from_cells(grid, &sums, 1).unwrap();
-    let mut opts = RenderOptions::new(crate::integrator::IntegratorKind::Bdpt, Budget::Spp(2048));
-    opts.seed = 3;
-    opts.threads = 2;
+    let mut opts = crate::integrator::RenderOptions::new(crate::integrator::IntegratorKind::Bdpt, Budget::Spp(2048));
+    opts.run.seed = 3;
+    opts.run.threads = 2;
     let image = crate::integrator::render(&scene, &opts).unwrap().image;
     let over_map: f64 = image
         .iter()

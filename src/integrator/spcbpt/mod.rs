@@ -42,7 +42,6 @@ pub use options::*;
 
 use crate::error::Error;
 use crate::film::Tile;
-use crate::integrator::RenderOptions;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::{Counts, FullPath, Heuristic, StrategyCounts};
 use crate::integrator::bidir::pool::{
@@ -57,12 +56,13 @@ use crate::integrator::pcbpt::Correlation;
 use crate::integrator::pcbpt::cache::{Record, trace_records};
 use crate::integrator::pcbpt::{PcMis, PcOptions, connection_counts, fill_counts, light_throughputs, throughput_at};
 use crate::integrator::pool_base::{PoolBase, PoolStats};
-use crate::integrator::registry::{Integrator, Iterations, Rendered};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
+use crate::integrator::run::RunOptions;
+use crate::integrator::run::{Integrator, Iterations, Rendered};
 use crate::integrator::spcbpt::subspace::{
     FEATURES, LightSubspaces, Matrix, SubspaceTree, TrainingSample, features, within_probability,
 };
-use crate::integrator::{Counters, Details, IntegratorStats, RenderStats};
+use crate::integrator::stats::{Counters, Details, IntegratorStats, RenderStats};
 use crate::math::{Rgb, luminance};
 use crate::sampling::{Random, Sampler};
 use crate::scene::Scene;
@@ -797,7 +797,7 @@ pub(crate) fn test_model(
 impl Integrator for SpcbptOptions {
     const BIDIRECTIONAL: bool = true;
 
-    fn render(&self, scene: &Scene, opts: &RenderOptions, iterations: Iterations) -> Rendered {
+    fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         self.sp.validate().map_err(Error::Usage)?;
         let (bdpt, pool) = (Bdpt::for_scene(scene, false), &self.sp.pool);
         let base = PoolBase::new(bdpt, self.heuristic, pool.max_pool_mb, pool.light_paths);
@@ -813,10 +813,10 @@ impl Integrator for SpcbptOptions {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::integrator::Counters;
     use crate::integrator::bidir::pool::draw_one_by_one;
     use crate::integrator::bidir::{WalkLimits, camera_subpath};
     use crate::integrator::pcbpt::cache::tests::scene;
+    use crate::integrator::stats::Counters;
     use crate::sampling::Sampler;
     use crate::sampling::chi2::discrete_chi2_of;
 

@@ -1,7 +1,7 @@
 //! The sensor, its film, reconstruction filter and sampler, and the scene file's
 //! integrator block: the parts of a scene that say how to render it rather than what.
 
-use super::{Builder, INTEGRATOR_PLUGINS, MAX_PIXELS, positive};
+use super::{Builder, MAX_PIXELS, positive};
 use crate::camera::{Camera, FovAxis};
 use crate::error::{Error, Result};
 use crate::film::Filter;
@@ -322,7 +322,7 @@ impl Builder<'_> {
                 format!(
                     "unknown integrator plugin \"{}\" (supported: {}); or pick one with --integrator, and the file's max_depth and rr_depth apply",
                     n.plugin,
-                    INTEGRATOR_PLUGINS.join(", ")
+                    IntegratorKind::PLUGINS.join(", ")
                 ),
             ));
         }

@@ -1,0 +1,124 @@
+//! What every integrator is given and gives back, below the registry that names them: the
+//! [`Integrator`] interface (an options type that renders), the run's settings that are no
+//! integrator's own ([`RunOptions`]: budget, seed, threads, tiles, progress, stop flag,
+//! per-strategy images, checkpoints) and the finished render ([`RenderOutput`]).
+
+use crate::error::Error;
+use crate::film::Film;
+use crate::integrator::stats::RenderStats;
+use crate::math::Rgb;
+use crate::sampling::Heuristic;
+use crate::scene::Scene;
+use serde::Serialize;
+use std::ops::Range;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// How much to render.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Budget {
+    /// Samples per pixel.
+    Spp(u32),
+    /// Wall-clock seconds (whole passes of one sample per pixel).
+    Time(f64),
+}
+
+/// The settings of a render that belong to no integrator.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub budget: Budget,
+    pub seed: u64,
+    /// Worker threads (0 = all cores).
+    pub threads: usize,
+    pub tile_size: u32,
+    pub progress: bool,
+    /// Set from outside (a signal handler) to stop after the current pass.
+    pub stop: Option<Arc<AtomicBool>>,
+    /// Keep one image per strategy `(s,t)` (bidirectional integrators).
+    pub strategy_images: bool,
+    /// Wall-clock times (seconds, ascending) at which to keep a snapshot of the image: the
+    /// first pass that ends at or after each time is developed.
+    pub checkpoints: Vec<f64>,
+}
+
+impl RunOptions {
+    /// `budget` with seed 0, every core, 32-pixel tiles and nothing else asked for.
+    pub fn new(budget: Budget) -> RunOptions {
+        RunOptions {
+            budget,
+            seed: 0,
+            threads: 0,
+            tile_size: 32,
+            progress: false,
+            stop: None,
+            strategy_images: false,
+            checkpoints: Vec::new(),
+        }
+    }
+}
+
+/// The iterations of a render to render (all of them when `None`).
+pub type Iterations = Option<Range<u32>>;
+
+/// What rendering gives.
+pub type Rendered = Result<RenderOutput, Error>;
+
+/// An integrator's options type, and how the integrator renders with them.
+pub trait Integrator:
+    clap::Args + clap::FromArgMatches + Default + Clone + std::fmt::Debug + Serialize + Send + Sync + 'static
+{
+    /// Whether the integrator samples with the bidirectional core's strategies (it needs a
+    /// light to start light subpaths from, and reports connections and light paths).
+    const BIDIRECTIONAL: bool;
+
+    /// Renders iterations `iterations` (all of them when `None`) of the run `run` describes
+    /// with this integrator and these options. The statistics' `integrator` and `options`
+    /// are the registry's to fill.
+    fn render(&self, scene: &Scene, run: &RunOptions, iterations: Iterations) -> Rendered;
+
+    /// The MIS heuristic, for an integrator that weighs strategies.
+    fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
+        None
+    }
+}
+
+/// The image as it stood at a checkpoint.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    pub seconds: f64,
+    /// Samples (or mutations) per pixel done.
+    pub spp: u32,
+    pub image: Vec<Rgb>,
+}
+
+/// Takes the snapshots whose checkpoint time has come.
+pub(crate) fn take_snapshots(
+    checkpoints: &[f64],
+    snapshots: &mut Vec<Snapshot>,
+    seconds: f64,
+    spp: u32,
+    develop: impl FnOnce() -> Vec<Rgb>,
+) {
+    let due = checkpoints.iter().filter(|&&t| t <= seconds).count();
+    if due > snapshots.len() {
+        let image = develop();
+        // Checkpoints passed within one pass share its image.
+        while snapshots.len() < due {
+            snapshots.push(Snapshot { seconds, spp, image: image.clone() });
+        }
+    }
+}
+
+/// A finished render.
+pub struct RenderOutput {
+    pub image: Vec<Rgb>,
+    /// Per-strategy images `(name, pixels)` when asked for; they sum to `image`.
+    pub strategy_images: Vec<(String, Vec<Rgb>)>,
+    /// Images at the requested checkpoints.
+    pub snapshots: Vec<Snapshot>,
+    pub width: u32,
+    pub height: u32,
+    pub stats: RenderStats,
+    /// The film's sums (what a chunk of a distributed render keeps).
+    pub film: Option<Film>,
+}
