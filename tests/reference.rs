@@ -176,6 +176,12 @@ fn path() -> Vec<Row> {
         row(&MATERIALS, "path", 128, "").same_estimator(4096),
         // Lit by `sunsky` alone, through a window: the sun patch on the floor lights the room.
         row(&SUNLIT_ROOM, "path", 32, ""),
+        // Mitsuba 0.6's sun, sky and both, as Mitsuba 0.6 renders them. Direct light alone
+        // must fail.
+        row(&SUN06, "path", 64, "").same_estimator(1024),
+        row(&SKY06, "path", 64, "").same_estimator(1024),
+        row(&SUNSKY06, "path", 64, "").same_estimator(1024),
+        row(&SUNSKY06, "path", 64, "").max_depth(2).same_estimator(1024).must_fail(),
         // Glass, glossy floors, 13 area lights on disks and rectangles.
         row(&STAIRCASE2, "path", 128, "").same_estimator(1024),
         row(&STAIRCASE2, "path", 128, "").sampler(SamplerKind::Sobol).same_estimator(1024),
@@ -192,6 +198,9 @@ fn bidirectional() -> Vec<Row> {
         row(&CORNELL_PLY, "bdpt", 16, ""),
         row(&CORNELL_PLY, "eorr", 16, ""),
         row(&CORNELL_PLY, "lvc", 16, ""),
+        row(&SUN06, "bdpt", 32, ""),
+        row(&SKY06, "bdpt", 32, ""),
+        row(&SUNSKY06, "bdpt", 32, ""),
         row(&SPOT_POINT, "lighttrace", 64, ""),
         row(&SPOT_POINT, "bdpt", 32, ""),
         row(&VEACH_MIS, "lighttrace", 256, ""),

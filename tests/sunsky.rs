@@ -1,7 +1,9 @@
 //! The `sunsky`, `sun` and `sky` emitters: a diffuse ground and block under Mitsuba 3's sun
 //! and sky rendered by the path tracer and BDPT against Mitsuba 3's reference
 //! (`tests/data/sunsky.exr`, `scripts/make_references.py sunsky`); the plugins and
-//! parameters as the loader reads them (Mitsuba 3's names, Mitsuba 0.6's upgraded).
+//! parameters as the loader reads them (Mitsuba 3's names, Mitsuba 0.6's upgraded, and
+//! Mitsuba 0.6's own sun in a file of version 0.x; its renders against Mitsuba 0.6's are
+//! rows of `tests/reference.rs`).
 
 mod common;
 
@@ -101,30 +103,83 @@ fn mitsuba_06_names_and_frame() {
         <float name="sunScale" value="2"/><float name="skyScale" value="0.5"/>
         <float name="sunRadiusScale" value="4"/><integer name="resolution" value="256"/></emitter>"#;
     let modern = r#"<emitter type="sunsky"><vector name="sun_direction" x="0.3" y="0.8" z="0.2"/>
-        <float name="sun_scale" value="2"/><float name="sky_scale" value="0.5"/>
+        <float name="sun_scale" value="2"/><float name="sky_scale" value="0.5"/><float name="albedo" value="0.2"/>
         <float name="sun_aperture" value="2.1432"/>
         <transform name="to_world"><rotate x="1" angle="-90"/></transform></emitter>"#;
     let old = load("0.6.0", legacy).unwrap();
     let new = load("3.0.0", modern).unwrap();
     let w = old.stats.warnings.join("\n");
     assert!(w.contains("resolution"), "{w}");
-    // The sky's horizon is y = 0 in both; the sun the same disk.
+    // The sky's horizon is y = 0 in both (Mitsuba 0.6's default ground albedo, 0.2, given
+    // to the Mitsuba 3 file); the sun the same disk, with Mitsuba 0.6's radiance: the
+    // Preetham sun at this zenith angle and the default turbidity, scaled by `sunScale`
+    // and spread over a disk of 4 times the radius.
     let sun = Vec3::new(0.3, 0.8, 0.2).normalize();
+    let zenith = sun.y.acos();
+    let radius = pcbpt::light::sun06::ANGULAR_RADIUS;
+    let spread = (1.0 - radius.cos()) / (1.0 - (4.0 * radius).cos());
+    let expected_sun = pcbpt::light::sun06::radiance(zenith, 3.0) * 2.0 * spread;
     for d in
         [sun, Vec3::new(0.5, 0.2, -0.6).normalize(), Vec3::new(0.1, 0.6, 0.7).normalize(), Vec3::new(0.5, -0.1, 0.3)]
     {
         let d = d.normalize();
-        let (a, b) = (
-            old.lights.iter().map(|l| l.eval_infinite(d)).sum::<Vec3>(),
-            new.lights.iter().map(|l| l.eval_infinite(d)).sum::<Vec3>(),
-        );
-        assert!((a - b).abs().max_element() <= 1e-4 * b.max_element().max(1e-3), "towards {d}: {a} against {b}");
+        let (a, b) = (old.lights[0].eval_infinite(d), new.lights[0].eval_infinite(d));
+        assert!((a - b).abs().max_element() <= 1e-4 * b.max_element().max(1e-3), "sky towards {d}: {a} against {b}");
         let (pa, pb) = (old.lights[1].pdf_infinite(d), new.lights[1].pdf_infinite(d));
         assert!((pa - pb).abs() <= 1e-3 * pb, "the sun's density towards {d}: {pa} against {pb}");
+        let l = old.lights[1].eval_infinite(d);
+        let want = if d == sun { expected_sun } else { Vec3::ZERO };
+        assert!(
+            (l - want).abs().max_element() <= 1e-4 * want.max_element().max(1e-3),
+            "sun towards {d}: {l} against {want}"
+        );
     }
     // A Mitsuba 0.6 name in a Mitsuba 3 file is unused.
     let e = load("3.0.0", r#"<emitter type="sunsky"><float name="sunScale" value="2"/></emitter>"#).err().unwrap();
     assert!(e.contains("unused property \"sunScale\""), "{e}");
+}
+
+/// Mitsuba 0.6's sun keeps its power whatever `sunRadiusScale` makes of its size, and a
+/// `sunRadiusScale` of 0 makes it a directional light of that irradiance; a Mitsuba 0.6
+/// sky's ground albedo defaults to 0.2 (Mitsuba 3's to 0.3).
+#[test]
+fn mitsuba_06_sun_keeps_its_power_and_a_zero_radius_is_directional() {
+    let sun = |radius_scale: &str| {
+        let e = format!(
+            r#"<emitter type="sun"><vector name="sunDirection" x="-0.4" y="0.6" z="0.69"/><float name="turbidity" value="4"/>
+            <float name="scale" value="5"/><float name="sunRadiusScale" value="{radius_scale}"/></emitter>"#
+        );
+        let scene = load("0.6.0", &e).unwrap();
+        assert_eq!(scene.lights.len(), 1);
+        match &scene.lights[0] {
+            Light::Sun(s) => s.irradiance(),
+            Light::Directional { direction, irradiance } => {
+                assert!((*direction + Vec3::new(-0.4, 0.6, 0.69).normalize()).length() < 1e-6, "{direction}");
+                *irradiance
+            }
+            other => panic!("not a sun: {other:?}"),
+        }
+    };
+    let zenith = Vec3::new(-0.4, 0.6, 0.69).normalize().y.acos();
+    let expected = pcbpt::light::sun06::irradiance(zenith, 4.0) * 5.0;
+    for scale in ["1", "3", "0"] {
+        let e = sun(scale);
+        assert!(
+            (e - expected).abs().max_element() <= 2e-3 * expected.max_element(),
+            "sunRadiusScale {scale}: {e} against {expected}"
+        );
+    }
+    let e = load("0.6.0", r#"<emitter type="sun"><float name="sunRadiusScale" value="-1"/></emitter>"#).err().unwrap();
+    assert!(e.contains("sunRadiusScale"), "{e}");
+    let sky = |albedo: &str| {
+        let e =
+            format!(r#"<emitter type="sky"><vector name="sunDirection" x="0.3" y="0.3" z="0.9"/>{albedo}</emitter>"#);
+        load("0.6.0", &e).unwrap().lights[0].eval_infinite(Vec3::new(0.2, 0.1, 0.5).normalize())
+    };
+    let (default, explicit, brighter) =
+        (sky(""), sky(r#"<float name="albedo" value="0.2"/>"#), sky(r#"<float name="albedo" value="0.3"/>"#));
+    assert_eq!(default, explicit);
+    assert!(brighter.y > default.y, "{brighter} against {default}");
 }
 
 #[test]

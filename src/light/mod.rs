@@ -14,6 +14,8 @@ use glam::{Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::Arc;
 
+pub mod cie;
+pub mod sun06;
 pub mod sunsky;
 
 /// A sphere enclosing the scene (for the power and sampling of lights at infinity).

@@ -167,6 +167,8 @@ pub struct SunSkyParams {
     pub sun_aperture: f32,
     /// Mitsuba 3's `complex_sun`: limb darkening and a radiance that varies with elevation.
     pub complex_sun: bool,
+    /// Mitsuba 0.6's sun ([`crate::light::sun06`]) instead of Hosek and Wilkie's.
+    pub sun06: bool,
 }
 
 impl SunSkyParams {
@@ -340,8 +342,8 @@ impl Sky {
 }
 
 /// The sun: a disk of directions of half-angle `acos(cos_max)` about `dir`, uniform radiance
-/// (Mitsuba 3's default) or Hosek and Wilkie's limb-darkened disk (`complex_sun`); zero
-/// below the horizon.
+/// (Mitsuba 3's default, or Mitsuba 0.6's sun for files of version 0.x) or Hosek and
+/// Wilkie's limb-darkened disk (`complex_sun`); zero below the horizon.
 #[derive(Debug)]
 pub struct Sun {
     to_local: Mat3,
@@ -385,6 +387,13 @@ impl Sun {
                 (0..n).map(|i| data(SUN_RAD + t * n + i) * (1.0 - tw) + data(SUN_RAD + (t + 1) * n + i) * tw).collect();
             (coefs, factor)
         });
+        let (radiance, complex) = if p.sun06 {
+            // Mitsuba 0.6 keeps the disk's power whatever its size.
+            let widened = (1.0 - crate::light::sun06::ANGULAR_RADIUS.cos()) / (1.0 - cos_max);
+            (crate::light::sun06::radiance(unit_angle_z(p.sun_local), p.turbidity) * (scale * widened), None)
+        } else {
+            (radiance, complex)
+        };
         let dir = (p.to_world * p.sun_local).normalize();
         let mut sun = Sun {
             to_local: p.to_world.inverse(),

@@ -64,6 +64,7 @@ fn case(name: &str) -> SunSkyParams {
         sky_scale: 1.0,
         sun_aperture: SUN_APERTURE_DEG,
         complex_sun: false,
+        sun06: false,
     };
     let from_date = |t: DateTime, p: Place| {
         let (theta, phi) = sun_coordinates(&t, &p);
@@ -87,6 +88,7 @@ fn case(name: &str) -> SunSkyParams {
                 to_world,
                 sun_local: (to_world.inverse() * Vec3::new(-0.2, 0.1, 0.35).normalize()).normalize(),
                 complex_sun: true,
+                sun06: false,
                 turbidity: 2.2,
                 albedo: Rgb::splat(0.8),
                 sun_aperture: 3.0,

@@ -1,9 +1,12 @@
 //! The `sunsky` emitter and its halves `sun` and `sky` (Mitsuba 0.6's plugins; here a
 //! `sunsky` with the other half off), with Mitsuba 3's parameters and Mitsuba 0.6's upgraded.
+//! A file of version 0.x gets Mitsuba 0.6's sun ([`sun06`]: its radiance, its size and
+//! `sunRadiusScale`, 0 for a directional sun) beside the Hosek–Wilkie sky both versions share.
 
 use super::Builder;
 use crate::error::{Error, Result};
 use crate::light::Light;
+use crate::light::sun06;
 use crate::light::sunsky::{self, DateTime, Place, SUN_APERTURE_DEG, Sky, Sun, SunSkyParams};
 use crate::scene::xml::{Node, NodeId};
 use glam::{Mat3, Mat4, Vec3};
@@ -59,24 +62,28 @@ impl Builder<'_> {
         let sun_scale = if has_sun { in_range(node, "sun_scale", scale, 0.0, f32::MAX)? } else { 0.0 };
         let sky_scale = if has_sky { in_range(node, "sky_scale", scale, 0.0, f32::MAX)? } else { 0.0 };
         let turbidity = in_range(node, "turbidity", 3.0, 1.0, 10.0)?;
-        let albedo = node.rgb("albedo")?.unwrap_or(Vec3::splat(0.3));
+        // Mitsuba 0.6's sky defaults to a ground albedo of 0.2, Mitsuba 3's to 0.3.
+        let albedo = node.rgb("albedo")?.unwrap_or(Vec3::splat(if node.legacy { 0.2 } else { 0.3 }));
         if !(albedo.min_element() >= 0.0 && albedo.max_element() <= 1.0) {
             return Err(Error::input(
                 &node.prop_loc("albedo"),
                 format!("\"albedo\" of {plugin} must be within [0, 1] in every channel, got {albedo}"),
             ));
         }
+        // Mitsuba 0.6's sunRadiusScale of 0 makes the sun a directional light.
+        let mut directional_sun = false;
         let sun_aperture = if node.legacy && node.prop("sun_radius_scale").is_some() {
             let s = node.float("sun_radius_scale")?.unwrap_or(1.0);
-            if !(s > 0.0 && SUN_APERTURE_DEG * s < 180.0) {
+            if !(s >= 0.0 && SUN_APERTURE_DEG * s < 180.0) {
                 return Err(Error::input(
                     &node.prop_loc("sun_radius_scale"),
                     format!(
-                        "\"sunRadiusScale\" must be positive and give a sun smaller than a half sphere, got {s} (for a sun of no size, use a directional emitter)"
+                        "\"sunRadiusScale\" must be 0 (a directional sun) or positive and give a sun smaller than a half sphere, got {s}"
                     ),
                 ));
             }
-            SUN_APERTURE_DEG * s
+            directional_sun = s == 0.0;
+            if directional_sun { SUN_APERTURE_DEG } else { SUN_APERTURE_DEG * s }
         } else {
             let a = node.float_or("sun_aperture", SUN_APERTURE_DEG)?;
             if !(a > 0.0 && a < 180.0) {
@@ -147,8 +154,18 @@ impl Builder<'_> {
             ));
         }
         self.check_unused(id)?;
-        let params =
-            SunSkyParams { to_world, sun_local, turbidity, albedo, sun_scale, sky_scale, sun_aperture, complex_sun };
+        let sun06 = node.legacy;
+        let params = SunSkyParams {
+            to_world,
+            sun_local,
+            turbidity,
+            albedo,
+            sun_scale,
+            sky_scale,
+            sun_aperture,
+            complex_sun,
+            sun06,
+        };
         if !params.sun_visible() {
             self.stats.warnings.push(format!(
                 "{loc}: the sun is below the horizon ({:.2}° elevation): the {plugin} emitter is black, as in Mitsuba 3",
@@ -160,7 +177,11 @@ impl Builder<'_> {
         if sky_scale > 0.0 {
             lights.push(Light::Sky(Arc::new(Sky::new(&params))));
         }
-        if sun_scale > 0.0 {
+        if sun_scale > 0.0 && directional_sun {
+            let zenith = sun_local.z.clamp(-1.0, 1.0).acos();
+            let irradiance = sun06::irradiance(zenith, turbidity) * sun_scale;
+            lights.push(Light::Directional { direction: -(to_world * sun_local).normalize(), irradiance });
+        } else if sun_scale > 0.0 {
             lights.push(Light::Sun(Arc::new(Sun::new(&params))));
         }
         Ok(lights)

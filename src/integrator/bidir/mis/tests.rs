@@ -88,6 +88,7 @@ fn scene(variant: Variant) -> Scene {
                     sky_scale: 0.2,
                     sun_aperture: crate::light::sunsky::SUN_APERTURE_DEG,
                     complex_sun: false,
+                    sun06: false,
                 };
                 let sky = crate::light::sunsky::Sky::new(&params);
                 let sun = crate::light::sunsky::Sun::new(&params);
