@@ -603,7 +603,8 @@ impl<'d> Builder<'d> {
         let geometry = match node.plugin.as_str() {
             "obj" | "ply" | "serialized" => {
                 let mut m = self.load_mesh(node)?;
-                if node.boolean_or("face_normals", false)? {
+                let face_normals = node.boolean_or("face_normals", false)?;
+                if face_normals {
                     m.normals = None;
                 }
                 // Mitsuba flips OBJ texture coordinates by default (`flip_tex_coords`).
@@ -614,6 +615,10 @@ impl<'d> Builder<'d> {
                     uv.iter_mut().for_each(|t| t.y = 1.0 - t.y);
                 }
                 m.transform(&to_world);
+                // Mitsuba smooths a mesh loaded without normals (in world space).
+                if m.normals.is_none() && !face_normals {
+                    m.compute_vertex_normals();
+                }
                 ShapeGeometry::Mesh(m)
             }
             "rectangle" | "cube" | "disk" => {

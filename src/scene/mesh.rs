@@ -47,6 +47,31 @@ impl TriangleMesh {
         }
     }
 
+    /// Smooth vertex normals for a mesh that has none, as Mitsuba (0.6 and 3) computes them
+    /// for a mesh loaded without normals: at each vertex, the sum of the unit normals of the
+    /// triangles around it, each weighted by the triangle's angle at the vertex (Thürmer
+    /// and Wüthrich 1998), normalised. A vertex of degenerate triangles only (which no ray
+    /// hits) gets `+z`.
+    pub fn compute_vertex_normals(&mut self) {
+        let mut sums = vec![Vec3::ZERO; self.positions.len()];
+        for t in &self.indices {
+            let p = t.map(|k| self.positions[k as usize]);
+            let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+            if n == Vec3::ZERO {
+                continue;
+            }
+            for i in 0..3 {
+                let d0 = (p[(i + 1) % 3] - p[i]).normalize_or_zero();
+                let d1 = (p[(i + 2) % 3] - p[i]).normalize_or_zero();
+                let angle = d0.dot(d1).clamp(-1.0, 1.0).acos();
+                if angle.is_finite() {
+                    sums[t[i] as usize] += n * angle;
+                }
+            }
+        }
+        self.normals = Some(sums.into_iter().map(|s| s.try_normalize().unwrap_or(Vec3::Z)).collect());
+    }
+
     /// Reverses the winding of every triangle (flips geometric normals).
     pub fn reverse_winding(&mut self) {
         for t in &mut self.indices {
@@ -236,6 +261,40 @@ pub fn disk(segments: u32) -> TriangleMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn vertex_normals_weigh_faces_by_their_angle() {
+        // A flat fan: every normal is the plane's.
+        let mut flat = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(-1.0, 0.2, 0.0)],
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+            ..Default::default()
+        };
+        flat.compute_vertex_normals();
+        assert!(flat.normals.as_ref().unwrap().iter().all(|n| (*n - Vec3::Z).length() < 1e-6));
+        // The corner of a cube (three faces, two triangles each, shared vertices): the corner's
+        // normal is the diagonal only with angle weights (face (x=0) meets the corner with
+        // two triangles, 45° + 45°; the others with one of 90°) — area or plain averaging
+        // would tilt it.
+        let p = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+        let mut corner = TriangleMesh {
+            positions: vec![p(0., 0., 0.), p(1., 0., 0.), p(0., 1., 0.), p(0., 0., 1.), p(0., 1., 1.)],
+            // z = 0 face (normal -z), y = 0 face (normal -y), x = 0 face in two triangles (normal -x).
+            indices: vec![[0, 2, 1], [0, 1, 3], [0, 3, 4], [0, 4, 2]],
+            ..Default::default()
+        };
+        corner.compute_vertex_normals();
+        let n0 = corner.normals.as_ref().unwrap()[0];
+        assert!((n0 - Vec3::splat(-1.0).normalize()).length() < 1e-5, "{n0}");
+        // A vertex of a degenerate triangle alone gets +z.
+        let mut degenerate = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, 2.0 * Vec3::X],
+            indices: vec![[0, 1, 2]],
+            ..Default::default()
+        };
+        degenerate.compute_vertex_normals();
+        assert_eq!(degenerate.normals.unwrap(), vec![Vec3::Z; 3]);
+    }
 
     #[test]
     fn cube_normals_point_outwards() {
