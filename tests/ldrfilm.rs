@@ -224,19 +224,27 @@ fn properties_no_plugin_reads_are_warnings_in_a_06_file_and_errors_in_a_mitsuba_
 }
 
 #[test]
-fn a_negative_conductor_eta_of_a_06_file_is_its_magnitude() {
-    let bsdf = |eta: &str| {
+fn a_negative_conductor_eta_or_k_of_a_06_file_is_its_magnitude() {
+    let bsdf = |eta: &str, k: &str| {
         with_material(&format!(
-            r#"<bsdf type="conductor"><rgb name="eta" value="{eta}"/><rgb name="k" value="3, 2, 1"/></bsdf>"#
+            r#"<bsdf type="conductor"><rgb name="eta" value="{eta}"/><rgb name="k" value="{k}"/></bsdf>"#
         ))
     };
-    let s = load(&small("0.6.0", "", &bsdf("-0.2, 0.9, 1.1"), "")).unwrap();
-    assert!(s.stats.warnings.iter().any(|w| w.contains("negative channel")), "{:?}", s.stats.warnings);
-    let same = load(&small("0.6.0", "", &bsdf("0.2, 0.9, 1.1"), "")).unwrap();
-    assert_eq!(format!("{:?}", s.bsdfs), format!("{:?}", same.bsdfs));
-    let v3 = small("3.0.0", "", &bsdf("-0.2, 0.9, 1.1"), "").replace("toWorld", "to_world").replace("lookAt", "lookat");
-    let e = load(&v3).err().expect("a negative eta in a Mitsuba 3 file is an error").to_string();
-    assert!(e.contains("\"eta\" must be finite and non-negative"), "{e}");
+    let same = load(&small("0.6.0", "", &bsdf("0.2, 0.9, 1.1", "3, 2, 1"), "")).unwrap();
+    assert!(same.stats.warnings.iter().all(|w| !w.contains("negative channel")), "{:?}", same.stats.warnings);
+    // living-room-2's fitted k has a negative red channel.
+    for (eta, k, name) in [("-0.2, 0.9, 1.1", "3, 2, 1", "eta"), ("0.2, 0.9, 1.1", "-3, 2, 1", "k")] {
+        let s = load(&small("0.6.0", "", &bsdf(eta, k), "")).unwrap();
+        assert!(
+            s.stats.warnings.iter().any(|w| w.contains(&format!("{name} ")) && w.contains("negative channel")),
+            "{:?}",
+            s.stats.warnings
+        );
+        assert_eq!(format!("{:?}", s.bsdfs), format!("{:?}", same.bsdfs));
+        let v3 = small("3.0.0", "", &bsdf(eta, k), "").replace("toWorld", "to_world").replace("lookAt", "lookat");
+        let e = load(&v3).err().expect("a negative eta or k in a Mitsuba 3 file is an error").to_string();
+        assert!(e.contains(&format!("\"{name}\" must be finite and non-negative")), "{e}");
+    }
 }
 
 /// A diffuse quad in the `z = 0` plane whose vertex normals lean 73° towards `+x`, seen from

@@ -429,22 +429,28 @@ impl<'d> Builder<'d> {
     /// Conductor parameters: a named `material` or `eta` and `k` (default: a perfect mirror),
     /// relative to the exterior medium's index `ext_eta` (Mitsuba 0.6's `extEta`, a number
     /// or a named index; default 1): both are divided by it, as Mitsuba 0.6 did. A version
-    /// 0.x file's `eta` may have negative channels (RGB fits of measured data do), which
-    /// Mitsuba 0.6 rendered: its Fresnel term, like this renderer's, depends on `eta²` alone,
-    /// so the channel's magnitude is taken, with a warning.
+    /// 0.x file's `eta` and `k` may have negative channels (RGB fits of measured data do),
+    /// which Mitsuba 0.6 rendered: its Fresnel term, like this renderer's, depends on
+    /// `(eta + ik)²` up to complex conjugation, which the magnitudes keep, so they are taken,
+    /// with a warning.
     fn conductor(&mut self, id: NodeId) -> Result<(Vec3, Vec3)> {
         let node = self.doc.node(id);
         let (eta, k) = match (node.string("material")?, node.rgb("eta")?, node.rgb("k")?) {
             (Some(m), None, None) => lookup_conductor(m).ok_or_else(|| {
                 Error::input(&node.prop_loc("material"), format!("unknown conductor material \"{m}\""))
             })?,
-            (None, Some(eta), Some(k)) if node.legacy && eta.is_finite() && eta.min_element() < 0.0 => {
-                self.stats.warnings.push(format!(
-                    "{}: the conductor's eta {eta} has a negative channel; its magnitude is used (the Fresnel term \
-                     depends on eta² alone, as in Mitsuba 0.6)",
-                    node.prop_loc("eta")
-                ));
-                (eta.abs(), non_negative_rgb(node, "k", k)?)
+            (None, Some(eta), Some(k)) if node.legacy && (eta.min_element() < 0.0 || k.min_element() < 0.0) => {
+                let mut magnitude = |name: &str, v: Vec3| {
+                    if v.is_finite() && v.min_element() < 0.0 {
+                        self.stats.warnings.push(format!(
+                            "{}: the conductor's {name} {v} has a negative channel; its magnitude is used (the Fresnel \
+                             term depends on (eta + ik)² up to conjugation, as in Mitsuba 0.6)",
+                            node.prop_loc(name)
+                        ));
+                    }
+                    non_negative_rgb(node, name, v.abs())
+                };
+                (magnitude("eta", eta)?, magnitude("k", k)?)
             }
             (None, Some(eta), Some(k)) => (non_negative_rgb(node, "eta", eta)?, non_negative_rgb(node, "k", k)?),
             (None, None, None) => (Vec3::ZERO, Vec3::ONE),

@@ -238,9 +238,18 @@ impl Document {
         }
         if let Some(c) = n.children.iter().find(|c| !c.used.get()) {
             let child = &self.nodes[c.node];
+            // Participating media are a feature this renderer lacks, not a mistake in the file.
+            let lacking = if child.tag == "medium" || child.tag == "phase" {
+                " (participating media are not supported: the scene needs a renderer with media)"
+            } else {
+                ""
+            };
             return Err(Error::input(
                 &c.loc,
-                format!("unexpected nested {} \"{}\" in {} plugin \"{}\"", child.tag, child.plugin, n.tag, n.plugin),
+                format!(
+                    "unexpected nested {} \"{}\" in {} plugin \"{}\"{lacking}",
+                    child.tag, child.plugin, n.tag, n.plugin
+                ),
             ));
         }
         Ok(())
