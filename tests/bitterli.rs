@@ -65,7 +65,6 @@ const LACKS: &[(&str, &str)] = &[
     ("furball", "unknown shape plugin \"hair\""),
     ("hair-curl", "unknown shape plugin \"hair\""),
     ("straight-hair", "unknown shape plugin \"hair\""),
-    ("living-room", "unknown bsdf plugin \"roughdiffuse\""),
     ("living-room-3", "participating media are not supported"),
     ("staircase2", "participating media are not supported"),
     ("teapot-full", "participating media are not supported"),

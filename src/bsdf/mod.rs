@@ -15,6 +15,7 @@ pub mod fresnel;
 pub mod microfacet;
 pub mod perturb;
 pub mod plastic;
+pub mod roughdiffuse;
 
 use crate::math::{Frame, Rgb};
 use crate::texture::{Opacity, Texture};
@@ -70,6 +71,9 @@ pub enum BsdfModel {
     Plastic { params: PlasticParams, diffuse_reflectance: Texture, specular_reflectance: Texture },
     /// Diffuse base under a rough coating.
     RoughPlastic { params: RoughPlasticParams, diffuse_reflectance: Texture, specular_reflectance: Texture },
+    /// Mitsuba 0.6's Oren–Nayar reflection; `alpha` is the RMS slope (its channels' mean),
+    /// `fast` its qualitative model.
+    RoughDiffuse { reflectance: Texture, alpha: Texture, fast: bool },
 }
 
 /// A BSDF as attached to a shape: a model, one-sided (the front side of the shading
@@ -142,7 +146,7 @@ impl Bsdf {
         let glossy =
             |m: microfacet::Microfacet, transmission| lobe(transmission, 0.5 * (m.alpha_u + m.alpha_v), Some(m.kind));
         let lobes = match &self.model {
-            BsdfModel::Diffuse { .. } => [reflection(DIFFUSE_ROUGHNESS), None],
+            BsdfModel::Diffuse { .. } | BsdfModel::RoughDiffuse { .. } => [reflection(DIFFUSE_ROUGHNESS), None],
             BsdfModel::Conductor { .. } => [reflection(0.0), None],
             BsdfModel::RoughConductor { distribution, .. } => [glossy(distribution.at(uv), false), None],
             BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => both(0.0),
@@ -286,6 +290,9 @@ impl Bsdf {
         let (wo, wi) = self.orient(wo, wi);
         match &self.model {
             BsdfModel::Diffuse { reflectance } => diffuse::eval(reflectance.eval(uv), wo, wi),
+            BsdfModel::RoughDiffuse { reflectance, alpha, fast } => {
+                roughdiffuse::eval(reflectance.eval(uv), alpha.eval(uv).element_sum() / 3.0, *fast, wo, wi)
+            }
             BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => Rgb::ZERO,
             BsdfModel::RoughConductor { distribution, eta, k, specular_reflectance } => {
                 conductor::eval_rough(&distribution.at(uv), *eta, *k, specular_reflectance.eval(uv), wo, wi)
@@ -308,6 +315,7 @@ impl Bsdf {
         let (wo, wi) = self.orient(wo, wi);
         match &self.model {
             BsdfModel::Diffuse { .. } => diffuse::pdf(wo, wi),
+            BsdfModel::RoughDiffuse { .. } => roughdiffuse::pdf(wo, wi),
             BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => 0.0,
             BsdfModel::RoughConductor { distribution, .. } => conductor::pdf_rough(&distribution.at(uv), wo, wi),
             BsdfModel::RoughDielectric { distribution, eta, .. } => {
@@ -376,6 +384,10 @@ impl Bsdf {
     fn sample_general(&self, wo_f: Vec3, uv: Vec2, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         let s = match &self.model {
             BsdfModel::Diffuse { reflectance } => diffuse::sample(reflectance.eval(uv), wo_f, u2)?,
+            BsdfModel::RoughDiffuse { reflectance, alpha, fast } => {
+                let a = alpha.eval(uv).element_sum() / 3.0;
+                roughdiffuse::sample(reflectance.eval(uv), a, *fast, wo_f, u2)?
+            }
             BsdfModel::Conductor { eta, k, specular_reflectance } => {
                 conductor::sample_smooth(*eta, *k, specular_reflectance.eval(uv), wo_f)?
             }
@@ -481,6 +493,10 @@ mod tests {
                 format!("roughplastic {kind:?} α={alpha}"),
                 Bsdf { model, two_sided: false, perturbation: None, opacity: None },
             ));
+        }
+        for (alpha, fast) in [(0.2, false), (0.8, false), (0.5, true)] {
+            let model = BsdfModel::RoughDiffuse { reflectance: c(0.7), alpha: c(alpha), fast };
+            v.push((format!("roughdiffuse α={alpha} fast={fast}"), Bsdf::new(model)));
         }
         v
     }

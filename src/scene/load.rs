@@ -45,6 +45,7 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughdielectric",
     "plastic",
     "roughplastic",
+    "roughdiffuse",
     "bumpmap",
     "normalmap",
 ];
@@ -480,6 +481,7 @@ impl<'d> Builder<'d> {
         let model = match plugin.as_str() {
             "bumpmap" | "normalmap" => return self.perturbed_bsdf(id),
             "diffuse" => BsdfModel::Diffuse { reflectance: self.texture_prop(id, "reflectance", Vec3::splat(0.5))? },
+            "roughdiffuse" => self.rough_diffuse(id)?,
             "twosided" => {
                 let inner: Vec<NodeId> = self.doc.children(id, "bsdf").map(|c| c.node).collect();
                 return match inner.as_slice() {
@@ -549,6 +551,28 @@ impl<'d> Builder<'d> {
         };
         self.check_unused(id)?;
         Ok(Bsdf::new(model))
+    }
+
+    /// Mitsuba 0.6's `roughdiffuse`: `reflectance` (or `diffuseReflectance`), `alpha` (a
+    /// number or a texture, default 0.2) and `useFastApprox`.
+    fn rough_diffuse(&mut self, id: NodeId) -> Result<BsdfModel> {
+        let name =
+            if self.node(id).prop("diffuse_reflectance").is_some() { "diffuse_reflectance" } else { "reflectance" };
+        let reflectance = self.texture_prop(id, name, Vec3::splat(0.5))?;
+        let alpha = self.texture_prop(id, "alpha", Vec3::splat(0.2))?;
+        let values: Vec<Vec3> = match &alpha {
+            Texture::Constant(c) => vec![*c],
+            Texture::Bitmap { bitmap, .. } => bitmap.texels().collect(),
+            Texture::Checkerboard { color0, color1, .. } => vec![*color0, *color1],
+        };
+        if let Some(bad) = values.iter().find(|v| !(v.is_finite() && v.min_element() >= 0.0)) {
+            return Err(Error::input(
+                &self.node(id).prop_loc("alpha"),
+                format!("roughdiffuse's alpha must be finite and non-negative, got {bad}"),
+            ));
+        }
+        let fast = self.node(id).boolean_or("use_fast_approx", false)?;
+        Ok(BsdfModel::RoughDiffuse { reflectance, alpha, fast })
     }
 
     fn resolve_path(&self, node: &Node, name: &str) -> Result<PathBuf> {
