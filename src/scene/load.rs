@@ -26,6 +26,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+mod coating;
 mod mask;
 mod perturb;
 mod prefetch;
@@ -45,6 +46,8 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughdielectric",
     "plastic",
     "roughplastic",
+    "coating",
+    "roughcoating",
     "bumpmap",
     "normalmap",
 ];
@@ -539,6 +542,7 @@ impl<'d> Builder<'d> {
                 }
             }
             "mask" => return self.mask(id),
+            "coating" | "roughcoating" => return self.coated(id),
             _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),
         };
         self.check_unused(id)?;
