@@ -8,6 +8,7 @@
 //! `wo`) and the reverse pdf (of `wo` given `wi`) are available, as bidirectional methods
 //! need.
 
+pub mod coating;
 pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
@@ -74,6 +75,9 @@ pub enum BsdfModel {
     /// Mitsuba 0.6's Oren–Nayar reflection; `alpha` is the RMS slope (its channels' mean),
     /// `fast` its qualitative model.
     RoughDiffuse { reflectance: Texture, alpha: Texture, fast: bool },
+    /// Any BSDF under a smooth or rough dielectric layer (Mitsuba 0.6's `coating` and
+    /// `roughcoating`).
+    Coating(Box<coating::Coating>),
 }
 
 /// A BSDF as attached to a shape: a model, one-sided (the front side of the shading
@@ -131,14 +135,18 @@ impl Bsdf {
 
     /// `true` when every lobe is a Dirac delta (no light sampling possible).
     pub fn is_delta(&self) -> bool {
-        matches!(
-            self.model,
-            BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. }
-        )
+        match &self.model {
+            BsdfModel::Coating(c) => c.is_delta(),
+            m => matches!(
+                m,
+                BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. }
+            ),
+        }
     }
 
     /// The lobes of the model at texture coordinates `uv` (where a textured roughness is
-    /// looked up): a smooth coating's Dirac reflection over a diffuse base counts as two.
+    /// looked up): a smooth coating's Dirac reflection over a diffuse base counts as two; a
+    /// coating's own lobe comes before its nested BSDF's.
     pub fn lobes(&self, uv: Vec2) -> impl Iterator<Item = Lobe> {
         let lobe = |transmission, roughness, microfacet| Some(Lobe { transmission, roughness, microfacet });
         let reflection = |roughness| lobe(false, roughness, None);
@@ -157,8 +165,13 @@ impl Bsdf {
             BsdfModel::RoughPlastic { params, .. } => {
                 [glossy(params.distribution, false), reflection(DIFFUSE_ROUGHNESS)]
             }
+            BsdfModel::Coating(c) => [Some(c.lobe()), None],
         };
-        lobes.into_iter().flatten()
+        let nested: Vec<Lobe> = match &self.model {
+            BsdfModel::Coating(c) => c.nested.lobes(uv).collect(),
+            _ => Vec::new(),
+        };
+        lobes.into_iter().flatten().chain(nested)
     }
 
     /// The relative index of refraction (interior over exterior) of light crossing the
@@ -166,16 +179,21 @@ impl Bsdf {
     pub fn eta(&self) -> f32 {
         match &self.model {
             BsdfModel::Dielectric { eta, .. } | BsdfModel::RoughDielectric { eta, .. } => *eta,
+            // The layer bends light back as it leaves: what crosses is bent by the nested BSDF.
+            BsdfModel::Coating(c) => c.nested.eta(),
             _ => 1.0,
         }
     }
 
     /// `true` when the BSDF can transmit light to the other side.
     pub fn transmits(&self) -> bool {
-        matches!(
-            self.model,
-            BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } | BsdfModel::RoughDielectric { .. }
-        )
+        match &self.model {
+            BsdfModel::Coating(c) => c.nested.transmits(),
+            m => matches!(
+                m,
+                BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } | BsdfModel::RoughDielectric { .. }
+            ),
+        }
     }
 
     /// Mirrors both directions to the front side for two-sided BSDFs; `None` when the
@@ -307,11 +325,12 @@ impl Bsdf {
             BsdfModel::RoughPlastic { params, diffuse_reflectance, specular_reflectance } => {
                 plastic::eval_rough(params, diffuse_reflectance.eval(uv), specular_reflectance.eval(uv), wo, wi)
             }
+            BsdfModel::Coating(c) => c.eval(wo, wi, uv, mode),
         }
     }
 
     /// [`Bsdf::pdf`] of the model alone.
-    fn pdf_model(&self, wo: Vec3, wi: Vec3, uv: Vec2, _mode: TransportMode) -> f32 {
+    fn pdf_model(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> f32 {
         let (wo, wi) = self.orient(wo, wi);
         match &self.model {
             BsdfModel::Diffuse { .. } => diffuse::pdf(wo, wi),
@@ -323,6 +342,7 @@ impl Bsdf {
             }
             BsdfModel::Plastic { params, .. } => plastic::pdf(params, wo, wi),
             BsdfModel::RoughPlastic { params, .. } => plastic::pdf_rough(params, wo, wi),
+            BsdfModel::Coating(c) => c.pdf(wo, wi, uv, mode),
         }
     }
 
@@ -413,6 +433,7 @@ impl Bsdf {
                 let (d, sp) = (diffuse_reflectance.eval(uv), specular_reflectance.eval(uv));
                 plastic::sample_rough(params, d, sp, wo_f, u1, u2)?
             }
+            BsdfModel::Coating(c) => c.sample(wo_f, uv, u1, u2, mode)?,
         };
         Some(s)
     }
@@ -497,6 +518,49 @@ mod tests {
         for (alpha, fast) in [(0.2, false), (0.8, false), (0.5, true)] {
             let model = BsdfModel::RoughDiffuse { reflectance: c(0.7), alpha: c(alpha), fast };
             v.push((format!("roughdiffuse α={alpha} fast={fast}"), Bsdf::new(model)));
+        }
+        // Mitsuba 0.6's layers, smooth and rough, clear and tinted, over a diffuse base, a
+        // rough metal and rough glass.
+        let tint = Texture::Constant(Vec3::new(0.1, 0.3, 0.6));
+        let metal = |kind, alpha| Bsdf {
+            model: BsdfModel::RoughConductor {
+                distribution: rough(kind, alpha, alpha).into(),
+                eta,
+                k,
+                specular_reflectance: c(1.0),
+            },
+            two_sided: false,
+            perturbation: None,
+            opacity: None,
+        };
+        let glass = Bsdf::new(BsdfModel::RoughDielectric {
+            distribution: rough(MicrofacetType::Beckmann, 0.3, 0.3).into(),
+            eta: 1.33,
+            specular_reflectance: c(1.0),
+            specular_transmittance: c(1.0),
+        });
+        let layers = [
+            ("coating/diffuse", None, c(0.0), Bsdf::diffuse(c(0.8))),
+            ("coating/diffuse σa", None, tint.clone(), Bsdf::diffuse(c(0.8))),
+            ("coating/roughconductor σa", None, tint.clone(), metal(MicrofacetType::Ggx, 0.2)),
+            (
+                "roughcoating Beckmann α=0.1/diffuse",
+                Some(rough(MicrofacetType::Beckmann, 0.1, 0.1)),
+                c(0.0),
+                Bsdf::diffuse(c(0.8)),
+            ),
+            (
+                "roughcoating GGX α=0.4/roughconductor σa",
+                Some(rough(MicrofacetType::Ggx, 0.4, 0.4)),
+                tint,
+                metal(MicrofacetType::Beckmann, 0.3),
+            ),
+            ("roughcoating GGX α=0.2/roughdielectric", Some(rough(MicrofacetType::Ggx, 0.2, 0.2)), c(0.0), glass),
+        ];
+        for (name, distribution, sigma_a, nested) in layers {
+            let interface = distribution.map(|d| coating::RoughInterface::new(d, 1.5));
+            let layer = coating::Coating::new(1.5, 2.0, sigma_a, c(1.0), interface, nested);
+            v.push((name.to_string(), Bsdf::new(BsdfModel::Coating(Box::new(layer)))));
         }
         v
     }

@@ -116,10 +116,7 @@ impl RoughPlasticParams {
     }
 
     fn transmittance(&self, mu: f32) -> f32 {
-        let x = mu.clamp(0.0, 1.0) * (TRANSMITTANCE_RES - 1) as f32;
-        let i = (x as usize).min(TRANSMITTANCE_RES - 2);
-        let f = x - i as f32;
-        self.external_transmittance[i] * (1.0 - f) + self.external_transmittance[i + 1] * f
+        transmittance_at(&self.external_transmittance, mu)
     }
 
     fn prob_specular(&self, wo: Vec3) -> f32 {
@@ -133,6 +130,16 @@ impl RoughPlasticParams {
         let pd = t * (1.0 - self.specular_sampling_weight);
         if ps + pd > 0.0 { ps / (ps + pd) } else { 0.0 }
     }
+}
+
+/// A coating's transmittance `T(μ)` from its table over `μ = i / (n - 1)` (linear
+/// interpolation; `μ` clamped to [0, 1]).
+pub(crate) fn transmittance_at(table: &[f32], mu: f32) -> f32 {
+    let n = table.len();
+    let x = mu.clamp(0.0, 1.0) * (n - 1) as f32;
+    let i = (x as usize).min(n - 2);
+    let f = x - i as f32;
+    table[i] * (1.0 - f) + table[i + 1] * f
 }
 
 /// Energy a rough dielectric interface reflects and transmits for light arriving at

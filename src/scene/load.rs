@@ -26,6 +26,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+mod coating;
 mod mask;
 mod perturb;
 mod prefetch;
@@ -46,6 +47,8 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "plastic",
     "roughplastic",
     "roughdiffuse",
+    "coating",
+    "roughcoating",
     "bumpmap",
     "normalmap",
 ];
@@ -547,6 +550,7 @@ impl<'d> Builder<'d> {
                 }
             }
             "mask" => return self.mask(id),
+            "coating" | "roughcoating" => return self.coated(id),
             _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),
         };
         self.check_unused(id)?;
