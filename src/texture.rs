@@ -343,6 +343,16 @@ impl Texture {
             Texture::Checkerboard { color0, color1, .. } => (*color0 + *color1) * 0.5,
         }
     }
+
+    /// The component-wise maximum over the texture (every texel of a bitmap; as Mitsuba
+    /// 0.6's `getMaximum`, which BSDFs compare against 1 to keep energy).
+    pub fn max(&self) -> Rgb {
+        match self {
+            Texture::Constant(c) => *c,
+            Texture::Bitmap { bitmap, .. } => bitmap.texels().fold(Rgb::splat(f32::NEG_INFINITY), Rgb::max),
+            Texture::Checkerboard { color0, color1, .. } => color0.max(*color1),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -58,9 +58,6 @@ const SCENES: [&str; 32] = [
 /// whose files are all there must stop on this error and nothing else; every other scene
 /// whose files are there must render.
 const LACKS: &[(&str, &str)] = &[
-    ("car", "unknown bsdf plugin \"coating\""),
-    ("car2", "unknown bsdf plugin \"coating\""),
-    ("material-testball", "unknown bsdf plugin \"coating\""),
     ("curly-hair", "unknown shape plugin \"hair\""),
     ("furball", "unknown shape plugin \"hair\""),
     ("hair-curl", "unknown shape plugin \"hair\""),

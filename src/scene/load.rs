@@ -13,6 +13,7 @@ use crate::accel::{Accel, Cutout};
 use crate::bsdf::fresnel::{fresnel_diffuse_reflectance, lookup_conductor, lookup_ior};
 use crate::bsdf::microfacet::{Microfacet, MicrofacetType, Roughness};
 use crate::bsdf::plastic::{PlasticParams, RoughPlasticParams};
+use crate::bsdf::ward::{WardAlpha, WardParams, WardVariant};
 use crate::bsdf::{Bsdf, BsdfModel};
 use crate::error::Location;
 use crate::error::{Error, Result};
@@ -49,6 +50,7 @@ pub const BSDF_PLUGINS: &[&str] = &[
     "roughdiffuse",
     "coating",
     "roughcoating",
+    "ward",
     "bumpmap",
     "normalmap",
 ];
@@ -430,6 +432,40 @@ impl<'d> Builder<'d> {
         }
     }
 
+    /// Mitsuba 0.6's `ward`: `variant` (default `balanced`), the roughness `alpha` (default
+    /// 0.1) that `alpha_u` and `alpha_v` override, each a positive number or a texture,
+    /// `specular_reflectance` (default 0.2) and `diffuse_reflectance` (default 0.5), scaled
+    /// together where they sum to more than 1 unless `ensure_energy_conservation` is off
+    /// (with a warning, as 0.6 gave).
+    fn ward(&mut self, id: NodeId) -> Result<BsdfModel> {
+        let node = self.doc.node(id);
+        let name = node.string("variant")?.unwrap_or("balanced");
+        let variant = WardVariant::from_name(name).ok_or_else(|| {
+            let msg = format!("unknown ward variant \"{name}\" ({})", WardVariant::NAMES.join(", "));
+            Error::input(&node.prop_loc("variant"), msg)
+        })?;
+        let alpha = self.alpha_texture(id, "alpha")?.unwrap_or(Texture::Constant(Vec3::splat(0.1)));
+        let alpha_u = self.alpha_texture(id, "alpha_u")?.unwrap_or_else(|| alpha.clone());
+        let alpha_v = self.alpha_texture(id, "alpha_v")?.unwrap_or(alpha);
+        let alpha = match (alpha_u, alpha_v) {
+            (Texture::Constant(u), Texture::Constant(v)) => WardAlpha::Fixed { u: u.x, v: v.x },
+            (u, v) => WardAlpha::Textured { u, v },
+        };
+        let diffuse_reflectance = self.texture_prop(id, "diffuse_reflectance", Vec3::splat(0.5))?;
+        let specular_reflectance = self.texture_prop(id, "specular_reflectance", Vec3::splat(0.2))?;
+        let ensure = node.boolean_or("ensure_energy_conservation", true)?;
+        let params = WardParams::new(variant, &diffuse_reflectance, &specular_reflectance, ensure);
+        if params.scale != 1.0 {
+            let sum = (diffuse_reflectance.max() + specular_reflectance.max()).max_element();
+            self.stats.warnings.push(format!(
+                "{}: the ward BSDF's specular_reflectance and diffuse_reflectance sum to {sum} (> 1) in a channel; \
+                 both are scaled by {} to keep energy, as Mitsuba 0.6 did (ensure_energy_conservation=false keeps them)",
+                node.loc, params.scale
+            ));
+        }
+        Ok(BsdfModel::Ward { params, alpha, diffuse_reflectance, specular_reflectance })
+    }
+
     /// Conductor parameters: a named `material` or `eta` and `k` (default: a perfect mirror),
     /// relative to the exterior medium's index `ext_eta` (Mitsuba 0.6's `extEta`, a number
     /// or a named index; default 1): both are divided by it, as Mitsuba 0.6 did. A version
@@ -549,6 +585,7 @@ impl<'d> Builder<'d> {
                     BsdfModel::RoughPlastic { params, diffuse_reflectance, specular_reflectance }
                 }
             }
+            "ward" => self.ward(id)?,
             "mask" => return self.mask(id),
             "coating" | "roughcoating" => return self.coated(id),
             _ => return Err(self.unknown_plugin(id, BSDF_PLUGINS)),

@@ -372,7 +372,8 @@ impl Case {
 /// infinity or first hit a surface with a Dirac lobe (glass, a mirror, smooth plastic's
 /// coat): light subpaths never connect to the camera through those. Where `min_alpha` is
 /// above zero, first hits on microfacet surfaces smoother than it are left out too: light
-/// subpaths reach the camera through their narrow lobes only rarely, with huge weights.
+/// subpaths reach the camera through their narrow lobes only rarely, with huge weights
+/// (a `ward` lobe counts by its roughness too).
 pub fn reachable_by_light_tracing(scene: &Scene, min_alpha: f32) -> Vec<bool> {
     use pcbpt::bsdf::BsdfModel;
     let alpha = |model: &BsdfModel, uv: glam::Vec2| {
@@ -381,6 +382,10 @@ pub fn reachable_by_light_tracing(scene: &Scene, min_alpha: f32) -> Vec<bool> {
                 distribution.at(uv)
             }
             BsdfModel::RoughPlastic { params, .. } => params.distribution,
+            BsdfModel::Ward { alpha, .. } => {
+                let (u, v) = alpha.at(uv);
+                return u.min(v);
+            }
             _ => return f32::INFINITY,
         };
         m.alpha_u.min(m.alpha_v)
