@@ -5,8 +5,12 @@
 # through `scripts/slurm/`, and `tests/slurm.rs`, which starts its own single-node cluster:
 # the packages' services are not started or needed) and Dask's distributed scheduler
 # (`scripts/dask_render.py` and `tests/dask.rs`; python3 with pip from the system if there is
-# no python3, then `dask[distributed]` from PyPI). Idempotent: installs only what is missing.
-# `--build-only` installs only what building and rendering need (no Slurm, no Dask).
+# no python3, then `dask[distributed]` from PyPI) and what the Python package's tests
+# (`scripts/python_tests.sh`) need to make a virtual environment (python3 with venv and pip:
+# Debian's python3-venv; the script installs maturin, NumPy and pytest into it from PyPI).
+# Idempotent: installs only what is missing.
+# `--build-only` installs only what building and rendering need (no Slurm, no Dask, no
+# Python package tests).
 # `--with-oiio` also installs OpenImageIO (headers, library, pkg-config file) for
 # `cargo build --features oiio`; `--with-embree4` what `scripts/embree4.sh` needs to
 # assemble an Embree 4 (python3 with pip, binutils' readelf; the C compiler comes with g++).
@@ -15,9 +19,10 @@ set -euo pipefail
 packages=(libembree-dev libclang-dev pkg-config g++)
 with_dask=1
 with_slurm=1
+with_python=1
 for arg in "$@"; do
   case "$arg" in
-    --build-only) with_dask=0; with_slurm=0 ;;
+    --build-only) with_dask=0; with_slurm=0; with_python=0 ;;
     --with-oiio) packages+=(libopenimageio-dev) ;;
     --with-embree4) packages+=(python3 python3-pip binutils) ;;
     *) echo "setup: unknown option $arg (known: --build-only, --with-oiio, --with-embree4)" >&2; exit 2 ;;
@@ -30,6 +35,11 @@ fi
 # is used as it is, otherwise the system's is installed.
 if [ "$with_dask" -eq 1 ] && ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then
   packages+=(python3 python3-pip)
+fi
+# scripts/python_tests.sh makes a virtual environment with pip in it: a python3 whose venv
+# can (ensurepip, which Debian ships apart in python3-venv) is used as it is.
+if [ "$with_python" -eq 1 ] && ! { command -v python3 >/dev/null 2>&1 && python3 -c 'import ensurepip, venv' >/dev/null 2>&1; }; then
+  packages+=(python3 python3-venv python3-pip)
 fi
 missing=()
 for p in "${packages[@]}"; do

@@ -111,6 +111,8 @@ fn default_backend() -> String {
 pub struct RunResult {
     pub scene: String,
     pub method: String,
+    /// The seed of the run's random numbers.
+    pub seed: u64,
     pub spp: u32,
     pub seconds: f64,
     pub samples_per_second: f64,
@@ -143,6 +145,19 @@ impl ExperimentFile {
     /// The method the speed-ups and ratios compare against.
     pub fn baseline(&self) -> String {
         self.baseline.clone().unwrap_or_else(|| self.method[0].name.clone())
+    }
+
+    /// Where the experiment in file `path` writes: `output` if given, else the file's
+    /// `output` (relative to the file's folder), else the file's name beside it.
+    pub fn output_folder(&self, path: &Path, output: Option<&Path>) -> PathBuf {
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        match output {
+            Some(o) => o.to_path_buf(),
+            None => match &self.output {
+                Some(o) => base.join(o),
+                None => base.join(path.file_stem().unwrap_or_default()),
+            },
+        }
     }
 
     pub fn load(path: &Path) -> Result<ExperimentFile> {
@@ -257,14 +272,7 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
 /// Runs an experiment file; returns the results and writes the outputs.
 pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunResult>> {
     let f = ExperimentFile::load(path)?;
-    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let out = match output {
-        Some(o) => o.to_path_buf(),
-        None => match &f.output {
-            Some(o) => base.join(o),
-            None => base.join(path.file_stem().unwrap_or_default()),
-        },
-    };
+    let out = f.output_folder(path, output);
     let baseline = f.baseline();
     let Some(seeds) = &f.seeds else {
         return run_seed(path, &f, f.seed.unwrap_or(0), &out, quiet);
@@ -369,6 +377,7 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
                 results.push(RunResult {
                     scene: s.name.clone(),
                     method: m.name.clone(),
+                    seed,
                     spp: peer.spp,
                     seconds: peer.seconds,
                     samples_per_second: peer.samples_per_second,
@@ -403,6 +412,7 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
             results.push(RunResult {
                 scene: s.name.clone(),
                 method: m.name.clone(),
+                seed,
                 spp: r.stats.spp,
                 seconds: r.stats.seconds,
                 samples_per_second: r.stats.samples_per_second,

@@ -172,6 +172,7 @@ mod tests {
         RunResult {
             scene: scene.into(),
             method: method.into(),
+            seed: 0,
             spp: 1,
             seconds: 2.0,
             samples_per_second: 1.0,

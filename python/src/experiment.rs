@@ -1,0 +1,41 @@
+//! `experiment`: an experiment file run as `pcbpt experiment FILE` runs it.
+
+use crate::errors::{self, check_exists};
+use pcbpt::experiment::{ExperimentFile, RunResult};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+/// Runs the experiment in `path`, writing into `output` (default: the file's); returns the
+/// output folder and one dict per run.
+#[pyfunction]
+#[pyo3(signature = (path, output, quiet))]
+pub fn experiment<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    output: Option<PathBuf>,
+    quiet: bool,
+) -> PyResult<(PathBuf, Vec<Bound<'py, PyDict>>)> {
+    check_exists(&path)?;
+    let file = ExperimentFile::load(&path).map_err(errors::error)?;
+    let folder = file.output_folder(&path, output.as_deref());
+    let runs = py.detach(|| pcbpt::experiment::run(&path, Some(&folder), quiet)).map_err(errors::error)?;
+    let runs = runs.iter().map(|r| run_dict(py, r)).collect::<PyResult<_>>()?;
+    Ok((folder, runs))
+}
+
+/// A run's results as a dict (the columns of `results.md` and `convergence.csv`).
+fn run_dict<'py>(py: Python<'py>, r: &RunResult) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("scene", &r.scene)?;
+    d.set_item("method", &r.method)?;
+    d.set_item("seed", r.seed)?;
+    d.set_item("spp", r.spp)?;
+    d.set_item("seconds", r.seconds)?;
+    d.set_item("samples_per_second", r.samples_per_second)?;
+    d.set_item("relmse", r.relmse)?;
+    d.set_item("flip", r.flip)?;
+    d.set_item("mean_ratio", r.mean_ratio)?;
+    d.set_item("curve", r.curve.clone())?;
+    Ok(d)
+}

@@ -1,0 +1,119 @@
+"""Loading and rendering: the images, their statistics, and that they are the command line's."""
+
+import _thread
+import json
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import pcbpt
+from conftest import CORNELL, SMALL
+
+
+def test_integrators_are_the_command_lines():
+    assert pcbpt.integrators() == ["path", "lighttrace", "bdpt", "eorr", "lvc", "pssmlt", "pcbpt", "spcbpt", "memlt"]
+
+
+def test_scene_attributes_are_the_files_after_the_defaults(cornell):
+    assert (cornell.width, cornell.height) == (SMALL["resx"], SMALL["resy"])
+    assert (cornell.integrator, cornell.plugin, cornell.sampler) == ("path", "path", "independent")
+    assert (cornell.spp, cornell.seed, cornell.max_depth, cornell.rr_depth) == (4, 0, 30, 3)
+    assert cornell.triangles > 0 and cornell.warnings == [] and cornell.backend == "embree"
+    assert "24x20" in repr(cornell)
+
+
+def test_defaults_keywords_set_scene_parameters():
+    scene = pcbpt.load(CORNELL, resx=8, resy=6, spp=3, max_depth=5, integrator="bdpt")
+    assert (scene.width, scene.height, scene.spp, scene.max_depth, scene.integrator) == (8, 6, 3, 5, "bdpt")
+    resized = pcbpt.load(CORNELL, resolution=(10, 7), spp=1)
+    assert (resized.width, resized.height) == (10, 7)
+    assert pcbpt.load(CORNELL, resolution="9x5", spp=1).width == 9
+
+
+@pytest.mark.parametrize("integrator", ["path", "bdpt"])
+def test_render_gives_a_float_image_of_the_film_size(cornell, integrator):
+    image = pcbpt.render(cornell, integrator, seed=1, threads=2)
+    assert image.shape == (cornell.height, cornell.width, 3)
+    assert image.dtype == np.float32
+    assert np.isfinite(image).all()
+    assert 0.01 < image.mean() < 10
+
+
+def test_the_seed_decides_the_image_and_threads_do_not(cornell):
+    a = pcbpt.render(cornell, seed=3, threads=1)
+    b = pcbpt.render(cornell, seed=3, threads=2)
+    c = pcbpt.render(cornell, seed=4, threads=2)
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+    assert np.array_equal(pcbpt.render(cornell), pcbpt.render(cornell, seed=cornell.seed))
+
+
+# Renders compared with the command line's: (integrator, keywords, the same as arguments).
+SAME_AS_CLI = [
+    (None, {}, []),
+    ("bdpt", {}, ["--integrator", "bdpt"]),
+    ("bdpt", {"heuristic": "balance", "max_depth": 4}, ["--integrator", "bdpt", "--heuristic", "balance", "--max-depth", "4"]),
+    ("lvc", {"light_paths": 300}, ["--integrator", "lvc", "--light-paths", "300"]),
+    ("pssmlt", {"two_stage": False}, ["--integrator", "pssmlt", "--two-stage", "false"]),
+]
+
+
+@pytest.mark.parametrize("integrator,options,args", SAME_AS_CLI)
+def test_the_image_and_statistics_are_the_command_lines(cornell, cli, tmp_path, integrator, options, args):
+    exr, stats_file = tmp_path / "cli.exr", tmp_path / "cli.json"
+    defines = [a for k, v in SMALL.items() for a in ("-D", f"{k}={v}")]
+    subprocess.run(
+        [cli, "render", CORNELL, *defines, *args, "--seed", "11", "--threads", "2", "-q", "-o", exr, "--stats", stats_file],
+        check=True,
+    )
+    image, stats = pcbpt.render(cornell, integrator, seed=11, threads=2, stats=True, **options)
+    assert np.array_equal(image, pcbpt.read_image(exr))
+    theirs = json.loads(stats_file.read_text())
+    for key in ["integrator", "options", "spp", "width", "height", "threads", "counters", "invalid_samples"]:
+        assert stats["render"][key] == theirs["render"][key], key
+    assert stats["triangles"] == theirs["triangles"]
+
+
+def test_statistics_are_the_stats_files(cornell):
+    _, stats = pcbpt.render(cornell, "bdpt", spp=2, threads=2, stats=True, heuristic="balance")
+    render = stats["render"]
+    assert render["integrator"] == "bdpt"
+    assert render["options"] == {"heuristic": "balance"}
+    assert (render["spp"], render["width"], render["height"], render["threads"]) == (2, 24, 20, 2)
+    assert render["seconds"] > 0 and not render["interrupted"]
+    assert stats["output"] is None and stats["embree_version"]
+    assert set(stats) >= {"scene", "load_seconds", "triangles", "load", "degenerate_triangles"}
+
+
+def test_a_time_budget_renders_whole_passes(cornell):
+    image, stats = pcbpt.render(cornell, time=0.2, threads=2, stats=True)
+    assert stats["render"]["spp"] >= 1 and np.isfinite(image).all()
+
+
+def test_keyboard_interrupt_stops_a_render_and_is_raised():
+    scene = pcbpt.load(CORNELL, resx=64, resy=64)
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    start = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            pcbpt.render(scene, "bdpt", time=60, threads=2)
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 10
+    # The scene is free again.
+    assert pcbpt.render(scene, spp=1, threads=2).shape == (64, 64, 3)
+
+
+def test_an_unknown_integrator_in_the_file_needs_one_named():
+    with pytest.raises(pcbpt.SceneError, match="unknown integrator plugin \"volpath\""):
+        pcbpt.load(CORNELL, integrator="volpath", **{k: v for k, v in SMALL.items()})
+    with pytest.warns(UserWarning, match="replaced"):
+        scene = pcbpt.load(CORNELL, integrator="volpath", override_integrator=True, **SMALL)
+    assert scene.integrator is None and scene.plugin == "volpath"
+    with pytest.raises(ValueError, match="pick one with integrator="):
+        pcbpt.render(scene)
+    assert pcbpt.render(scene, "path", seed=2, threads=2).shape == (20, 24, 3)
