@@ -160,6 +160,10 @@ struct RenderArgs {
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
+    /// Where standard error is not a terminal (a Slurm log, a pipe), print a progress line
+    /// every this many seconds instead of a progress bar.
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = parse_seconds)]
+    log_interval: f64,
 }
 
 #[derive(Args)]
@@ -201,6 +205,14 @@ fn parse_chunk(s: &str) -> std::result::Result<(u32, u32), String> {
     let (i, n) = s.split_once('/').ok_or_else(|| format!("\"{s}\" is not I/N"))?;
     let num = |x: &str| x.trim().parse::<u32>().map_err(|_| format!("\"{s}\" is not I/N"));
     Ok((num(i)?, num(n)?))
+}
+
+/// A non-negative, finite number of seconds.
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("expected a non-negative number of seconds, got {s:?}")),
+    }
 }
 
 fn parse_range(s: &str) -> std::result::Result<(u32, u32), String> {
@@ -433,6 +445,7 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
     opts.run.seed = a.seed.unwrap_or(scene.sampler.seed);
     opts.run.threads = a.threads;
     opts.run.progress = !a.quiet;
+    opts.run.log_interval = a.log_interval;
     opts.run.stop = Some(stop);
     opts.run.strategy_images = a.strategy_images.is_some();
     if let Some(dir) = &a.strategy_images {

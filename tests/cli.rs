@@ -724,3 +724,30 @@ fn the_command_line_reference_is_current() {
         "docs/cli.md is stale: regenerate it with `cargo run --release -- cli-reference > docs/cli.md`"
     );
 }
+
+/// Where standard error is not a terminal (here a pipe, as in a Slurm log), progress comes
+/// as plain lines, one per `--log-interval` at most, and none with `--quiet`; a negative
+/// interval is refused by name.
+#[test]
+fn progress_in_a_log_is_lines_not_a_bar() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path(), "log.xml", LIGHT);
+    let out_path = dir.path().join("log.exr");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["render", s.to_str().unwrap(), "-o", out_path.to_str().unwrap(), "--spp", "16"];
+        args.extend_from_slice(extra);
+        let out = pcbpt(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let lines = |err: &str| err.lines().filter(|l| l.starts_with('[') && l.contains(" of 16 spp (")).count();
+    let every_pass = run(&["--log-interval", "0"]);
+    assert!(lines(&every_pass) >= 1, "{every_pass}");
+    assert!(!every_pass.contains('\r') && !every_pass.contains('\u{1b}'), "control codes in a log: {every_pass:?}");
+    assert!(every_pass.contains("8×8: 16 of 16 spp (100%)"), "{every_pass}");
+    assert_eq!(lines(&run(&["--log-interval", "3600"])), 0);
+    assert_eq!(run(&["--log-interval", "0", "--quiet"]), "");
+    let bad = pcbpt(&["render", s.to_str().unwrap(), "--log-interval=-1"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("--log-interval") && err.contains("non-negative"), "{err}");
+}

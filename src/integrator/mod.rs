@@ -13,6 +13,7 @@ pub mod metropolis;
 pub mod path;
 pub mod pcbpt;
 pub mod pool_base;
+pub(crate) mod progress;
 pub mod pssmlt;
 pub mod registry;
 pub(crate) mod render_loop;

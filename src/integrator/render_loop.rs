@@ -24,6 +24,7 @@
 
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
+use crate::integrator::progress::Progress;
 use crate::integrator::run::{Budget, RenderOutput, RunOptions, take_snapshots};
 use crate::integrator::stats::{Counters, Details, PhaseRays, PhaseTimes, RenderStats};
 use crate::math::Rgb;
@@ -325,7 +326,7 @@ pub(crate) fn run<M: Iterative>(
     let mut counters = Counters::default();
     let mut work = Work::default();
     let start = Instant::now();
-    let bar = progress_bar(opts, w, h, tile_list.len(), range.len() as u32);
+    let progress = Progress::new(opts, w, h, tile_list.len(), range.len() as u32, start);
     let mut first = range.start;
     let mut passes = 0u32;
     let mut interrupted = false;
@@ -374,13 +375,7 @@ pub(crate) fn run<M: Iterative>(
                         .map(|&t| {
                             (!stopped()).then(|| {
                                 let r = method.render_tile(&ctx, &prepared.pass, t, first, count);
-                                // A pass of a large image takes long: the bar moves by tiles.
-                                if let Some(bar) = &bar {
-                                    match opts.budget {
-                                        Budget::Spp(_) => bar.inc(count as u64),
-                                        Budget::Time(secs) => bar.set_position(time_position(start, secs)),
-                                    }
-                                }
+                                progress.tile_done(count, start);
                                 r
                             })
                         })
@@ -415,14 +410,7 @@ pub(crate) fn run<M: Iterative>(
                 work.phases.merge += add_pass(&mut film, pending.take());
                 film.develop()
             });
-            if let Some(bar) = &bar {
-                match opts.budget {
-                    Budget::Spp(_) => bar.set_position(done as u64 * tile_list.len() as u64),
-                    Budget::Time(t) => bar.set_position(time_position(start, t)),
-                }
-                let secs = start.elapsed().as_secs_f64().max(1e-9);
-                bar.set_message(format!("{done} spp, {:.2} M samples/s", counters.samples as f64 / secs / 1e6));
-            }
+            progress.pass_done(done, counters.samples, start);
             if stopped() {
                 interrupted = true;
                 break;
@@ -436,9 +424,7 @@ pub(crate) fn run<M: Iterative>(
         work.phases.merge += add_pass(&mut film, pending.take());
         Ok(())
     });
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
-    }
+    progress.finish();
     result?;
     let seconds = start.elapsed().as_secs_f64();
     let spp = first - range.start;
@@ -453,33 +439,6 @@ pub(crate) fn run<M: Iterative>(
     let strategy_images =
         (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
     Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats, film: Some(film) })
-}
-
-/// The render's progress bar on a terminal: in tiles rendered times their samples per
-/// pixel (`tiles` per pass), or in thousandths of the time budget.
-fn progress_bar(opts: &RunOptions, w: u32, h: u32, tiles: usize, spp: u32) -> Option<indicatif::ProgressBar> {
-    use std::io::IsTerminal;
-    if !opts.progress || !std::io::stderr().is_terminal() {
-        return None;
-    }
-    let (len, template) = match opts.budget {
-        Budget::Spp(_) => (
-            spp as u64 * tiles as u64,
-            format!("{w}×{h} {{wide_bar}} {{percent}}% of {spp} spp, ETA {{eta}} — {{msg}}"),
-        ),
-        Budget::Time(_) => (1000, format!("{w}×{h} {{wide_bar}} {{elapsed}} — {{msg}}")),
-    };
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(&template) {
-        bar.set_style(style);
-    }
-    bar.enable_steady_tick(Duration::from_secs(1));
-    Some(bar)
-}
-
-/// The position of a time budget's progress bar: thousandths of `budget` seconds elapsed.
-fn time_position(start: Instant, budget: f64) -> u64 {
-    (start.elapsed().as_secs_f64() / budget * 1000.0).min(1000.0) as u64
 }
 
 #[cfg(test)]

@@ -32,6 +32,8 @@ pub struct RunOptions {
     pub threads: usize,
     pub tile_size: u32,
     pub progress: bool,
+    /// Seconds between progress lines where standard error is not a terminal (a log).
+    pub log_interval: f64,
     /// Set from outside (a signal handler) to stop after the current pass.
     pub stop: Option<Arc<AtomicBool>>,
     /// Keep one image per strategy `(s,t)` (bidirectional integrators).
@@ -42,7 +44,8 @@ pub struct RunOptions {
 }
 
 impl RunOptions {
-    /// `budget` with seed 0, every core, 32-pixel tiles and nothing else asked for.
+    /// `budget` with seed 0, every core, 32-pixel tiles, no progress (a line every 10 s in a
+    /// log when asked for) and nothing else asked for.
     pub fn new(budget: Budget) -> RunOptions {
         RunOptions {
             budget,
@@ -50,6 +53,7 @@ impl RunOptions {
             threads: 0,
             tile_size: 32,
             progress: false,
+            log_interval: 10.0,
             stop: None,
             strategy_images: false,
             checkpoints: Vec::new(),
