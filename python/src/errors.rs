@@ -5,8 +5,9 @@
 
 use pcbpt::error::Error;
 use pyo3::create_exception;
-use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyUserWarning, PyValueError};
 use pyo3::prelude::*;
+use std::ffi::CString;
 use std::path::Path;
 
 create_exception!(
@@ -63,4 +64,10 @@ pub fn check_exists(path: &Path) -> PyResult<()> {
 pub fn integer<T: TryFrom<i128>>(name: &str, value: &Bound<'_, PyAny>, what: &str) -> PyResult<T> {
     let n: i128 = value.extract()?;
     T::try_from(n).map_err(|_| PyValueError::new_err(format!("{name} must be {what}, got {n}")))
+}
+
+/// A `UserWarning` from the caller's line.
+pub fn warn(py: Python<'_>, msg: &str) -> PyResult<()> {
+    let msg = CString::new(msg.replace('\0', " ")).unwrap_or_default();
+    PyErr::warn(py, &py.get_type::<PyUserWarning>(), &msg, 2)
 }

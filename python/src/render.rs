@@ -2,7 +2,7 @@
 //! same seed, bit for bit), on a worker thread while the calling thread, without the GIL,
 //! waits and answers Ctrl-C by stopping the render.
 
-use crate::errors::{self, integer};
+use crate::errors::{self, integer, warn};
 use crate::images::to_array;
 use crate::scene::Scene;
 use clap::ValueEnum;
@@ -12,10 +12,9 @@ use pcbpt::integrator::registry::INTEGRATORS;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput, RunOptions};
 use pcbpt::sampling::SamplerKind;
 use pcbpt::scene::IntegratorSpec;
-use pyo3::exceptions::{PyRuntimeError, PyUserWarning, PyValueError};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::ffi::CString;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -61,7 +60,7 @@ pub fn render<'py>(
         run: RunOptions::new(budget(scene, spp, time)?),
     };
     let settings = Settings {
-        integrator: integrator_spec(scene, named.is_some(), max_depth, rr_depth)?,
+        integrator: spec_for_render(scene, named.is_some(), max_depth, rr_depth)?,
         sampler: sampler_kind(py, scene, kind, sampler)?,
     };
     opts.run.seed = match seed {
@@ -103,7 +102,7 @@ fn budget(scene: &Scene, spp: Option<Bound<'_, PyAny>>, time: Option<f64>) -> Py
 /// The integrator's shared parameters for this render: the file's, with `max_depth` and
 /// `rr_depth` if given. As with `--integrator`, naming the integrator drops the file's
 /// `strict_normals` (the loader reads it only for the file's own path tracer).
-fn integrator_spec(
+fn spec_for_render(
     scene: &Scene,
     named: bool,
     max_depth: Option<Bound<'_, PyAny>>,
@@ -137,12 +136,6 @@ fn sampler_kind(py: Python<'_>, scene: &Scene, kind: IntegratorKind, sampler: Op
         warn(py, &format!("the scene's {msg}"))?;
     }
     Ok(sampler_kind)
-}
-
-/// A `UserWarning` from the caller's line.
-pub fn warn(py: Python<'_>, msg: &str) -> PyResult<()> {
-    let msg = CString::new(msg.replace('\0', " ")).unwrap_or_default();
-    PyErr::warn(py, &py.get_type::<PyUserWarning>(), &msg, 2)
 }
 
 /// What a render changes in the loaded scene, set while it holds the scene's lock.

@@ -169,7 +169,7 @@ pub fn load(
     let t0 = Instant::now();
     let scene = py.detach(|| pcbpt::scene::Scene::load(&path, &options)).map_err(|e| scene_error(py, e))?;
     for w in &scene.stats.warnings {
-        crate::render::warn(py, w)?;
+        crate::errors::warn(py, w)?;
     }
     Ok(Scene {
         integrator_spec: scene.integrator.clone(),
