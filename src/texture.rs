@@ -344,14 +344,20 @@ impl Texture {
         }
     }
 
+    /// Every value the texture takes: a constant's, a bitmap's texels, a checkerboard's two
+    /// colours.
+    pub fn values(&self) -> Box<dyn Iterator<Item = Rgb> + '_> {
+        match self {
+            Texture::Constant(c) => Box::new(std::iter::once(*c)),
+            Texture::Bitmap { bitmap, .. } => Box::new(bitmap.texels()),
+            Texture::Checkerboard { color0, color1, .. } => Box::new([*color0, *color1].into_iter()),
+        }
+    }
+
     /// The component-wise maximum over the texture (every texel of a bitmap; as Mitsuba
     /// 0.6's `getMaximum`, which BSDFs compare against 1 to keep energy).
     pub fn max(&self) -> Rgb {
-        match self {
-            Texture::Constant(c) => *c,
-            Texture::Bitmap { bitmap, .. } => bitmap.texels().fold(Rgb::splat(f32::NEG_INFINITY), Rgb::max),
-            Texture::Checkerboard { color0, color1, .. } => color0.max(*color1),
-        }
+        self.values().fold(Rgb::splat(f32::NEG_INFINITY), Rgb::max)
     }
 }
 

@@ -10,6 +10,7 @@
 //! Bézier in the cube root of the sun's elevation), the same constants, and the sun's position
 //! from a date and place computed in single precision as Mitsuba 3 computes it.
 
+use crate::light::sun06;
 use crate::math::{Frame, Rgb, luminance};
 use crate::sampling::Distribution2D;
 use glam::{Mat3, Vec2, Vec3};
@@ -30,8 +31,8 @@ const _: () = assert!(DATA.len() == 4 * DATA_LEN);
 /// The sun's mean apparent diameter in degrees (`sun_aperture`'s default).
 pub const SUN_APERTURE_DEG: f32 = 0.5358;
 /// The half aperture Mitsuba 3 divides the sun's irradiance by (in double precision, then
-/// rounded).
-const SUN_HALF_APERTURE: f32 = (std::f64::consts::PI * (0.5 * 0.5358) / 180.0) as f32;
+/// rounded): Mitsuba 0.6's angular radius of the sun, which Mitsuba 3 kept.
+const SUN_HALF_APERTURE: f32 = sun06::ANGULAR_RADIUS;
 /// Mitsuba 3's `MI_CIE_Y_NORMALIZATION`.
 const CIE_Y_NORMALIZATION: f32 = (1.0 / 106.750_259_399_414_06_f64) as f32;
 /// Mitsuba 3's `SPEC_TO_RGB_SUN_CONV`.
@@ -363,36 +364,42 @@ pub struct Sun {
     irradiance: Rgb,
 }
 
+/// Hosek and Wilkie's sun for `p`, scaled by `factor` (the scale times the ratio of the
+/// standard disk's solid angle to this one's): its mean radiance, and with `complex_sun` its
+/// limb-darkening coefficients at this turbidity with the factor that scales them.
+fn hosek_wilkie_sun(p: &SunSkyParams, factor: f32) -> (Rgb, Option<(Vec<f32>, f32)>) {
+    let (t, tw) = turbidity_interval(p.turbidity);
+    // Irradiance tables every 3° of elevation from 2°.
+    let e = ((p.sun_eta().to_degrees() - 2.0) / 3.0).clamp(0.0, 30.0 - (1.0 - f32::EPSILON / 2.0));
+    let (ei, ew) = interval(e, 30);
+    let irr = |c: usize| {
+        let at = |ti: usize, ej: usize| data(SUN_IRRAD + (ti * 30 + ej) * 3 + c);
+        let tu = |ej: usize| at(t, ej) * (1.0 - tw) + at(t + 1, ej) * tw;
+        tu(ei) * (1.0 - ew) + tu(ei + 1) * ew
+    };
+    let factor = factor * SPEC_TO_RGB_SUN_CONV * CIE_Y_NORMALIZATION;
+    let mean = factor / (2.0 * PI * (1.0 - SUN_HALF_APERTURE.cos()));
+    let radiance = Rgb::new(irr(0), irr(1), irr(2)) * mean;
+    let complex = p.complex_sun.then(|| {
+        let n = SUN_SEGMENTS * 72;
+        let coefs =
+            (0..n).map(|i| data(SUN_RAD + t * n + i) * (1.0 - tw) + data(SUN_RAD + (t + 1) * n + i) * tw).collect();
+        (coefs, factor)
+    });
+    (radiance, complex)
+}
+
 impl Sun {
     pub fn new(p: &SunSkyParams) -> Sun {
         let half = p.half_aperture();
         let cos_max = half.cos();
         let area_ratio = (1.0 - SUN_HALF_APERTURE.cos()) / (1.0 - cos_max);
-        let (t, tw) = turbidity_interval(p.turbidity);
         let scale = if p.sun_visible() { p.sun_scale } else { 0.0 };
-        // Irradiance tables every 3° of elevation from 2°.
-        let e = ((p.sun_eta().to_degrees() - 2.0) / 3.0).clamp(0.0, 30.0 - (1.0 - f32::EPSILON / 2.0));
-        let (ei, ew) = interval(e, 30);
-        let irr = |c: usize| {
-            let at = |ti: usize, ej: usize| data(SUN_IRRAD + (ti * 30 + ej) * 3 + c);
-            let tu = |ej: usize| at(t, ej) * (1.0 - tw) + at(t + 1, ej) * tw;
-            tu(ei) * (1.0 - ew) + tu(ei + 1) * ew
-        };
-        let factor = scale * area_ratio * SPEC_TO_RGB_SUN_CONV * CIE_Y_NORMALIZATION;
-        let mean = factor / (2.0 * PI * (1.0 - SUN_HALF_APERTURE.cos()));
-        let radiance = Rgb::new(irr(0), irr(1), irr(2)) * mean;
-        let complex = p.complex_sun.then(|| {
-            let n = SUN_SEGMENTS * 72;
-            let coefs =
-                (0..n).map(|i| data(SUN_RAD + t * n + i) * (1.0 - tw) + data(SUN_RAD + (t + 1) * n + i) * tw).collect();
-            (coefs, factor)
-        });
+        // Both models keep the disk's power whatever its size.
         let (radiance, complex) = if p.sun06 {
-            // Mitsuba 0.6 keeps the disk's power whatever its size.
-            let widened = (1.0 - crate::light::sun06::ANGULAR_RADIUS.cos()) / (1.0 - cos_max);
-            (crate::light::sun06::radiance(unit_angle_z(p.sun_local), p.turbidity) * (scale * widened), None)
+            (sun06::radiance(unit_angle_z(p.sun_local), p.turbidity) * (scale * area_ratio), None)
         } else {
-            (radiance, complex)
+            hosek_wilkie_sun(p, scale * area_ratio)
         };
         let dir = (p.to_world * p.sun_local).normalize();
         let mut sun = Sun {
