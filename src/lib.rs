@@ -20,6 +20,7 @@ pub mod image_io;
 pub mod integrator;
 pub mod light;
 pub mod math;
+pub mod medium;
 pub mod partial;
 pub mod sampling;
 pub mod scene;

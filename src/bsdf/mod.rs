@@ -82,6 +82,9 @@ pub enum BsdfModel {
     Coating(Box<coating::Coating>),
     /// Mitsuba 0.6's anisotropic Ward model: a glossy lobe over a diffuse base.
     Ward { params: WardParams, alpha: WardAlpha, diffuse_reflectance: Texture, specular_reflectance: Texture },
+    /// No surface at all (Mitsuba's `null`): light goes straight through. What a shape that
+    /// only bounds a participating medium has.
+    Null,
 }
 
 /// A BSDF as attached to a shape: a model, one-sided (the front side of the shading
@@ -143,9 +146,18 @@ impl Bsdf {
             BsdfModel::Coating(c) => c.is_delta(),
             m => matches!(
                 m,
-                BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. }
+                BsdfModel::Conductor { .. }
+                    | BsdfModel::Dielectric { .. }
+                    | BsdfModel::ThinDielectric { .. }
+                    | BsdfModel::Null
             ),
         }
+    }
+
+    /// Whether the surface is only a boundary between media (Mitsuba's `null`).
+    #[inline]
+    pub fn is_null(&self) -> bool {
+        matches!(self.model, BsdfModel::Null)
     }
 
     /// The lobes of the model at texture coordinates `uv` (where a textured roughness is
@@ -170,6 +182,7 @@ impl Bsdf {
                 [glossy(params.distribution, false), reflection(DIFFUSE_ROUGHNESS)]
             }
             BsdfModel::Coating(c) => [Some(c.lobe()), None],
+            BsdfModel::Null => [lobe(true, 0.0, None), None],
             // Ward's half vectors follow the Beckmann distribution of the same roughness.
             BsdfModel::Ward { alpha, .. } => {
                 let (alpha_u, alpha_v) = alpha.at(uv);
@@ -206,7 +219,10 @@ impl Bsdf {
             BsdfModel::Coating(c) => c.nested.transmits(),
             m => matches!(
                 m,
-                BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } | BsdfModel::RoughDielectric { .. }
+                BsdfModel::Dielectric { .. }
+                    | BsdfModel::ThinDielectric { .. }
+                    | BsdfModel::RoughDielectric { .. }
+                    | BsdfModel::Null
             ),
         }
     }
@@ -326,7 +342,10 @@ impl Bsdf {
             BsdfModel::RoughDiffuse { reflectance, alpha, fast } => {
                 roughdiffuse::eval(reflectance.eval(uv), alpha.eval(uv).element_sum() / 3.0, *fast, wo, wi)
             }
-            BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => Rgb::ZERO,
+            BsdfModel::Conductor { .. }
+            | BsdfModel::Dielectric { .. }
+            | BsdfModel::ThinDielectric { .. }
+            | BsdfModel::Null => Rgb::ZERO,
             BsdfModel::RoughConductor { distribution, eta, k, specular_reflectance } => {
                 conductor::eval_rough(&distribution.at(uv), *eta, *k, specular_reflectance.eval(uv), wo, wi)
             }
@@ -354,7 +373,10 @@ impl Bsdf {
         match &self.model {
             BsdfModel::Diffuse { .. } => diffuse::pdf(wo, wi),
             BsdfModel::RoughDiffuse { .. } => roughdiffuse::pdf(wo, wi),
-            BsdfModel::Conductor { .. } | BsdfModel::Dielectric { .. } | BsdfModel::ThinDielectric { .. } => 0.0,
+            BsdfModel::Conductor { .. }
+            | BsdfModel::Dielectric { .. }
+            | BsdfModel::ThinDielectric { .. }
+            | BsdfModel::Null => 0.0,
             BsdfModel::RoughConductor { distribution, .. } => conductor::pdf_rough(&distribution.at(uv), wo, wi),
             BsdfModel::RoughDielectric { distribution, eta, .. } => {
                 dielectric::pdf_rough(&distribution.at(uv), *eta, wo, wi)
@@ -457,6 +479,10 @@ impl Bsdf {
             BsdfModel::Ward { params, alpha, diffuse_reflectance, specular_reflectance } => {
                 let (d, sp) = (diffuse_reflectance.eval(uv), specular_reflectance.eval(uv));
                 ward::sample(params, alpha.at(uv), d, sp, wo_f, u1, u2)?
+            }
+            BsdfModel::Null => {
+                let wi = -wo_f;
+                BsdfSample { wi, f: Rgb::ONE / wi.z.abs().max(1e-20), pdf: 1.0, weight: Rgb::ONE, delta: true }
             }
         };
         Some(s)

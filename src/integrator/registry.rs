@@ -14,6 +14,7 @@ use crate::integrator::pcbpt::{PcbptOptions, PoolOptions};
 use crate::integrator::pssmlt::PssmltOptions;
 use crate::integrator::run::{Integrator, Iterations, Rendered, RunOptions};
 use crate::integrator::spcbpt::SpcbptOptions;
+use crate::error::Error;
 use crate::scene::Scene;
 use serde::Serialize;
 
@@ -91,6 +92,13 @@ macro_rules! integrators {
                 }
             }
 
+            /// Whether the integrator renders participating media ([`Integrator::MEDIA`]).
+            pub fn renders_media(&self) -> bool {
+                match self {
+                    $(Method::$variant(_) => <$options as Integrator>::MEDIA,)*
+                }
+            }
+
             /// The MIS heuristic, for the integrators that weigh strategies.
             pub fn heuristic_mut(&mut self) -> Option<&mut Heuristic> {
                 match self {
@@ -101,6 +109,13 @@ macro_rules! integrators {
             /// Renders with the integrator (see [`Integrator::render`]); the statistics
             /// name it and its options.
             pub(crate) fn render(&self, scene: &Scene, run: &RunOptions, iterations: Iterations) -> Rendered {
+                if scene.volumetric && !self.renders_media() {
+                    return Err(Error::Usage(format!(
+                        "{}: the scene has participating media or null (medium boundary) surfaces, which --integrator {} does not render; use --integrator path",
+                        scene.path.display(),
+                        self.kind().name()
+                    )));
+                }
                 let mut out = match self {
                     $(Method::$variant(o) => o.render(scene, run, iterations),)*
                 }?;

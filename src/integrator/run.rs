@@ -75,6 +75,10 @@ pub trait Integrator:
     /// light to start light subpaths from, and reports connections and light paths).
     const BIDIRECTIONAL: bool;
 
+    /// Whether the integrator renders participating media and null surfaces (scenes with
+    /// them are refused otherwise).
+    const MEDIA: bool = false;
+
     /// Renders iterations `iterations` (all of them when `None`) of the run `run` describes
     /// with this integrator and these options. The statistics' `integrator` and `options`
     /// are the registry's to fill.

@@ -24,6 +24,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 mod bsdf;
+mod medium;
 mod coating;
 mod mask;
 mod perturb;
@@ -76,6 +77,9 @@ impl Scene {
             read_as_bilinear: Vec::new(),
             coatings: Vec::new(),
             prefetched: prefetch::Prefetched::default(),
+            media: Vec::new(),
+            medium_ids: HashMap::new(),
+            camera_medium: None,
         };
         b.prefetched = prefetch::Prefetched::read(&doc, &b.base);
         let mut sensor = None;
@@ -115,6 +119,9 @@ impl Scene {
                 "texture" => {
                     b.texture_node(child.node)?;
                 }
+                "medium" => {
+                    b.medium(child.node)?;
+                }
                 t => {
                     return Err(Error::input(&node.loc, format!("<{t}> plugins are not supported by this renderer")));
                 }
@@ -147,6 +154,7 @@ impl Scene {
                 s.prepare_sampling();
             }
         }
+        let volumetric = !b.media.is_empty() || b.shapes.iter().any(|s| b.bsdfs[s.bsdf].is_null());
         let bounds = scene_bounds(&b.shapes, camera.position);
         let light_sampler = LightSampler::new(&b.lights, &b.shapes, &bounds);
         let infinite_lights = (0..b.lights.len()).filter(|&i| b.lights[i].is_infinite()).collect();
@@ -183,6 +191,9 @@ impl Scene {
             sampler,
             accel,
             stats: b.stats,
+            media: b.media,
+            camera_medium: b.camera_medium,
+            volumetric,
         })
     }
 }
@@ -207,6 +218,11 @@ struct Builder<'d> {
     coatings: Vec<RoughPlasticParams>,
     /// The meshes and textures read ahead in parallel (`load/prefetch.rs`).
     prefetched: prefetch::Prefetched,
+    /// Participating media (`load/medium.rs`), and where each medium node went.
+    media: Vec<crate::medium::Medium>,
+    medium_ids: HashMap<NodeId, u32>,
+    /// The sensor's medium.
+    camera_medium: Option<u32>,
 }
 
 /// The emitters at infinity that model the sun and the sky (`load/sunsky.rs`).
@@ -413,10 +429,16 @@ impl<'d> Builder<'d> {
                 );
             }
         };
+        let media = self.medium_interface(id)?;
+        let emits = self.doc.node(id).children.iter().any(|c| self.doc.node(c.node).tag == "emitter");
         let bsdf = match self.single_child(id, "bsdf", "a shape")? {
+            // Mitsuba's defaults: no surface for a boundary of media, black for a shape
+            // that emits, grey diffuse otherwise.
+            None if media.is_some() && !emits => {
+                self.bsdfs.push(Bsdf::new(crate::bsdf::BsdfModel::Null));
+                self.bsdfs.len() - 1
+            }
             None => {
-                // Mitsuba's defaults: grey diffuse, but black for a shape that emits.
-                let emits = self.doc.node(id).children.iter().any(|c| self.doc.node(c.node).tag == "emitter");
                 let reflectance = if emits { 0.0 } else { 0.5 };
                 self.bsdfs.push(Bsdf::diffuse(Texture::Constant(Vec3::splat(reflectance))));
                 self.bsdfs.len() - 1
@@ -433,6 +455,7 @@ impl<'d> Builder<'d> {
             return Err(Error::input(&node.loc, format!("after to_world, {msg}")));
         }
         let mut shape = Shape::new(geometry, bsdf, flip_normals, name);
+        shape.media = media;
         if let ShapeGeometry::Mesh(m) = &shape.geometry {
             self.stats.triangles += m.indices.len();
             self.stats.vertices += m.positions.len();
@@ -462,6 +485,12 @@ impl<'d> Builder<'d> {
                         "the emitting shape \"{}\" has a mask: emitters with cut-outs are not supported",
                         shape.name
                     ),
+                ));
+            }
+            if self.bsdfs[shape.bsdf].is_null() {
+                return Err(Error::input(
+                    &self.node(e).loc,
+                    format!("the emitting shape \"{}\" has a null BSDF: give it a surface", shape.name),
                 ));
             }
             if shape.area().is_nan() || shape.area() <= 0.0 {

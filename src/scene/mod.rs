@@ -14,6 +14,9 @@ use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::film::Filter;
 use crate::light::{Bounds, Light, LightSampler};
+use crate::math::Rgb;
+use crate::medium::Medium;
+use glam::Vec3;
 use shape::{Shape, SurfaceInteraction};
 use std::path::PathBuf;
 
@@ -106,6 +109,10 @@ pub fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
+/// The most null surfaces a ray crosses before it counts as blocked (a guard against
+/// rays caught between coincident boundaries).
+pub const MAX_NULL_CROSSINGS: usize = 256;
+
 /// A render-ready scene.
 pub struct Scene {
     pub path: PathBuf,
@@ -123,6 +130,13 @@ pub struct Scene {
     pub sampler: SamplerSpec,
     pub accel: Accel,
     pub stats: LoadStats,
+    /// The participating media that shapes bound (`Shape::media`) and the camera sits in.
+    pub media: Vec<Medium>,
+    /// The medium around the camera (`None`: vacuum).
+    pub camera_medium: Option<u32>,
+    /// Whether light meets media or null surfaces on its way (what an integrator without
+    /// media refuses).
+    pub volumetric: bool,
 }
 
 impl Scene {
@@ -154,6 +168,42 @@ impl Scene {
     #[inline]
     pub fn bsdf_index(&self, si: &SurfaceInteraction) -> usize {
         self.shapes[si.shape as usize].bsdf
+    }
+
+    /// The medium a ray leaving the surface point `si` in direction `d` travels in, when the
+    /// ray that reached it travelled in `current`.
+    #[inline]
+    pub fn medium_after(&self, si: &SurfaceInteraction, d: Vec3, current: Option<u32>) -> Option<u32> {
+        self.shapes[si.shape as usize].media.map_or(current, |m| m.towards(si.ng, d))
+    }
+
+    /// The fraction of light that travels along the segment `ray` (from `ray.o` to
+    /// `ray.at(ray.tmax)`) starting in `medium`: zero when a surface blocks it; null
+    /// surfaces (medium boundaries) are crossed, each medium's transmittance applied on its
+    /// stretch. Without media, a plain occlusion query.
+    pub fn transmittance(&self, ray: &Ray, mut medium: Option<u32>) -> Rgb {
+        if !self.volumetric {
+            return if self.occluded(ray) { Rgb::ZERO } else { Rgb::ONE };
+        }
+        let end = ray.at(ray.tmax);
+        let mut ray = *ray;
+        let mut tr = Rgb::ONE;
+        for _ in 0..MAX_NULL_CROSSINGS {
+            let hit = self.intersect(&ray);
+            if let Some(m) = medium {
+                let t = hit.as_ref().map_or(ray.tmax, |si| si.t);
+                tr *= self.media[m as usize].transmittance(t * ray.d.length());
+            }
+            let Some(si) = hit else {
+                return tr;
+            };
+            if !self.bsdf(&si).is_null() || tr == Rgb::ZERO {
+                return Rgb::ZERO;
+            }
+            medium = self.medium_after(&si, ray.d, medium);
+            ray = si.spawn_ray_to(end);
+        }
+        Rgb::ZERO
     }
 
     /// The area light of a surface point, if its shape emits.

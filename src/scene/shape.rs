@@ -33,6 +33,9 @@ pub struct Shape {
     pub flip_normals: bool,
     /// The shape's `id` in the scene file, or its plugin name.
     pub name: String,
+    /// The media on its two sides, where the shape bounds a medium (elsewhere a ray keeps
+    /// the medium it travels in).
+    pub media: Option<crate::medium::MediumInterface>,
     area: f32,
     /// Triangle selection by area (meshes that emit).
     area_distribution: Option<Distribution1D>,
@@ -101,6 +104,7 @@ impl Shape {
             light: None,
             flip_normals,
             name,
+            media: None,
             area,
             area_distribution: None,
             sample_normals: Vec::new(),

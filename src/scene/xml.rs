@@ -238,9 +238,9 @@ impl Document {
         }
         if let Some(c) = n.children.iter().find(|c| !c.used.get()) {
             let child = &self.nodes[c.node];
-            // Participating media are a feature this renderer lacks, not a mistake in the file.
+            // Where media may be nested.
             let lacking = if child.tag == "medium" || child.tag == "phase" {
-                " (participating media are not supported: the scene needs a renderer with media)"
+                " (a medium belongs to a shape, as its interior or exterior, or to the sensor; a phase function to a medium)"
             } else {
                 ""
             };

@@ -16,6 +16,7 @@ use glam::Vec3;
 /// BSDF plugins this renderer implements.
 pub const BSDF_PLUGINS: &[&str] = &[
     "diffuse",
+    "null",
     "mask",
     "twosided",
     "conductor",
@@ -229,6 +230,7 @@ impl Builder<'_> {
         let one = Vec3::ONE;
         let model = match plugin.as_str() {
             "bumpmap" | "normalmap" => return self.perturbed_bsdf(id),
+            "null" => BsdfModel::Null,
             "diffuse" => BsdfModel::Diffuse { reflectance: self.texture_prop(id, "reflectance", Vec3::splat(0.5))? },
             "roughdiffuse" => self.rough_diffuse(id)?,
             "twosided" => {

@@ -124,6 +124,7 @@ impl Builder<'_> {
             None => SamplerSpec { spp: 4, seed: 0, kind: SamplerKind::Independent },
             Some(n) => self.sampler(n)?,
         };
+        self.camera_medium = self.sensor_medium(id)?;
         self.check_unused(id)?;
         let camera = Camera::new(Transform::new(to_world), fov, axis, (film.width, film.height), near, far);
         Ok((camera, film, sampler))

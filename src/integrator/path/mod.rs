@@ -1,6 +1,10 @@
 //! Unidirectional path tracing (contract §1): next-event estimation with one light sample
 //! per vertex, MIS by the power heuristic between BSDF and light sampling, Russian roulette
 //! from `rr_depth` on, and Mitsuba's `max_depth` (segments from the camera; -1 unlimited).
+//! In scenes with participating media or null surfaces, [`PathTracer::li_media`] (`media.rs`)
+//! tracks the medium along the path.
+
+mod media;
 
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
@@ -189,7 +193,11 @@ impl PathTracer {
         sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
             let ray = ctx.scene.camera.generate_ray(pos);
             counters.camera_rays += 1;
-            sink.l = self.li(ctx.scene, ray, sampler, counters);
+            sink.l = if ctx.scene.volumetric {
+                self.li_media(ctx.scene, ray, sampler, counters)
+            } else {
+                self.li(ctx.scene, ray, sampler, counters)
+            };
             true
         })
     }
@@ -221,6 +229,7 @@ pub struct PathOptions {}
 
 impl Integrator for PathOptions {
     const BIDIRECTIONAL: bool = false;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         let pt = PathTracer { sampler: scene.sampler.kind, ..PathTracer::new(&scene.integrator) };
