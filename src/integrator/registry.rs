@@ -4,6 +4,7 @@
 //! plugins that select it. From that table come [`IntegratorKind`], [`Method`] (an integrator
 //! with its options, what a render is given), [`INTEGRATORS`] and the dispatch of a render.
 
+use crate::error::Error;
 use crate::integrator::bidir::mis::Heuristic;
 use crate::integrator::budget::BudgetOptions;
 use crate::integrator::eorr::EorrOptions;
@@ -14,7 +15,6 @@ use crate::integrator::pcbpt::{PcbptOptions, PoolOptions};
 use crate::integrator::pssmlt::PssmltOptions;
 use crate::integrator::run::{Integrator, Iterations, Rendered, RunOptions};
 use crate::integrator::spcbpt::SpcbptOptions;
-use crate::error::Error;
 use crate::scene::Scene;
 use serde::Serialize;
 

@@ -16,7 +16,9 @@ const INV_4PI: f32 = 0.25 / PI;
 pub enum Phase {
     Isotropic,
     /// Henyey and Greenstein's lobe with mean cosine `g` in (−1, 1).
-    HenyeyGreenstein { g: f32 },
+    HenyeyGreenstein {
+        g: f32,
+    },
 }
 
 impl Phase {

@@ -24,9 +24,9 @@ use std::sync::Arc;
 use std::time::Instant;
 
 mod bsdf;
-mod medium;
 mod coating;
 mod mask;
+mod medium;
 mod perturb;
 mod prefetch;
 mod sensor;

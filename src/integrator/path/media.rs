@@ -228,7 +228,8 @@ impl PathTracer {
             if le == Rgb::ZERO {
                 continue;
             }
-            let w = self.emission_weight(s.depth, s.prev_delta, s.prev_pdf, || scene.light_sampler.pmf(light_index) * pdf);
+            let w =
+                self.emission_weight(s.depth, s.prev_delta, s.prev_pdf, || scene.light_sampler.pmf(light_index) * pdf);
             s.l += s.beta * le * w;
         }
     }

@@ -63,7 +63,8 @@ impl Builder<'_> {
     /// The media a shape's nested or referenced `<medium name="interior|exterior">`
     /// children put on its two sides, if it has any.
     pub(super) fn medium_interface(&mut self, shape: NodeId) -> Result<Option<MediumInterface>> {
-        let children: Vec<_> = self.doc.children(shape, "medium").map(|c| (c.name.clone(), c.node, c.loc.clone())).collect();
+        let children: Vec<_> =
+            self.doc.children(shape, "medium").map(|c| (c.name.clone(), c.node, c.loc.clone())).collect();
         if children.is_empty() {
             return Ok(None);
         }
@@ -127,7 +128,11 @@ fn legacy_coefficients(node: &Node) -> Result<(Rgb, Rgb)> {
                 let (has, lacks) = if given.is_some() { (a, b) } else { (b, a) };
                 Err(Error::input(
                     &node.prop_loc(has),
-                    format!("a medium with \"{has}\" needs \"{lacks}\" too (Mitsuba 0.6 took it from its Skin1 preset)"),
+                    format!(
+                        "a medium with \"{}\" needs \"{}\" too (Mitsuba 0.6 took it from its Skin1 preset)",
+                        legacy_name(has),
+                        legacy_name(lacks)
+                    ),
                 ))
             }
         }
@@ -140,12 +145,30 @@ fn legacy_coefficients(node: &Node) -> Result<(Rgb, Rgb)> {
             let (st, al) = (non_negative(node, "sigma_t", st)?, albedo(node, al)?);
             Ok((st * (Rgb::ONE - al), st * al))
         }
-        (Some(_), Some(_)) => Err(Error::input(
-            &node.prop_loc("sigma_t"),
-            "give sigmaA and sigmaS, or sigmaT and albedo, not both pairs",
-        )),
-        (None, None) => Err(Error::input(&node.loc, "a homogeneous medium needs sigmaA and sigmaS (or sigmaT and albedo)")),
+        (Some(_), Some(_)) => {
+            Err(Error::input(&node.prop_loc("sigma_t"), "give sigmaA and sigmaS, or sigmaT and albedo, not both pairs"))
+        }
+        (None, None) => {
+            Err(Error::input(&node.loc, "a homogeneous medium needs sigmaA and sigmaS (or sigmaT and albedo)"))
+        }
     }
+}
+
+/// A property's name as a version 0.x file spells it (`sigma_a` → `sigmaA`).
+fn legacy_name(name: &str) -> String {
+    let mut out = String::new();
+    let mut upper = false;
+    for c in name.chars() {
+        match c {
+            '_' => upper = true,
+            c if upper => {
+                out.push(c.to_ascii_uppercase());
+                upper = false;
+            }
+            c => out.push(c),
+        }
+    }
+    out
 }
 
 fn non_negative(node: &Node, name: &str, v: Rgb) -> Result<Rgb> {

@@ -1,0 +1,187 @@
+//! Participating media against exact answers: Beer's law through an absorbing slab, single
+//! scattering of a point light in fog (a quadrature of the volume rendering equation), and
+//! a furnace (a non-absorbing medium in a uniformly lit world, where every ray sees the
+//! world's radiance whatever the scattering) — each with a control showing the test would
+//! notice a missing factor.
+
+mod common;
+
+use common::*;
+use pcbpt::accel::Backend;
+use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use std::f64::consts::PI;
+use std::path::PathBuf;
+
+fn write(dir: &tempfile::TempDir, name: &str, xml: &str) -> PathBuf {
+    let path = dir.path().join(name);
+    std::fs::write(&path, xml).unwrap();
+    path
+}
+
+fn sensor(fov: f32, size: u32, origin: &str, medium: &str) -> String {
+    // Towards the origin, or along +z from it.
+    let target = if origin == "0, 0, 0" { "0, 0, 1" } else { "0, 0, 0" };
+    format!(
+        r#"<sensor type="perspective"><float name="fov" value="{fov}"/>
+        <transform name="to_world"><lookat origin="{origin}" target="{target}" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="{size}"/><integer name="height" value="{size}"/><rfilter type="box"/></film>
+        {medium}</sensor>"#
+    )
+}
+
+/// A camera on the axis of a cube of side 2 whose interior absorbs, against a uniform
+/// environment: each ray keeps `exp(-σt · 2 / cos θ)` of it (θ below 0.5° here).
+#[test]
+fn an_absorbing_slab_follows_beers_law() {
+    let dir = tempfile::tempdir().unwrap();
+    let sigma = [0.2f32, 0.5, 1.0];
+    let xml = format!(
+        r#"<scene version="3.0.0">
+        {}
+        <emitter type="constant"><rgb name="radiance" value="2"/></emitter>
+        <shape type="cube"><medium type="homogeneous" name="interior">
+            <rgb name="sigma_t" value="{}, {}, {}"/><float name="albedo" value="0"/></medium></shape>
+        </scene>"#,
+        sensor(1.0, 4, "0, 0, 5", ""),
+        sigma[0],
+        sigma[1],
+        sigma[2]
+    );
+    let scene = load(&write(&dir, "slab.xml", &xml), &[], Backend::Embree);
+    let img = image(render(&scene, IntegratorKind::Path, 4, 1, 1));
+    for p in &img.pixels {
+        for c in 0..3 {
+            let exact = 2.0 * (-2.0 * sigma[c]).exp();
+            assert!((p[c] / exact - 1.0).abs() < 1e-3, "channel {c}: {} against {exact}", p[c]);
+        }
+    }
+    // Control: without the medium the pixels keep the environment's 2.
+    let clear = xml.replace(
+        r#"<float name="albedo" value="0"/>"#,
+        r#"<float name="albedo" value="0"/><float name="scale" value="0"/>"#,
+    );
+    let scene = load(&write(&dir, "clear.xml", &clear), &[], Backend::Embree);
+    let img = image(render(&scene, IntegratorKind::Path, 4, 1, 1));
+    assert!(img.pixels.iter().all(|p| (p[0] - 2.0).abs() < 1e-4), "{:?}", img.pixels[0]);
+}
+
+const SIGMA_T: [f64; 3] = [0.4, 0.6, 0.8];
+const ALBEDO: [f64; 3] = [0.8, 0.5, 0.9];
+const G: f64 = 0.6;
+const LIGHT: [f64; 3] = [0.5, 0.0, 3.0];
+const INTENSITY: f64 = 10.0;
+
+/// The radiance single scattering brings to a camera at the origin looking along +z
+/// through fog filling space, lit by a point light at [`LIGHT`]: ∫ T(t) σs p(θ(t)) I T(r) / r²
+/// dt by Simpson's rule. `phase_sign` -1 mirrors the phase function (the control).
+fn single_scattering(c: usize, phase_sign: f64) -> f64 {
+    let (st, ss) = (SIGMA_T[c], SIGMA_T[c] * ALBEDO[c]);
+    let f = |t: f64| {
+        let d = [LIGHT[0], LIGHT[1], LIGHT[2] - t];
+        let r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let r = r2.sqrt();
+        // wo = -z (towards the camera), wi towards the light: wo · wi = -d.z / r.
+        let dot = phase_sign * -d[2] / r;
+        let p = (1.0 - G * G) / (4.0 * PI * (1.0 + G * G + 2.0 * G * dot).powf(1.5));
+        (-st * t).exp() * ss * p * INTENSITY * (-st * r).exp() / r2
+    };
+    let (end, n) = (100.0, 200_000);
+    let h = end / n as f64;
+    let mut sum = f(0.0) + f(end);
+    for i in 1..n {
+        sum += f(i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    sum * h / 3.0
+}
+
+#[test]
+fn single_scattering_of_a_point_light_matches_the_quadrature() {
+    let dir = tempfile::tempdir().unwrap();
+    let medium = format!(
+        r#"<medium type="homogeneous"><rgb name="sigma_t" value="{}, {}, {}"/><rgb name="albedo" value="{}, {}, {}"/>
+        <phase type="hg"><float name="g" value="{G}"/></phase></medium>"#,
+        SIGMA_T[0], SIGMA_T[1], SIGMA_T[2], ALBEDO[0], ALBEDO[1], ALBEDO[2]
+    );
+    let xml = format!(
+        r#"<scene version="3.0.0">
+        <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+        {}
+        <emitter type="point"><point name="position" x="{}" y="{}" z="{}"/><rgb name="intensity" value="{INTENSITY}"/></emitter>
+        </scene>"#,
+        sensor(0.2, 1, "0, 0, 0", &medium),
+        LIGHT[0],
+        LIGHT[1],
+        LIGHT[2]
+    );
+    let scene = load(&write(&dir, "fog.xml", &xml), &[], Backend::Embree);
+    let passes: Vec<f64> = (0..8)
+        .map(|seed| {
+            let out = render(&scene, IntegratorKind::Path, 20_000, seed, 2);
+            out.image[0][1] as f64
+        })
+        .collect();
+    let (mean, err) = mean_and_standard_error(&passes);
+    let exact = single_scattering(1, 1.0);
+    let mirrored = single_scattering(1, -1.0);
+    eprintln!("single scattering: {mean:.5} ± {err:.5}, exact {exact:.5}, mirrored phase {mirrored:.5}");
+    assert!((mean - exact).abs() < 4.0 * err + 2e-3 * exact, "{mean} ± {err} against {exact}");
+    // Control: the mirrored phase function's answer is far outside the error.
+    assert!((mean - mirrored).abs() > 20.0 * err && (mean / mirrored - 1.0).abs() > 0.2);
+    // Every channel, from one longer render.
+    let out = render(&scene, IntegratorKind::Path, 100_000, 99, 2);
+    for c in 0..3 {
+        let exact = single_scattering(c, 1.0);
+        assert!(
+            (out.image[0][c] as f64 / exact - 1.0).abs() < 0.02,
+            "channel {c}: {} against {exact}",
+            out.image[0][c]
+        );
+    }
+}
+
+/// A sphere of non-absorbing fog (a null boundary) under a uniform environment: radiance
+/// is conserved, so every pixel sees the environment's value at every depth of scattering.
+fn furnace(albedo: f32, g: f32) -> f64 {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = format!(
+        r#"<scene version="3.0.0">
+        {}
+        <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+        <shape type="sphere"><medium type="homogeneous" name="interior">
+            <float name="sigma_t" value="3"/><float name="albedo" value="{albedo}"/>
+            <phase type="hg"><float name="g" value="{g}"/></phase></medium></shape>
+        </scene>"#,
+        sensor(30.0, 8, "0, 0, 4", "")
+    );
+    let scene = load(&write(&dir, "furnace.xml", &xml), &[], Backend::Embree);
+    image(render(&scene, IntegratorKind::Path, 1024, 5, 2)).mean()
+}
+
+#[test]
+fn a_scattering_furnace_keeps_the_environments_radiance() {
+    for g in [0.0, 0.7, -0.5] {
+        let mean = furnace(1.0, g);
+        eprintln!("furnace, g = {g}: {mean:.5}");
+        assert!((mean - 1.0).abs() < 0.01, "g = {g}: {mean}");
+    }
+    // Control: light lost to absorption shows.
+    let absorbing = furnace(0.8, 0.0);
+    assert!(absorbing < 0.95, "{absorbing}");
+}
+
+/// Integrators without media refuse a scene with them, naming the path tracer.
+#[test]
+fn integrators_without_media_refuse_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = format!(
+        r#"<scene version="3.0.0">{}
+        <emitter type="constant"/>
+        <shape type="sphere"><medium type="homogeneous" name="interior"/></shape></scene>"#,
+        sensor(30.0, 4, "0, 0, 4", "")
+    );
+    let scene = load(&write(&dir, "fog.xml", &xml), &[], Backend::Embree);
+    for kind in [IntegratorKind::Bdpt, IntegratorKind::Pcbpt, IntegratorKind::Memlt, IntegratorKind::Pssmlt] {
+        let e = integrator::render(&scene, &RenderOptions::new(kind, Budget::Spp(1))).err().expect("refused");
+        assert!(e.to_string().contains("--integrator path"), "{}: {e}", kind.name());
+    }
+}
