@@ -195,6 +195,7 @@ impl IntegratorStats for EorrStats {
 
 impl Integrator for EorrOptions {
     const BIDIRECTIONAL: bool = true;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         use crate::error::Error;

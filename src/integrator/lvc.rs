@@ -167,6 +167,7 @@ impl IntegratorStats for LvcStats {
 
 impl Integrator for LvcOptions {
     const BIDIRECTIONAL: bool = true;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         if self.connections == 0 {

@@ -191,8 +191,14 @@ impl Scene {
         for _ in 0..MAX_NULL_CROSSINGS {
             let hit = self.intersect(&ray);
             if let Some(m) = medium {
-                let t = hit.as_ref().map_or(ray.tmax, |si| si.t);
-                tr *= self.media[m as usize].transmittance(t * ray.d.length());
+                // Past the last surface, a medium that nothing bounds goes on for ever: what
+                // comes from beyond the scene (a light at infinity) crosses all of it.
+                let d = match &hit {
+                    Some(si) => si.t * ray.d.length(),
+                    None if self.bounds.contains(end) => ray.tmax * ray.d.length(),
+                    None => f32::INFINITY,
+                };
+                tr *= self.media[m as usize].transmittance(d);
             }
             let Some(si) = hit else {
                 return tr;
@@ -204,6 +210,27 @@ impl Scene {
             ray = si.spawn_ray_to(end);
         }
         Rgb::ZERO
+    }
+
+    /// The medium at the point `p`, for a point no walk reached (a light's position): the
+    /// side facing `p` of the first surface bounding media that a ray from `p` meets (other
+    /// surfaces are passed through); the camera's medium where no such surface is met.
+    pub fn medium_at(&self, p: Vec3) -> Option<u32> {
+        if self.media.is_empty() {
+            return None;
+        }
+        // An arbitrary direction, unlikely to graze axis-aligned walls.
+        let d = Vec3::new(0.2752, 0.9312, 0.2389).normalize();
+        let mut ray = Ray::new(p, d);
+        for _ in 0..MAX_NULL_CROSSINGS {
+            let Some(si) = self.intersect(&ray) else { break };
+            if let Some(m) = self.shapes[si.shape as usize].media {
+                // Leaving along the normal means `p` is inside.
+                return if si.ng.dot(d) > 0.0 { m.interior } else { m.exterior };
+            }
+            ray = si.spawn_ray(d);
+        }
+        self.camera_medium
     }
 
     /// The area light of a surface point, if its shape emits.

@@ -8,7 +8,7 @@ use crate::film::Tile;
 use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_weight_with};
 use crate::integrator::bidir::{
     Connection, Delivery, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath,
-    visible,
+    transmittance,
 };
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::integrator::run::RunOptions;
@@ -67,15 +67,16 @@ impl<'a, C: StrategyCounts> Connector<'a, C> {
 }
 
 impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
-    /// Traces the shadow ray of a connection: `true` when unoccluded.
+    /// Traces the shadow ray of a connection: the transmittance between its ends (zero when
+    /// occluded).
     #[inline]
-    fn trace(&self, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
+    fn trace(&self, a: &Vertex, b: &Vertex, counters: &mut Counters) -> Rgb {
         counters.connections += 1;
-        let v = visible(self.scene, a, b, counters);
-        if !v {
+        let tr = transmittance(self.scene, a, b, counters);
+        if tr == Rgb::ZERO {
             counters.connections_occluded += 1;
         }
-        v
+        tr
     }
 
     /// `s = 0`: the camera subpath `z_0..z_{t-1}` ends on an emitter.
@@ -162,7 +163,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
         let inv_dist2 = k.inv_dist2;
         // `We cos θ_camera` is the direction's density `k.pdf_dir`.
         let c = qs.beta * light_end.f * (k.pdf_dir * inv_dist2);
-        let z0 = Vertex::camera(scene.camera.position);
+        let z0 = Vertex { medium: scene.camera_medium, ..Vertex::camera(scene.camera.position) };
         let conn = Connection {
             w: k.wi,
             dist2: k.dist2,
@@ -250,19 +251,22 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
                 return false;
             }
             let Some(k) = self.policy.keep(c * w, pos, rng) else { return false };
-            let visible = self.trace(a, b, counters);
+            let tr = self.trace(a, b, counters);
+            let visible = tr != Rgb::ZERO;
             if visible {
                 self.observe(light, camera, conn, drawn, sink);
-                deliver(sink, c, w * k);
+                deliver(sink, c * tr, w * k);
             }
             visible
-        } else if self.trace(a, b, counters) {
+        } else {
+            let tr = self.trace(a, b, counters);
+            if tr == Rgb::ZERO {
+                return false;
+            }
             let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
             self.observe(light, camera, conn, drawn, sink);
-            deliver(sink, c, w);
+            deliver(sink, c * tr, w);
             true
-        } else {
-            false
         }
     }
 }
@@ -319,7 +323,7 @@ impl Bdpt {
         let scene = conn.scene;
         if self.light_only {
             scratch.camera.clear();
-            scratch.camera.push(Vertex::camera(scene.camera.position));
+            scratch.camera.push(Vertex { medium: scene.camera_medium, ..Vertex::camera(scene.camera.position) });
             if !scene.infinite_lights.is_empty() && self.allowed(0, 2) {
                 // No light path reaches the pinhole from infinity: the camera ray finds the
                 // sky seen directly.
@@ -425,6 +429,7 @@ impl Bdpt {
 
 impl Integrator for LighttraceOptions {
     const BIDIRECTIONAL: bool = true;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         let method = BdptRender { bdpt: Bdpt::for_scene(scene, true), heuristic: Default::default() };
@@ -434,6 +439,7 @@ impl Integrator for LighttraceOptions {
 
 impl Integrator for BdptOptions {
     const BIDIRECTIONAL: bool = true;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         let method = BdptRender { bdpt: Bdpt::for_scene(scene, false), heuristic: self.heuristic };

@@ -36,6 +36,10 @@ pub enum VertexKind {
     /// Where a camera walk leaves the scene: every light at infinity (`constant`, `envmap`)
     /// seen in one direction.
     Sky,
+    /// A scattering event in a participating medium ([`Vertex::medium`] says which): a
+    /// point-like vertex (no normal, so no cosine in its area — here volume — densities)
+    /// that scatters by the medium's phase function.
+    Medium,
 }
 
 /// A path vertex.
@@ -66,6 +70,9 @@ pub struct Vertex {
     pub bsdf: u32,
     /// Throughput of the subpath up to and including this vertex (over its densities).
     pub beta: Rgb,
+    /// The medium the walk reached this vertex through (a medium vertex's own; the camera's
+    /// for the pinhole; where the light is for a light vertex); `None` is vacuum.
+    pub medium: Option<u32>,
     pub pdf_fwd: f32,
     pub pdf_rev: f32,
     /// Converts this vertex's solid-angle density towards its predecessor (in its own walk)
@@ -100,6 +107,7 @@ impl Vertex {
             shape: u32::MAX,
             bsdf: u32::MAX,
             beta: Rgb::ONE,
+            medium: None,
             pdf_fwd: 1.0,
             pdf_rev: 0.0,
             to_prev: 0.0,
@@ -123,6 +131,7 @@ impl Vertex {
             shape: u32::MAX,
             bsdf: u32::MAX,
             beta,
+            medium: None,
             pdf_fwd,
             pdf_rev: 0.0,
             to_prev: 0.0,
@@ -182,6 +191,7 @@ impl Vertex {
             shape: si.shape,
             bsdf,
             beta,
+            medium: None,
             pdf_fwd: 0.0,
             pdf_rev: 0.0,
             to_prev: 0.0,
@@ -191,6 +201,41 @@ impl Vertex {
             infinite: false,
             label: None,
         }
+    }
+
+    /// A scattering event at `p` in medium `medium`, reached from the direction `wo`.
+    pub fn in_medium(p: Vec3, wo: Vec3, medium: u32, beta: Rgb) -> Vertex {
+        Vertex {
+            kind: VertexKind::Medium,
+            wo,
+            medium: Some(medium),
+            connectible: true,
+            ..Vertex::light(0, p, Vec3::ZERO, Vec2::ZERO, beta, 0.0)
+        }
+    }
+
+    /// Whether the vertex scatters light (a surface or a medium vertex, not an endpoint).
+    #[inline]
+    pub fn scatters(&self) -> bool {
+        matches!(self.kind, VertexKind::Surface | VertexKind::Medium)
+    }
+
+    /// The medium a ray leaving this vertex in direction `w` travels in: across a surface
+    /// that bounds media, the one on `w`'s side; elsewhere the one the vertex was reached in.
+    #[inline]
+    pub fn medium_towards(&self, scene: &Scene, w: Vec3) -> Option<u32> {
+        match self.kind {
+            VertexKind::Surface => {
+                scene.shapes[self.shape as usize].media.map_or(self.medium, |m| m.towards(self.ng, w))
+            }
+            _ => self.medium,
+        }
+    }
+
+    /// The phase function of a medium vertex.
+    #[inline]
+    fn phase(&self, scene: &Scene) -> crate::medium::Phase {
+        scene.media[self.medium.expect("a medium vertex has a medium") as usize].phase
     }
 
     /// Where the BSDF of a surface vertex is evaluated.
@@ -211,7 +256,7 @@ impl Vertex {
         match self.kind {
             VertexKind::Light(l) => Some(l as usize),
             VertexKind::Surface => scene.shapes[self.shape as usize].light,
-            VertexKind::Camera | VertexKind::Sky => None,
+            VertexKind::Camera | VertexKind::Sky | VertexKind::Medium => None,
         }
     }
 
@@ -259,6 +304,11 @@ impl Vertex {
             }
             VertexKind::Camera => End { f: Rgb::ZERO, pdf_fwd: scene.camera.pdf_direction(w), pdf_rev: 0.0 },
             VertexKind::Sky => End { f: self.infinite_emission(scene), pdf_fwd: 0.0, pdf_rev: 0.0 },
+            VertexKind::Medium => {
+                // Phase functions are symmetric and sampled exactly: value and both densities.
+                let p = self.phase(scene).eval(self.wo, w);
+                End { f: Rgb::splat(p), pdf_fwd: p, pdf_rev: p }
+            }
         }
     }
 
@@ -267,6 +317,9 @@ impl Vertex {
     /// adjoint shading-normal correction in importance mode.
     #[inline]
     pub fn scatter(&self, scene: &Scene, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        if self.kind == VertexKind::Medium {
+            return Rgb::splat(self.phase(scene).eval(wo, wi));
+        }
         let (lo, li) = (self.frame.to_local(wo), self.frame.to_local(wi));
         self.scatter_local(self.bsdf(scene), wo, wi, lo, li, mode)
     }
@@ -306,9 +359,13 @@ impl Vertex {
             VertexKind::Camera => scene.camera.pdf_direction(w),
             VertexKind::Light(l) => scene.lights[l as usize].pdf_emission_direction(self.ng, w),
             VertexKind::Sky => 0.0,
-            VertexKind::Surface => {
+            VertexKind::Surface | VertexKind::Medium => {
                 let Some(prev) = prev else { return 0.0 };
                 let wo = if prev.at_infinity() { prev.ng } else { (prev.p - self.p).normalize_or_zero() };
+                if self.kind == VertexKind::Medium {
+                    return self.phase(scene).eval(wo, w)
+                        * if next.at_infinity() { 1.0 } else { next.cos_area(-w) / dist2 };
+                }
                 let bsdf = self.bsdf(scene);
                 bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.at(), TransportMode::Radiance)
             }
@@ -328,6 +385,10 @@ impl Vertex {
             VertexKind::Light(_) if self.infinite => (self.pdf_light(scene, next), 0.0),
             VertexKind::Light(l) => (scene.lights[l as usize].pdf_emission_direction(self.ng, w) * to_next, 0.0),
             VertexKind::Sky => (0.0, 0.0),
+            VertexKind::Medium => {
+                let p = self.phase(scene).eval(self.wo, w);
+                (p * to_next, p * self.to_prev)
+            }
             VertexKind::Surface => {
                 let bsdf = self.bsdf(scene);
                 let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
@@ -543,9 +604,32 @@ fn random_walk<R: Random>(
     // Throughput of the scattering alone (what Russian roulette looks at).
     let mut rr_beta = Rgb::ONE;
     let mut bounces = 0u32;
+    // The medium the ray travels in, and the null surfaces it crossed.
+    let mut medium = path[path.len() - 1].medium_towards(scene, ray.d);
+    let mut crossings = 0;
     while path.len() < max_vertices {
         counters.extension_rays += 1;
-        let Some(mut si) = scene.intersect(&ray) else {
+        let hit = scene.intersect(&ray);
+        if let Some(m) = medium {
+            let len = ray.d.length();
+            let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t * len);
+            let flight = scene.media[m as usize].sample(t_max, rng.next_1d(), rng.next_1d());
+            beta *= flight.weight;
+            rr_beta *= flight.weight;
+            if beta == Rgb::ZERO || !beta.is_finite() {
+                break;
+            }
+            if flight.scattered {
+                let p = ray.o + ray.d * (flight.t / len);
+                let Some(wi) = scatter_in_medium(scene, p, m, &ray, beta, max_vertices, rng, path) else { break };
+                if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
+                    break;
+                }
+                ray = Ray::new(p, wi);
+                continue;
+            }
+        }
+        let Some(mut si) = hit else {
             // A camera walk that leaves the scene ends on the lights at infinity.
             if mode == TransportMode::Radiance && !scene.infinite_lights.is_empty() {
                 let n = path.len();
@@ -562,6 +646,18 @@ fn random_walk<R: Random>(
             }
             break;
         };
+        let bsdf_index = scene.bsdf_index(&si);
+        let bsdf = &scene.bsdfs[bsdf_index];
+        if bsdf.is_null() {
+            // A boundary between media: on into the medium behind it, no vertex.
+            crossings += 1;
+            if crossings > crate::scene::MAX_NULL_CROSSINGS {
+                break;
+            }
+            medium = scene.medium_after(&si, ray.d, medium);
+            ray = si.spawn_ray(ray.d);
+            continue;
+        }
         let n = path.len();
         let prev = &path[n - 1];
         let back = prev.p - si.p;
@@ -580,9 +676,8 @@ fn random_walk<R: Random>(
         } else {
             back / dist
         };
-        let bsdf_index = scene.bsdf_index(&si);
-        let bsdf = &scene.bsdfs[bsdf_index];
         let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
+        v.medium = medium;
         // After a light at infinity the density towards it stays a solid-angle density.
         v.to_prev = if n == 1 && prev.at_infinity() { 1.0 } else { prev.cos_area(si.wo) / (dist * dist) };
         // A vertex left through a delta lobe has no density (zero marks the delta).
@@ -615,17 +710,74 @@ fn random_walk<R: Random>(
         if beta == Rgb::ZERO || !beta.is_finite() {
             break;
         }
-        bounces += 1;
-        if bounces >= rr_depth {
-            let q = max_component(rr_beta).min(0.95);
-            if rng.next_1d() >= q {
-                break;
-            }
-            beta /= q;
-            rr_beta /= q;
+        if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
+            break;
         }
+        medium = scene.medium_after(&si, wi, medium);
         ray = si.spawn_ray(wi);
     }
+}
+
+/// Counts a bounce and plays Russian roulette from `rr_depth` bounces on, on the
+/// throughput of the scattering alone (`rr_beta`): `false` when the walk ends.
+#[inline]
+fn roulette<R: Random>(beta: &mut Rgb, rr_beta: &mut Rgb, bounces: &mut u32, rr_depth: u32, rng: &mut R) -> bool {
+    *bounces += 1;
+    if *bounces >= rr_depth {
+        let q = max_component(*rr_beta).min(0.95);
+        if rng.next_1d() >= q {
+            return false;
+        }
+        *beta /= q;
+        *rr_beta /= q;
+    }
+    true
+}
+
+/// A walk's scattering event at `p` in medium `m` (the ray `ray` led there): pushes the
+/// medium vertex with its densities, as [`random_walk`] does for surfaces, and samples the
+/// direction the walk leaves along (`None` when the walk is full).
+#[allow(clippy::too_many_arguments)]
+fn scatter_in_medium<R: Random>(
+    scene: &Scene,
+    p: Vec3,
+    m: u32,
+    ray: &Ray,
+    beta: Rgb,
+    max_vertices: usize,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+) -> Option<Vec3> {
+    let n = path.len();
+    let prev = &path[n - 1];
+    let back = prev.p - p;
+    let dist = back.length();
+    if dist == 0.0 || !dist.is_finite() {
+        return None;
+    }
+    let from_infinity = n == 1 && prev.at_infinity();
+    let wo = if from_infinity {
+        prev.ng
+    } else if prev.delta {
+        -ray.d.normalize()
+    } else {
+        back / dist
+    };
+    let mut v = Vertex::in_medium(p, wo, m, beta);
+    v.to_prev = if from_infinity { 1.0 } else { prev.cos_area(wo) / (dist * dist) };
+    if !prev.delta {
+        let (fwd, rev) = prev.densities(scene, &v, -wo, dist);
+        v.pdf_fwd = fwd;
+        if n >= 2 {
+            path[n - 2].pdf_rev = rev;
+        }
+    }
+    path.push(v);
+    if path.len() >= max_vertices {
+        return None;
+    }
+    // The phase function is sampled exactly: the throughput is unchanged.
+    Some(scene.media[m as usize].phase.sample(wo, rng.next_2d()).0)
 }
 
 /// Traces a camera subpath through film position `pos` (pixel units) into `path`.
@@ -639,7 +791,7 @@ pub fn camera_subpath<R: Random>(
 ) {
     path.clear();
     let ray = scene.camera.generate_ray(pos);
-    path.push(Vertex::camera(ray.o));
+    path.push(Vertex { medium: scene.camera_medium, ..Vertex::camera(ray.o) });
     if limits.camera_vertices <= 1 {
         return;
     }
@@ -697,6 +849,10 @@ pub fn light_subpath<R: Random>(
         let o = if es.n == Vec3::ZERO { es.p } else { offset_origin(es.p, es.n, es.d) };
         (y0, Ray::new(o, es.d), le / (origin * es.pdf_dir))
     };
+    let mut y0 = y0;
+    if scene.volumetric {
+        y0.medium = light_medium(scene, l, &y0, ray.d);
+    }
     path.push(y0);
     if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
         return;
@@ -712,6 +868,18 @@ pub fn light_subpath<R: Random>(
         path,
         counters,
     );
+}
+
+/// The medium light leaving light `l` at its vertex `y0` in direction `d` travels in: the
+/// side of its shape's medium boundary that `d` leaves to, or the medium at its position.
+fn light_medium(scene: &Scene, l: usize, y0: &Vertex, d: Vec3) -> Option<u32> {
+    if let crate::light::Light::Area { shape, .. } = &scene.lights[l]
+        && let Some(m) = scene.shapes[*shape].media
+    {
+        return m.towards(y0.ng, d);
+    }
+    let p = if y0.ng == Vec3::ZERO { y0.p } else { offset_origin(y0.p, y0.ng, d) };
+    scene.medium_at(p)
 }
 
 /// The start of a light subpath from light `l` at infinity (chosen with probability `pmf`):
@@ -732,7 +900,17 @@ fn infinite_light_start(scene: &Scene, l: usize, pmf: f32, u_pos: Vec2, u_dir: V
 /// A shadow ray between two vertices, offset at both ends along their geometric normals.
 #[inline]
 pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
+    transmittance(scene, a, b, counters) != Rgb::ZERO
+}
+
+/// The fraction of light that travels between the light-side vertex `a` and the
+/// camera-side vertex `b` of a connection: zero when something blocks the segment, else the
+/// transmittance of the media along it ([`Scene::transmittance`]). The segment is traced
+/// from the end whose medium its walk knows: `b`, unless `b` lies at infinity.
+#[inline]
+pub fn transmittance(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> Rgb {
     counters.shadow_rays += 1;
+    let (a, b) = if scene.volumetric && !b.infinite { (b, a) } else { (a, b) };
     // The segment stops `SHADOW_EPSILON` of its length short of its far end. A vertex at
     // infinity is a point beyond the scene, some scene diameters away: the ray starts at the
     // finite vertex, so that margin lies outside the scene rather than in front of the
@@ -742,7 +920,12 @@ pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -
     let d = b.p - a.p;
     let o = if a.ng == Vec3::ZERO { a.p } else { offset_origin(a.p, a.ng, d) };
     let e = if b.ng == Vec3::ZERO { b.p } else { offset_origin(b.p, b.ng, -d) };
-    !scene.occluded(&Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON))
+    let segment = Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON);
+    if scene.volumetric {
+        scene.transmittance(&segment, a.medium_towards(scene, d))
+    } else {
+        scene.transmittance(&segment, None)
+    }
 }
 
 /// Where a strategy's contribution goes: onto the pixel being sampled (`add`) or, for

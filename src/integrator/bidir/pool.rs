@@ -7,7 +7,7 @@ use crate::error::Error;
 use crate::film::Splat;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::StrategyCounts;
-use crate::integrator::bidir::{Delivery, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_subpath};
+use crate::integrator::bidir::{Delivery, Sink, Vertex, WalkLimits, camera_subpath, light_subpath};
 use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::sampling::{Random, Sampler};
@@ -243,7 +243,7 @@ impl LightPool {
                 let start = pool.vertices.len() as u32;
                 for (depth, v) in verts[k..k + len as usize].iter().enumerate() {
                     let index = pool.vertices.len() as u32;
-                    if depth >= 1 && v.kind == VertexKind::Surface && v.is_connectible() {
+                    if depth >= 1 && v.scatters() && v.is_connectible() {
                         pool.connectible.push(index);
                     }
                     pool.vertices.push(*v);

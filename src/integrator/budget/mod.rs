@@ -251,7 +251,7 @@ fn path_traced_tile(ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult
     sample_tile(ctx, tile, first, count, |pos, sampler, sink, counters| {
         let ray = ctx.scene.camera.generate_ray(pos);
         counters.camera_rays += 1;
-        sink.l = pt.li(ctx.scene, ray, sampler, counters);
+        sink.l = pt.radiance(ctx.scene, ray, sampler, counters);
         true
     })
 }

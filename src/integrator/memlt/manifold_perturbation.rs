@@ -223,7 +223,8 @@ pub fn plan(scene: &Scene, x: &[Vertex], a: usize, toward_light: bool, treatment
         VertexKind::Camera => toward_light,
         VertexKind::Light(_) => !toward_light,
         VertexKind::Surface => connectible(scene, &x[a]) && !specular(a),
-        VertexKind::Sky => false,
+        // MEMLT renders no media (scenes with them are refused).
+        VertexKind::Sky | VertexKind::Medium => false,
     };
     // A light at infinity starts no plan (the direction it sends light along is its own)
     // and ends no walk (its edge has no length to walk along).
@@ -410,7 +411,7 @@ fn direction_density(scene: &Scene, x: &[Vertex], plan: &Plan) -> f64 {
             let mode = if plan.toward_light { TransportMode::Radiance } else { TransportMode::Importance };
             lobe_pdf(scene, a, back, w, mode)
         }
-        VertexKind::Sky => 0.0,
+        VertexKind::Sky | VertexKind::Medium => 0.0,
     };
     p as f64
 }

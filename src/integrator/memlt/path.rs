@@ -426,7 +426,8 @@ pub fn leave<R: Random>(
             v[i].delta = s.delta;
             Some(ray_from(&v[i], d))
         }
-        VertexKind::Sky => None,
+        // MEMLT renders no media (scenes with them are refused).
+        VertexKind::Sky | VertexKind::Medium => None,
     }
 }
 

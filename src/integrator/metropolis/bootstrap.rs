@@ -164,7 +164,7 @@ impl Evaluator<'_> {
             MltBase::Path => {
                 let ray = scene.camera.generate_ray(out.pos);
                 c.camera_rays += 1;
-                out.pixel = self.path.li(scene, ray, rng, c);
+                out.pixel = self.path.radiance(scene, ray, rng, c);
             }
         }
         out.finish()

@@ -64,7 +64,18 @@ impl PathTracer {
         }
     }
 
-    /// Radiance arriving along a camera ray.
+    /// Radiance arriving along a camera ray: [`PathTracer::li`], or
+    /// [`PathTracer::li_media`] in a scene with media.
+    #[inline]
+    pub fn radiance<R: Random>(&self, scene: &Scene, ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
+        if scene.volumetric {
+            self.li_media(scene, ray, sampler, counters)
+        } else {
+            self.li(scene, ray, sampler, counters)
+        }
+    }
+
+    /// Radiance arriving along a camera ray in a scene without media.
     pub fn li<R: Random>(&self, scene: &Scene, mut ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
         let mut l = Rgb::ZERO;
         let mut beta = Rgb::ONE;
@@ -193,11 +204,7 @@ impl PathTracer {
         sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
             let ray = ctx.scene.camera.generate_ray(pos);
             counters.camera_rays += 1;
-            sink.l = if ctx.scene.volumetric {
-                self.li_media(ctx.scene, ray, sampler, counters)
-            } else {
-                self.li(ctx.scene, ray, sampler, counters)
-            };
+            sink.l = self.radiance(ctx.scene, ray, sampler, counters);
             true
         })
     }

@@ -6,7 +6,7 @@ use crate::bsdf::TransportMode;
 use crate::film::tiles;
 use crate::integrator::bidir::mis::FullPath;
 use crate::integrator::bidir::pool::LightPool;
-use crate::integrator::bidir::{Vertex, VertexKind, WalkLimits, camera_subpath, visible};
+use crate::integrator::bidir::{Vertex, WalkLimits, camera_subpath, visible};
 use crate::integrator::pcbpt::{DistanceTerm, PcOptions, PcSampling};
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, luminance};
@@ -75,12 +75,7 @@ pub fn trace_records(
                 let pos =
                     Vec2::new(tile.x0 as f32 + u.x * tile.width as f32, tile.y0 as f32 + u.y * tile.height as f32);
                 camera_subpath(scene, pos, &limits, &mut rng, &mut path, &mut counters);
-                records.extend(
-                    path.iter()
-                        .skip(1)
-                        .filter(|v| v.kind == VertexKind::Surface && v.is_connectible())
-                        .map(Record::new),
-                );
+                records.extend(path.iter().skip(1).filter(|v| v.scatters() && v.is_connectible()).map(Record::new));
             }
             (records, counters)
         })

@@ -241,7 +241,8 @@ impl PcOptions {
 
 /// The throughputs `α_L(x_k)`, `1 <= k < out.len()`, that a light subpath along the full
 /// path's vertices would carry: emission and BSDFs with their cosines over the solid-angle
-/// densities of sampling them, from positions alone (Russian roulette left out).
+/// densities of sampling them, from positions alone (Russian roulette and the media's
+/// transmittance left out).
 pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
     out.fill(Rgb::ZERO);
     if out.len() < 2 {
@@ -270,6 +271,15 @@ pub fn light_throughputs(scene: &Scene, path: &FullPath, out: &mut [Rgb]) {
         let x = path.get(i);
         let wo = if i == 1 && x0.at_infinity() { x0.ng } else { (path.get(i - 1).p - x.p).normalize_or_zero() };
         let wi = (path.get(i + 1).p - x.p).normalize_or_zero();
+        if !x.scatters() {
+            return;
+        }
+        if x.kind == crate::integrator::bidir::VertexKind::Medium {
+            // A phase function sampled exactly: the throughput is unchanged (the media's
+            // transmittance is not a function of positions alone, and is left out).
+            out[i + 1] = alpha;
+            continue;
+        }
         let bsdf = x.bsdf(scene);
         let (lo, li) = (x.frame.to_local(wo), x.frame.to_local(wi));
         let f = x.scatter_local(bsdf, wo, wi, lo, li, TransportMode::Importance);
@@ -716,6 +726,7 @@ impl IntegratorStats for PcbptStats {
 
 impl Integrator for PcbptOptions {
     const BIDIRECTIONAL: bool = true;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         self.pc.validate().map_err(Error::Usage)?;

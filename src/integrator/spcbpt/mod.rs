@@ -48,7 +48,7 @@ use crate::integrator::bidir::pool::{
     CONCENTRATION_DEPTHS, LightPool, PILOT_ITERATION, PoolCounters, PoolSelection, concentration_depth,
     pass_concentration,
 };
-use crate::integrator::bidir::{Delivery, Sink, Vertex, VertexKind};
+use crate::integrator::bidir::{Delivery, Sink, Vertex};
 use crate::integrator::budget::{
     Budget, BudgetMode, BudgetStats, CameraSample, Operations, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
 };
@@ -158,7 +158,7 @@ impl Model {
     /// asks for another's subspaces (an endpoint's, a purely specular vertex's), and one
     /// that did would classify it itself.
     pub fn label_connectible(&self, scene: &Scene, vertices: &mut [Vertex]) {
-        for v in vertices.iter_mut().filter(|v| v.kind == VertexKind::Surface && v.is_connectible()) {
+        for v in vertices.iter_mut().filter(|v| v.scatters() && v.is_connectible()) {
             self.label(scene, v);
         }
     }
@@ -796,6 +796,7 @@ pub(crate) fn test_model(
 
 impl Integrator for SpcbptOptions {
     const BIDIRECTIONAL: bool = true;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         self.sp.validate().map_err(Error::Usage)?;
@@ -943,7 +944,7 @@ mod tests {
         let scene = scene();
         let (model, pool, _, _) = setup(&scene);
         let mut vertices: Vec<Vertex> = camera_prefixes(&scene).into_iter().flatten().collect();
-        vertices.extend(pool.vertices.iter().filter(|y| y.kind == VertexKind::Surface));
+        vertices.extend(pool.vertices.iter().filter(|y| y.scatters()));
         let mut rng = Sampler::new(&[11]);
         let (mut checked, mut turned, mut swapped_differ) = (0, 0, 0);
         for v in &vertices {
