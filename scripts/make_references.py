@@ -56,6 +56,9 @@ REFERENCES = {
     # An open box under a point light and a spot light, both out of the camera's view
     # (MEMLT's lights with a Dirac position).
     "spot-point": ("scenes/spot-point/scene.xml", {"resx": 128, "resy": 96}, 4096, None),
+    # Fog through the open front of a box, a glass sphere, a small light: Mitsuba 3's
+    # volpath (the scene's own integrator).
+    "fog-caustic": ("scenes/fog-caustic/scene.xml", {"resx": 64, "resy": 64}, 16384, None),
 }
 
 # Settings the scene file gives, recorded in the JSON beside the reference.
@@ -72,6 +75,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def render(name, variant, chunk, out_dir, chunks_dir=None):
+    import xml.etree.ElementTree as ET
+
     import mitsuba as mi
     import numpy as np
 
@@ -99,7 +104,7 @@ def render(name, variant, chunk, out_dir, chunks_dir=None):
     settings = {
         "renderer": f"Mitsuba {mi.__version__}",
         "variant": variant,
-        "integrator": "path",
+        "integrator": ET.parse(scene_path).getroot().find("integrator").get("type"),
         "scene": scene_rel,
         "parameters": params,
     }
@@ -107,8 +112,6 @@ def render(name, variant, chunk, out_dir, chunks_dir=None):
         settings["film"] = {"width": resolution[0], "height": resolution[1]}
         settings["stripped"] = list(mitsuba_scene.STRIP[:1])
     settings.update(NOTES.get(name, {}))
-    import xml.etree.ElementTree as ET
-
     masked = [e.get("value") for e in mitsuba_scene.mask_alpha_bitmaps(ET.parse(scene_path).getroot())]
     if masked:
         settings["mask_opacity"] = (

@@ -39,7 +39,7 @@ fn an_absorbing_slab_follows_beers_law() {
         r#"<scene version="3.0.0">
         {}
         <emitter type="constant"><rgb name="radiance" value="2"/></emitter>
-        <shape type="cube"><medium type="homogeneous" name="interior">
+        <shape type="cube"><bsdf type="null"/><medium type="homogeneous" name="interior">
             <rgb name="sigma_t" value="{}, {}, {}"/><float name="albedo" value="0"/></medium></shape>
         </scene>"#,
         sensor(1.0, 4, "0, 0, 5", ""),
@@ -147,7 +147,7 @@ fn furnace(albedo: f32, g: f32) -> f64 {
         r#"<scene version="3.0.0">
         {}
         <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
-        <shape type="sphere"><medium type="homogeneous" name="interior">
+        <shape type="sphere"><bsdf type="null"/><medium type="homogeneous" name="interior">
             <float name="sigma_t" value="3"/><float name="albedo" value="{albedo}"/>
             <phase type="hg"><float name="g" value="{g}"/></phase></medium></shape>
         </scene>"#,

@@ -155,7 +155,29 @@ impl Row {
 }
 
 fn rows() -> Vec<Row> {
-    [path(), bidirectional(), pcbpt(), spcbpt(), budget(), metropolis(), bump()].into_iter().flatten().collect()
+    [path(), bidirectional(), pcbpt(), spcbpt(), budget(), metropolis(), bump(), media()]
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
+/// Participating media, against Mitsuba 3's `volpath`: every integrator that renders them
+/// on fog with a glass sphere in it (the caustic's beam through the fog is light tracing's
+/// and the connections' to find; the path tracer finds it through the small light). Light
+/// tracing over the pixels it can render (not what the sphere shows): over the whole image
+/// it must fail. The negative control leaves out the paths of more than 4 segments.
+fn media() -> Vec<Row> {
+    vec![
+        row(&FOG_CAUSTIC, "path", 1024, ""),
+        row(&FOG_CAUSTIC, "lighttrace", 256, "").light_traced(0.0, true),
+        row(&FOG_CAUSTIC, "bdpt", 64, ""),
+        row(&FOG_CAUSTIC, "bdpt", 64, "").max_depth(4).must_fail(),
+        row(&FOG_CAUSTIC, "eorr", 64, ""),
+        row(&FOG_CAUSTIC, "lvc", 64, ""),
+        row(&FOG_CAUSTIC, "pcbpt", 64, ""),
+        row(&FOG_CAUSTIC, "spcbpt", 64, ""),
+        chains(&FOG_CAUSTIC, "pssmlt", 64, ""),
+    ]
 }
 
 /// The path tracer, judged as the references' own estimator. The negative control, one

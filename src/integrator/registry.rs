@@ -129,7 +129,7 @@ macro_rules! integrators {
 
 integrators! {
     /// Unidirectional path tracing with next-event estimation and MIS.
-    Path("path", plugins: ["path"]) => crate::integrator::path::PathOptions,
+    Path("path", plugins: ["path", "volpath", "volpath_simple"]) => crate::integrator::path::PathOptions,
     /// Light tracing: light subpaths connected to the camera (`t = 1`) only.
     Lighttrace("lighttrace", plugins: ["ptracer"]) => crate::integrator::bidir::bdpt::LighttraceOptions,
     /// Bidirectional path tracing with every strategy.

@@ -432,9 +432,10 @@ impl<'d> Builder<'d> {
         let media = self.medium_interface(id)?;
         let emits = self.doc.node(id).children.iter().any(|c| self.doc.node(c.node).tag == "emitter");
         let bsdf = match self.single_child(id, "bsdf", "a shape")? {
-            // Mitsuba's defaults: no surface for a boundary of media, black for a shape
-            // that emits, grey diffuse otherwise.
-            None if media.is_some() && !emits => {
+            // Mitsuba's defaults: black for a shape that emits, grey diffuse otherwise; but in
+            // a version 0.x file no surface for a boundary of media (Mitsuba 0.6's null BSDF,
+            // which Mitsuba 3 files give by name).
+            None if media.is_some() && !emits && node.legacy => {
                 self.bsdfs.push(Bsdf::new(crate::bsdf::BsdfModel::Null));
                 self.bsdfs.len() - 1
             }

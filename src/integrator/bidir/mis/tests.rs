@@ -37,6 +37,9 @@ enum Variant {
     /// Mitsuba 3's sun and sky (`sunsky`) beside the area light: the sun a small cone of
     /// directions, the sky a tabulated density, combined as one sky.
     Sunsky,
+    /// Fog filling the box (the camera's medium, bounded by nothing): medium vertices
+    /// between the surface ones, with a forward-scattering phase function.
+    Fog,
 }
 
 fn scene(variant: Variant) -> Scene {
@@ -59,6 +62,17 @@ fn scene(variant: Variant) -> Scene {
     };
     match variant {
         Variant::Diffuse | Variant::VeachAjar => {}
+        Variant::Fog => {
+            let phase = crate::medium::Phase::HenyeyGreenstein { g: 0.4 };
+            scene.media.push(crate::medium::Medium::new(
+                Rgb::new(0.1, 0.15, 0.2),
+                Rgb::splat(0.7),
+                phase,
+                "fog".into(),
+            ));
+            scene.camera_medium = Some(0);
+            scene.volumetric = true;
+        }
         Variant::Glossy => {
             set(&mut scene, "TallBox", rough(0.15, MicrofacetType::Ggx));
             set(&mut scene, "BackWall", rough(0.4, MicrofacetType::Beckmann));
@@ -247,8 +261,7 @@ fn paths(scene: &Scene, seed: u64, want: usize) -> Vec<Vec<Vertex>> {
         // Every vertex must be reachable from both ends (the two subpaths were traced
         // independently, so their junction may not be): the vertex before the camera lies
         // on the image, and every generation density of the path is positive.
-        if x.iter().skip(1).take(x.len() - 2).any(|v| v.kind != VertexKind::Surface)
-            || scene.camera.connect(x[x.len() - 2].p).is_none()
+        if x.iter().skip(1).take(x.len() - 2).any(|v| !v.scatters()) || scene.camera.connect(x[x.len() - 2].p).is_none()
         {
             continue;
         }
@@ -449,7 +462,7 @@ fn check_variant(variant: Variant, seed: u64) {
                 .filter_map(|s| subpaths(&scene, &x, s))
                 .map(|(l, c)| mis_weight(&scene, &l, &c, heuristic, &Counts::LightTrace))
                 .sum();
-            assert!((lt - 1.0).abs() < 1e-5 || x[n - 2].kind != VertexKind::Surface, "light tracing: {lt}");
+            assert!((lt - 1.0).abs() < 1e-5 || !x[n - 2].scatters(), "light tracing: {lt}");
         }
         checked += 1;
     }
@@ -473,6 +486,15 @@ fn check_variant(variant: Variant, seed: u64) {
     if variant == Variant::Mirror {
         assert!(with_delta > 10, "only {with_delta} paths through the mirror");
     }
+    if variant == Variant::Fog {
+        let in_fog = paths(&scene, seed, 300).iter().filter(|x| x.iter().any(|v| v.kind == VertexKind::Medium)).count();
+        assert!(in_fog > 100, "only {in_fog} paths with a medium vertex");
+    }
+}
+
+#[test]
+fn weights_sum_to_one_with_medium_vertices() {
+    check_variant(Variant::Fog, 10);
 }
 
 #[test]
