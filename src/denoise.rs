@@ -6,6 +6,7 @@
 //! it.
 
 use crate::error::{Error, Result};
+use crate::film::Filter;
 use crate::math::Rgb;
 use std::path::{Path, PathBuf};
 
@@ -33,6 +34,22 @@ pub fn denoised_path(output: &Path) -> PathBuf {
         None => format!("{stem}.denoised"),
     };
     output.with_file_name(name)
+}
+
+/// What to warn of when the film's reconstruction filter spreads samples over neighbouring
+/// pixels: the noise is then correlated between pixels, and the denoiser, trained on
+/// independent pixels, takes much of it for detail and leaves it.
+pub fn filter_warning(filter: &Filter) -> Option<String> {
+    let name = match *filter {
+        Filter::Box { radius } if radius <= 0.5 => return None,
+        Filter::Box { radius } => format!("box filter of radius {radius}"),
+        Filter::Tent { .. } => "tent filter".into(),
+        Filter::Gaussian { .. } => "gaussian filter".into(),
+    };
+    Some(format!(
+        "--denoise: the film's {name} correlates the noise of neighbouring pixels, which \
+             Open Image Denoise mostly leaves in place; it expects a box filter (<rfilter type=\"box\"/>)"
+    ))
 }
 
 /// Refuses `--denoise` before rendering in a build that cannot denoise.
@@ -92,6 +109,14 @@ mod tests {
         assert_eq!(denoised_path(Path::new("out/a.exr")), PathBuf::from("out/a.denoised.exr"));
         assert_eq!(denoised_path(Path::new("b.png")), PathBuf::from("b.denoised.png"));
         assert_eq!(denoised_path(Path::new("c")), PathBuf::from("c.denoised"));
+    }
+
+    #[test]
+    fn only_a_box_filter_of_one_pixel_goes_without_a_warning() {
+        assert!(filter_warning(&Filter::Box { radius: 0.5 }).is_none());
+        for f in [Filter::Box { radius: 1.0 }, Filter::Tent { radius: 1.0 }, Filter::Gaussian { stddev: 0.5 }] {
+            assert!(filter_warning(&f).is_some_and(|w| w.contains("--denoise")), "{f:?}");
+        }
     }
 
     #[test]

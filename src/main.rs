@@ -395,6 +395,9 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         for w in &scene.stats.warnings {
             eprintln!("warning: {w}");
         }
+        if let Some(w) = a.denoise.then(|| pcbpt::denoise::filter_warning(&scene.film.filter)).flatten() {
+            eprintln!("warning: {w}");
+        }
         let l = &scene.stats;
         eprintln!(
             "loaded {}: {} triangles ({:.1} MiB of mesh arrays) in {:.2} s: reading {:.2} s, {} BVH {:.2} s",
