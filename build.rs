@@ -10,12 +10,16 @@
 //! With `--features oiio`, it also compiles the C++ side of the OpenImageIO bridge
 //! (`src/ffi/oiio.cpp`, with `cxx`) against the system OpenImageIO: found by
 //! pkg-config (`OpenImageIO.pc`), or under `$OIIO_DIR` (`include/`, `lib/`) when given.
+//!
+//! With `--features oidn` and `$OIDN_DIR` (the `oidn` crate links Open Image Denoise from
+//! `$OIDN_DIR/lib`), the binaries get an rpath to that folder.
 
 use std::env;
 use std::path::{Path, PathBuf};
 
 fn main() {
     build_oiio_bridge();
+    oidn_rpath();
     println!("cargo:rerun-if-changed=wrapper.h");
     println!("cargo:rerun-if-env-changed=EMBREE_DIR");
     println!("cargo::rustc-check-cfg=cfg(embree4)");
@@ -130,3 +134,16 @@ fn build_oiio_bridge() {
 /// Nothing to build without `--features oiio`.
 #[cfg(not(feature = "oiio"))]
 fn build_oiio_bridge() {}
+
+/// With `--features oidn`, an rpath to `$OIDN_DIR/lib` (where the `oidn` crate links Open
+/// Image Denoise from; `scripts/setup.sh --with-oidn` assembles it), so that `pcbpt` and the
+/// tests find the library without LD_LIBRARY_PATH.
+fn oidn_rpath() {
+    println!("cargo:rerun-if-env-changed=OIDN_DIR");
+    if env::var_os("CARGO_FEATURE_OIDN").is_none() {
+        return;
+    }
+    if let Some(dir) = env::var_os("OIDN_DIR").filter(|d| !d.is_empty()) {
+        println!("cargo:rustc-link-arg=-Wl,-rpath,{}", PathBuf::from(dir).join("lib").display());
+    }
+}

@@ -14,18 +14,24 @@
 # `--with-oiio` also installs OpenImageIO (headers, library, pkg-config file) for
 # `cargo build --features oiio`; `--with-embree4` what `scripts/embree4.sh` needs to
 # assemble an Embree 4 (python3 with pip, binutils' readelf; the C compiler comes with g++).
+# `--with-oidn` also provides Intel Open Image Denoise for `cargo build --features oidn`
+# (`--denoise`): python3 with pip and readelf, then `scripts/oidn.sh` assembles the library
+# from PyPI's pyoidn wheel in $OIDN_DIR (default: target/oidn) and prints the OIDN_DIR
+# to export for the build.
 set -euo pipefail
 
 packages=(libembree-dev libclang-dev pkg-config g++)
 with_dask=1
 with_slurm=1
 with_python=1
+with_oidn=0
 for arg in "$@"; do
   case "$arg" in
     --build-only) with_dask=0; with_slurm=0; with_python=0 ;;
     --with-oiio) packages+=(libopenimageio-dev) ;;
     --with-embree4) packages+=(python3 python3-pip binutils) ;;
-    *) echo "setup: unknown option $arg (known: --build-only, --with-oiio, --with-embree4)" >&2; exit 2 ;;
+    --with-oidn) with_oidn=1; packages+=(binutils) ;;
+    *) echo "setup: unknown option $arg (known: --build-only, --with-oiio, --with-embree4, --with-oidn)" >&2; exit 2 ;;
   esac
 done
 if [ "$with_slurm" -eq 1 ]; then
@@ -40,6 +46,10 @@ fi
 # can (ensurepip, which Debian ships apart in python3-venv) is used as it is.
 if [ "$with_python" -eq 1 ] && ! { command -v python3 >/dev/null 2>&1 && python3 -c 'import ensurepip, venv' >/dev/null 2>&1; }; then
   packages+=(python3 python3-venv python3-pip)
+fi
+# scripts/oidn.sh fetches a wheel with pip: a python3 with pip is used as it is.
+if [ "$with_oidn" -eq 1 ] && ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then
+  packages+=(python3 python3-pip)
 fi
 missing=()
 for p in "${packages[@]}"; do
@@ -73,6 +83,13 @@ if [ "$with_dask" -eq 1 ]; then
     fi
     $pip_sudo python3 -m pip install "${pip_args[@]}" 'dask[distributed]'
   fi
+fi
+
+if [ "$with_oidn" -eq 1 ]; then
+  root="$(cd "$(dirname "$0")/.." && pwd)"
+  oidn_dir="${OIDN_DIR:-$root/target/oidn}"
+  "$root/scripts/oidn.sh" "$oidn_dir"
+  echo "setup: for cargo build --features oidn: export OIDN_DIR=$oidn_dir" >&2
 fi
 
 if ! command -v cargo >/dev/null 2>&1; then

@@ -12,6 +12,8 @@ pub mod accel;
 pub mod bsdf;
 pub mod camera;
 pub mod compare;
+pub mod denoise;
+pub mod display;
 pub mod error;
 pub mod experiment;
 pub mod ffi;

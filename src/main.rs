@@ -5,10 +5,11 @@ mod cli_reference;
 use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use pcbpt::accel::{Backend, BuildOptions, BuildQuality, BvhLayout};
 use pcbpt::compare;
+use pcbpt::display::DisplayServer;
 use pcbpt::error::{Error, Result};
 use pcbpt::image_io::{self, Image};
 use pcbpt::integrator::registry::{self, INTEGRATORS};
-use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use pcbpt::integrator::{self, Budget, IntegratorKind, Preview, RenderOptions};
 use pcbpt::sampling::SamplerKind;
 use pcbpt::scene::{LoadOptions, Scene};
 use std::path::PathBuf;
@@ -160,6 +161,15 @@ struct RenderArgs {
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
+    /// Stream the image to the tev viewer listening at HOST:PORT as it renders (tev's default
+    /// port is 14158); without a viewer there the render goes on with a warning.
+    #[arg(long, value_name = "HOST:PORT", value_parser = pcbpt::display::parse_address)]
+    display_server: Option<String>,
+    /// Also write the image denoised by Intel Open Image Denoise beside the output
+    /// (`NAME.denoised.EXT`; the output itself is unchanged). Needs a build with
+    /// `--features oidn`.
+    #[arg(long, conflicts_with_all = ["chunk", "iterations"])]
+    denoise: bool,
     /// Where standard error is not a terminal (a Slurm log, a pipe), print a progress line
     /// every this many seconds instead of a progress bar.
     #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = parse_seconds)]
@@ -343,6 +353,9 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
     let named = integrator_argument(&args);
     let matches = parse_render(&args, named, "the integrator --integrator names");
     let a = RenderArgs::from_arg_matches(&matches).map_err(|e| Error::Usage(e.to_string()))?;
+    if a.denoise {
+        pcbpt::denoise::check_available()?;
+    }
     let stop = install_signal_handlers()?;
     let t0 = Instant::now();
     let build = BuildOptions {
@@ -380,6 +393,9 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
     let load_seconds = t0.elapsed().as_secs_f64();
     if !a.quiet {
         for w in &scene.stats.warnings {
+            eprintln!("warning: {w}");
+        }
+        if let Some(w) = a.denoise.then(|| pcbpt::denoise::filter_warning(&scene.film.filter)).flatten() {
             eprintln!("warning: {w}");
         }
         let l = &scene.stats;
@@ -475,6 +491,11 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
             Some((iterations, total, pcbpt::partial::render_identity(&scene, &opts, &hash)))
         }
     };
+    let display = a.display_server.as_deref().and_then(|address| {
+        let name = output.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "pcbpt".into());
+        DisplayServer::connect(address, &name, scene.film.width, scene.film.height, a.quiet).map(Arc::new)
+    });
+    opts.run.preview = display.clone().map(|d| d as Arc<dyn Preview>);
     let out = integrator::render_iterations(&scene, &opts, part.as_ref().map(|p| p.0.clone()))?;
     let s = &out.stats;
     // The Embree library linked at run time (e.g. "4.4.0"), for the summary and the stats.
@@ -493,7 +514,19 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         }
         // An interrupted chunk writes no part: a merge would take it for a whole one.
         Some(_) => {}
-        None => image_io::write_film(&output, &Image::new(out.width, out.height, out.image), scene.film.ldr.as_ref())?,
+        None => image_io::write_film(
+            &output,
+            &Image::new(out.width, out.height, out.image.clone()),
+            scene.film.ldr.as_ref(),
+        )?,
+    }
+    if let Some(d) = &display {
+        d.finish(&out.image);
+    }
+    if a.denoise {
+        let denoised = pcbpt::denoise::denoise(out.width, out.height, &out.image, Default::default())?;
+        let path = pcbpt::denoise::denoised_path(&output);
+        image_io::write_film(&path, &Image::new(out.width, out.height, denoised), scene.film.ldr.as_ref())?;
     }
     if let Some(path) = &a.stats {
         let json = serde_json::json!({ "scene": a.scene, "output": output, "load_seconds": load_seconds, "triangles": scene.stats.triangles, "load": { "read_seconds": scene.stats.read_seconds, "bvh_seconds": scene.stats.bvh_seconds, "vertices": scene.stats.vertices, "mesh_bytes": scene.stats.mesh_bytes }, "degenerate_triangles": scene.stats.degenerate_triangles, "embree_version": embree_version, "render": s });

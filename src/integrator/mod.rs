@@ -24,7 +24,7 @@ pub mod stats;
 use crate::scene::Scene;
 pub use bidir::pool::CONCENTRATION_DEPTHS;
 pub use registry::{IntegratorKind, Method};
-pub use run::{Budget, Integrator, RenderOutput, RunOptions, Snapshot};
+pub use run::{Budget, Integrator, Preview, RenderOutput, RunOptions, Snapshot};
 pub use stats::{Counters, Details, IntegratorStats, PhaseRays, PhaseTimes, RenderStats};
 use std::ops::Range;
 

@@ -17,7 +17,8 @@
 //! image whatever the number of threads. Pass boundaries depend only on the render's total
 //! sample count (and on where an integrator's state changes), never on where a chunk starts.
 //! A time budget (`--time`) runs whole passes of one iteration until the budget is spent; a
-//! stop flag (set by Ctrl-C) ends the render after the pass in flight.
+//! stop flag (set by Ctrl-C) ends the render after the pass in flight. Checkpoint snapshots
+//! and a live preview ([`crate::integrator::run::Preview`]) develop the film between passes.
 //!
 //! Light-tracing contributions (`t = 1`) are splatted: each tile (and each part of a light
 //! pool) collects its splats in a list, and the lists are added to the film in order.
@@ -25,7 +26,7 @@
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
 use crate::integrator::progress::Progress;
-use crate::integrator::run::{Budget, RenderOutput, RunOptions, take_snapshots};
+use crate::integrator::run::{Budget, RenderOutput, RunOptions, offer_preview, take_snapshots};
 use crate::integrator::stats::{Counters, Details, PhaseRays, PhaseTimes, RenderStats};
 use crate::math::Rgb;
 use crate::sampling::{PixelSampler, Sampler};
@@ -407,6 +408,10 @@ pub(crate) fn run<M: Iterative>(
             passes += 1;
             let done = first - range.start;
             take_snapshots(&opts.checkpoints, &mut snapshots, start.elapsed().as_secs_f64(), done, || {
+                work.phases.merge += add_pass(&mut film, pending.take());
+                film.develop()
+            });
+            offer_preview(opts, w, h, done, || {
                 work.phases.merge += add_pass(&mut film, pending.take());
                 film.develop()
             });

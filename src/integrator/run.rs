@@ -1,7 +1,7 @@
 //! What every integrator is given and gives back, below the registry that names them: the
 //! [`Integrator`] interface (an options type that renders), the run's settings that are no
 //! integrator's own ([`RunOptions`]: budget, seed, threads, tiles, progress, stop flag,
-//! per-strategy images, checkpoints) and the finished render ([`RenderOutput`]).
+//! per-strategy images, checkpoints, a live preview) and the finished render ([`RenderOutput`]).
 
 use crate::error::Error;
 use crate::film::Film;
@@ -41,6 +41,8 @@ pub struct RunOptions {
     /// Wall-clock times (seconds, ascending) at which to keep a snapshot of the image: the
     /// first pass that ends at or after each time is developed.
     pub checkpoints: Vec<f64>,
+    /// A viewer shown the image as it renders (`--display-server`).
+    pub preview: Option<Arc<dyn Preview>>,
 }
 
 impl RunOptions {
@@ -57,6 +59,7 @@ impl RunOptions {
             stop: None,
             strategy_images: false,
             checkpoints: Vec::new(),
+            preview: None,
         }
     }
 }
@@ -114,6 +117,24 @@ pub(crate) fn take_snapshots(
         while snapshots.len() < due {
             snapshots.push(Snapshot { seconds, spp, image: image.clone() });
         }
+    }
+}
+
+/// A viewer of the image while it renders: after each pass (each round of a Markov-chain
+/// render) the render loops develop the image and show it, when the viewer wants one.
+pub trait Preview: Send + Sync + std::fmt::Debug {
+    /// Whether the viewer wants an image now (the loops develop one only then).
+    fn wants(&self) -> bool;
+    /// The image after `spp` samples (or mutations) per pixel; must not block for long.
+    fn show(&self, width: u32, height: u32, spp: u32, image: Vec<Rgb>);
+}
+
+/// Shows the image `develop` gives to the run's viewer, if it has one that wants it now.
+pub(crate) fn offer_preview(opts: &RunOptions, width: u32, height: u32, spp: u32, develop: impl FnOnce() -> Vec<Rgb>) {
+    if let Some(p) = &opts.preview
+        && p.wants()
+    {
+        p.show(width, height, spp, develop());
     }
 }
 

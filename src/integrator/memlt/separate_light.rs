@@ -120,6 +120,8 @@ fn pass(opts: &RunOptions, key: Keys, spp: u32, stream: u64) -> RunOptions {
     o.budget = Budget::Spp(spp);
     o.seed = crate::sampling::hash_words(&key(stream, 0));
     o.checkpoints.clear();
+    // The preview shows the whole render's image (the chains' rounds), not a pass's part.
+    o.preview = None;
     o.progress = false;
     o
 }

@@ -10,7 +10,7 @@ pub mod stays;
 pub mod two_stage;
 
 use crate::film::Film;
-use crate::integrator::run::{Budget, RenderOutput, RunOptions, Snapshot, take_snapshots};
+use crate::integrator::run::{Budget, RenderOutput, RunOptions, Snapshot, offer_preview, take_snapshots};
 use crate::integrator::stats::{Counters, Details, RenderStats};
 use crate::math::Rgb;
 use crate::scene::Scene;
@@ -92,7 +92,8 @@ pub(crate) struct ChainRun {
 /// that two independent halves of the chains can be compared), each group's steps splatting
 /// into a film of its own: a chain's steps do not depend on the group it is in, and the
 /// films' sums are exact, so the image does not depend on the number of threads. After each
-/// round the snapshots due are developed by `develop(chains, film)`, `film` being `into`
+/// round the snapshots due (and the live preview's image, when it wants one) are developed
+/// by `develop(chains, film)`, `film` being `into`
 /// with the splats so far (and the mutations done as its light paths); at the end the
 /// splats are added to `into`.
 #[allow(clippy::too_many_arguments)]
@@ -139,6 +140,12 @@ pub(crate) fn run_chains<C: Send>(
                 develop(chains, f)
             });
         }
+        offer_preview(opts, into.width, into.height, (done / pixels) as u32, || {
+            let mut f = into.clone();
+            f.add_splat_films(&films);
+            f.light_paths = done;
+            develop(chains, f)
+        });
         if opts.stop.as_ref().is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst)) {
             interrupted = true;
             break;
