@@ -726,8 +726,8 @@ fn the_command_line_reference_is_current() {
 }
 
 /// Where standard error is not a terminal (here a pipe, as in a Slurm log), progress comes
-/// as plain lines, one per `--log-interval` at most, and none with `--quiet`; a negative
-/// interval is refused by name.
+/// as plain lines, one per `--log-interval` at most (from the Markov chains' rounds as from the
+/// render loop's passes), and none with `--quiet`; a negative interval is refused by name.
 #[test]
 fn progress_in_a_log_is_lines_not_a_bar() {
     let dir = tempfile::tempdir().unwrap();
@@ -747,6 +747,12 @@ fn progress_in_a_log_is_lines_not_a_bar() {
     assert!(every_pass.contains("8×8: 16 of 16 spp (100%)"), "{every_pass}");
     assert_eq!(lines(&run(&["--log-interval", "3600"])), 0);
     assert_eq!(run(&["--log-interval", "0", "--quiet"]), "");
+    // The Markov chains' rounds too (mutations per pixel).
+    for chains in ["pssmlt", "memlt"] {
+        let log = run(&["--log-interval", "0", "--integrator", chains]);
+        assert!(log.contains("8×8: 16 of 16 spp (100%)"), "{chains}: {log}");
+        assert!(!log.contains('\r') && !log.contains('\u{1b}'), "{chains}: control codes in a log: {log:?}");
+    }
     let bad = pcbpt(&["render", s.to_str().unwrap(), "--log-interval=-1"]);
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("--log-interval") && err.contains("non-negative"), "{err}");

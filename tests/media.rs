@@ -185,3 +185,37 @@ fn integrators_without_media_refuse_them() {
         assert!(e.to_string().contains("--integrator path"), "{}: {e}", kind.name());
     }
 }
+
+/// A spot light inside a ball of fog (a null sphere), seen from outside: light subpaths must
+/// start in the fog (the medium found at the light's position), or light tracing and BDPT
+/// would see the ball's inside unlit by their own strategies. Every integrator agrees with
+/// the path tracer; the control, the same fog around nothing, differs from it.
+#[test]
+fn a_light_inside_a_medium_starts_its_paths_there() {
+    let dir = tempfile::tempdir().unwrap();
+    let ball = |inside: &str| {
+        format!(
+            r#"<scene version="3.0.0">
+            {}
+            <shape type="sphere"><bsdf type="null"/><medium type="homogeneous" name="interior">
+                <float name="sigma_t" value="{inside}"/><float name="albedo" value="0.9"/></medium></shape>
+            <shape type="rectangle"><transform name="to_world"><scale value="4"/><translate z="-2"/></transform>
+                <bsdf type="diffuse"/></shape>
+            <emitter type="spot"><transform name="to_world"><lookat origin="0, 0.2, 0" target="0, 0.2, -1" up="0, 1, 0"/></transform>
+                <rgb name="intensity" value="20"/><float name="cutoff_angle" value="40"/></emitter>
+            </scene>"#,
+            sensor(40.0, 16, "0, 0, 4", "")
+        )
+    };
+    let scene = load(&write(&dir, "ball.xml", &ball("1.5")), &[], Backend::Embree);
+    let mean = |kind, spp, seed| image(render(&scene, kind, spp, seed, 2)).mean();
+    let reference = (mean(IntegratorKind::Path, 2048, 1) + mean(IntegratorKind::Path, 2048, 2)) / 2.0;
+    for (kind, spp) in [(IntegratorKind::Lighttrace, 512), (IntegratorKind::Bdpt, 256), (IntegratorKind::Pcbpt, 256)] {
+        let m = (mean(kind, spp, 3) + mean(kind, spp, 4)) / 2.0;
+        eprintln!("{}: {m:.5} against the path tracer's {reference:.5}", kind.name());
+        assert!((m / reference - 1.0).abs() < 0.02, "{}: {m} against {reference}", kind.name());
+    }
+    let clear = load(&write(&dir, "clear.xml", &ball("0")), &[], Backend::Embree);
+    let m = image(render(&clear, IntegratorKind::Bdpt, 256, 3, 2)).mean();
+    assert!((m / reference - 1.0).abs() > 0.1, "{m} against {reference}");
+}

@@ -244,7 +244,7 @@ pub(crate) fn pool_tile<S: CameraSample>(
 }
 
 /// A tile of a plan that [`Plan::path_tracing`]: the path tracer's samples (next-event
-/// estimation and BSDF sampling under the power heuristic, `src/integrator/path.rs`), which
+/// estimation and BSDF sampling under the power heuristic, `src/integrator/path/`), which
 /// cost less than the bidirectional camera pass with its stored vertices and ratio walks.
 fn path_traced_tile(ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult {
     let pt = PathTracer::new(&ctx.scene.integrator);

@@ -10,6 +10,7 @@ pub mod stays;
 pub mod two_stage;
 
 use crate::film::Film;
+use crate::integrator::progress::Progress;
 use crate::integrator::run::{Budget, RenderOutput, RunOptions, Snapshot, offer_preview, take_snapshots};
 use crate::integrator::stats::{Counters, Details, RenderStats};
 use crate::math::Rgb;
@@ -119,6 +120,8 @@ pub(crate) fn run_chains<C: Send>(
     let per_group = chains.len().div_ceil(films.len());
     let per_round = pixels.div_ceil(count);
     let (mut done, mut interrupted) = (span.done, false);
+    // Mutations per pixel stand for samples per pixel in the bar and the log's lines.
+    let progress = Progress::new(opts, into.width, into.height, 1, total.div_ceil(pixels) as u32, start);
     while done < total {
         let n = per_round.min((total - done).div_ceil(count));
         pool.install(|| {
@@ -131,6 +134,7 @@ pub(crate) fn run_chains<C: Send>(
             })
         });
         done += n * count;
+        progress.pass_done((done / pixels) as u32, done - span.done, start);
         if !opts.checkpoints.is_empty() {
             let elapsed = start.elapsed().as_secs_f64();
             take_snapshots(&opts.checkpoints, snapshots, elapsed, (done / pixels) as u32, || {
@@ -160,6 +164,7 @@ pub(crate) fn run_chains<C: Send>(
             break;
         }
     }
+    progress.finish();
     into.add_splat_films(&films);
     let sizes = chains.chunks(per_group).map(|g| g.len());
     ChainRun { done, interrupted, groups: films.into_iter().zip(sizes).collect() }
