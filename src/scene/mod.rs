@@ -1,6 +1,7 @@
 //! Scenes: loading Mitsuba XML into an editable description ([`xml`]), instantiating it
 //! into the render-ready, immutable [`Scene`] ([`load`]), and the queries integrators make.
 
+pub mod hair;
 pub mod load;
 pub mod mesh;
 pub mod ply;
