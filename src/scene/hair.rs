@@ -64,6 +64,35 @@ pub fn hair_from_bytes(bytes: &[u8], path: &Path) -> Result<Strands> {
     }
 }
 
+/// The strands in the ASCII format (what [`hair_from_bytes`] reads back).
+pub fn hair_to_ascii(strands: &Strands) -> String {
+    let mut out = String::new();
+    for (i, strand) in strands.iter().enumerate() {
+        if i > 0 {
+            out.push('\n');
+        }
+        for p in strand {
+            out += &format!("{} {} {}\n", p.x, p.y, p.z);
+        }
+    }
+    out
+}
+
+/// The strands in the binary format (an infinity before each strand but the first).
+pub fn hair_to_binary(strands: &Strands) -> Vec<u8> {
+    let mut out = BINARY_HEADER.to_vec();
+    out.extend_from_slice(&(strands.vertices.len() as u32).to_le_bytes());
+    for (i, strand) in strands.iter().enumerate() {
+        if i > 0 {
+            out.extend_from_slice(&f32::INFINITY.to_le_bytes());
+        }
+        for w in strand.iter().flat_map(|p| p.to_array()) {
+            out.extend_from_slice(&w.to_le_bytes());
+        }
+    }
+    out
+}
+
 fn read_binary(bytes: &[u8]) -> std::result::Result<Strands, String> {
     let count = bytes.get(..4).ok_or("the binary hair file ends before its vertex count")?;
     let count = u32::from_le_bytes([count[0], count[1], count[2], count[3]]) as usize;
@@ -352,6 +381,8 @@ mod tests {
         let words = [0., 0., 0., 1., 0., 0., 2., 0.5, 0., inf, 5., 5., 5., 6., 5., 5.];
         let b = hair_from_bytes(&binary(5, &words), Path::new("b.mitshair")).unwrap();
         assert_eq!(a, b);
+        assert_eq!(hair_to_binary(&a), binary(5, &words));
+        assert_eq!(strands(&hair_to_ascii(&a)).unwrap(), a);
     }
 
     #[test]
