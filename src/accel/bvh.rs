@@ -138,7 +138,10 @@ impl ObvhsScene {
     }
 
     fn bvh_ray(r: &Ray) -> obvhs::ray::Ray {
-        obvhs::ray::Ray::new(Vec3A::from(r.o), Vec3A::from(r.d), r.tmin, r.tmax)
+        // obvhs takes a component of -0 as positive for the ray's octant but inverts it to a
+        // large negative number, and then misses every box: adding +0 turns -0 into +0.
+        let d = Vec3A::from(r.d) + Vec3A::ZERO;
+        obvhs::ray::Ray::new(Vec3A::from(r.o), d, r.tmin, r.tmax)
     }
 
     pub fn intersect(&self, r: &Ray) -> Option<Hit> {
