@@ -273,3 +273,24 @@ fn mitsuba_06_property_names_are_read() {
     assert_eq!(h.vertices.len(), 3);
     assert!((h.radius - 0.2).abs() < 1e-6 && (h.vertices[2] - Vec3::new(4.0, 0.02, 0.0)).length() < 1e-6);
 }
+
+#[test]
+fn every_integrator_renders_hair() {
+    use clap::ValueEnum;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("fur.mitshair"), hair_to_ascii(&furball(60, 3))).unwrap();
+    let glossy =
+        r#"<float name="radius" value="0.02"/><bsdf type="roughconductor"><float name="alpha" value="0.3"/></bsdf>"#;
+    let path = scene_with(dir.path(), "fur.mitshair", glossy);
+    let options = LoadOptions { resolution: Some((12, 12)), ..Default::default() };
+    let scene = Scene::load(&path, &options).unwrap();
+    for kind in IntegratorKind::value_variants() {
+        let out = common::render(&scene, *kind, 2, 1, 2);
+        assert!(
+            out.image.iter().all(|p| p.is_finite() && p.min_element() >= 0.0),
+            "{}: a pixel is negative or not finite",
+            kind.name()
+        );
+        assert!(out.image.iter().any(|p| p.max_element() > 0.0), "{}: a black image", kind.name());
+    }
+}

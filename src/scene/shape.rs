@@ -573,6 +573,36 @@ mod tests {
     }
 
     #[test]
+    fn hair_is_sampled_uniformly_on_its_cylinders() {
+        use crate::scene::hair::{Hair, HairParams, Strands};
+        // Segments of lengths 1 and 3: a quarter of the samples on the first.
+        let strands = Strands { vertices: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 3.0, 0.0)], starts: vec![0] };
+        let params = HairParams { radius: 0.1, angle_threshold: 0.0, reduction: 0.0 };
+        let hair = Hair::build(&strands, &crate::math::Transform::default(), params).unwrap();
+        let mut shape = Shape::new(ShapeGeometry::Hair(hair), 0, false, "hair".into());
+        shape.prepare_sampling();
+        assert!((shape.area() - 2.0 * PI * 0.1 * 4.0).abs() < 1e-5);
+        let mut sampler = crate::sampling::Sampler::new(&[9]);
+        let n = 20_000;
+        let mut on_first = 0;
+        for _ in 0..n {
+            let ps = shape.sample_area(sampler.next_1d(), sampler.next_2d());
+            // The first segment's normals are perpendicular to x, the second's to y.
+            let first = ps.n.x.abs() < 1e-5;
+            let (axis, dist) = if first {
+                (Vec3::X, Vec2::new(ps.p.y, ps.p.z).length())
+            } else {
+                (Vec3::Y, Vec2::new(ps.p.x - 1.0, ps.p.z).length())
+            };
+            on_first += usize::from(first);
+            assert!((dist - 0.1).abs() < 1e-5 && ps.n.dot(axis).abs() < 1e-5, "{ps:?}");
+            assert!((ps.n.length() - 1.0).abs() < 1e-5 && (0.0..=1.0).contains(&ps.uv.x));
+        }
+        let share = on_first as f32 / n as f32;
+        assert!((share - 0.25).abs() < 0.015, "{share}");
+    }
+
+    #[test]
     fn flat_meshes_have_constant_normals() {
         let mut m = curved_triangle(None);
         m.normals = None;
