@@ -488,7 +488,9 @@ impl<'d> Builder<'d> {
                     node.loc, shape.name
                 ));
             }
-        } else if let ShapeGeometry::Sphere { .. } = &shape.geometry {
+        } else if let ShapeGeometry::Hair(h) = &shape.geometry {
+            self.stats.hair_segments += h.segments.len();
+        } else {
             self.stats.spheres += 1;
         }
         let masked = self.bsdfs[shape.bsdf].opacity.is_some();

@@ -60,6 +60,8 @@ pub struct LoadStats {
     pub triangles: usize,
     pub vertices: usize,
     pub spheres: usize,
+    /// Segments of the `hair` shapes.
+    pub hair_segments: usize,
     /// Bytes of the shapes' vertex and triangle arrays (positions, normals, uvs, indices,
     /// emitters' sampling tables), not counting the accelerator's own copies and BVH.
     pub mesh_bytes: usize,
