@@ -245,7 +245,8 @@ impl Hair {
         let first = self.vertices.len() as u32;
         self.vertices.extend_from_slice(strand);
         let lengths: Vec<f32> = strand.windows(2).map(|w| (w[1] - w[0]).length()).collect();
-        let total: f32 = lengths.iter().sum();
+        // Positive even where the lengths underflow.
+        let total = lengths.iter().sum::<f32>().max(f32::MIN_POSITIVE);
         let mut along = 0.0;
         let last = lengths.len() - 1;
         for (i, len) in lengths.iter().enumerate() {
@@ -295,7 +296,7 @@ impl Hair {
     /// length, `v` the angle around the axis over 2π.
     pub fn surface_point(&self, i: usize, p: Vec3) -> (Vec3, Vec3, Frame, Vec2) {
         let (a, b) = self.segment(i);
-        let axis = (b - a).normalize();
+        let axis = (b - a).normalize_or(Vec3::X);
         let (c, s) = closest_on_segment(p, a, b);
         let around = Frame::from_normal(axis);
         let mut n = (p - c).normalize_or_zero();
@@ -319,7 +320,7 @@ impl Hair {
         let (a, b) = self.segment(i);
         let range = self.u_range[i];
         let dp_du = if range.y > 0.0 { (b - a) / range.y } else { b - a };
-        let axis = (b - a).normalize();
+        let axis = (b - a).normalize_or(Vec3::X);
         (dp_du, axis.cross(n) * (2.0 * PI * self.radius))
     }
 }
