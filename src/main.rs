@@ -400,9 +400,14 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         }
         let l = &scene.stats;
         eprintln!(
-            "loaded {}: {} triangles ({:.1} MiB of mesh arrays) in {:.2} s: reading {:.2} s, {} BVH {:.2} s",
+            "loaded {}: {} triangles{} ({:.1} MiB of mesh arrays) in {:.2} s: reading {:.2} s, {} BVH {:.2} s",
             a.scene.display(),
             pcbpt::scene::load::group_thousands(l.triangles as u64),
+            if l.hair_segments > 0 {
+                format!(", {} hair segments", pcbpt::scene::load::group_thousands(l.hair_segments as u64))
+            } else {
+                String::new()
+            },
             l.mesh_bytes as f64 / (1024.0 * 1024.0),
             load_seconds,
             l.read_seconds,

@@ -56,14 +56,8 @@ const SCENES: [&str; 32] = [
 
 /// What this renderer lacks that a scene needs, as the error that names it says. A scene
 /// whose files are all there must stop on this error and nothing else; every other scene
-/// whose files are there must render.
-const LACKS: &[(&str, &str)] = &[
-    ("curly-hair", "unknown shape plugin \"hair\""),
-    ("furball", "unknown shape plugin \"hair\""),
-    ("hair-curl", "unknown shape plugin \"hair\""),
-    ("straight-hair", "unknown shape plugin \"hair\""),
-    ("living-room-3", "unknown shape plugin \"hair\""),
-];
+/// whose files are there must render. Nothing, since media and hair.
+const LACKS: &[(&str, &str)] = &[];
 
 /// The folders to read scenes from.
 fn folders() -> Vec<PathBuf> {
@@ -73,6 +67,11 @@ fn folders() -> Vec<PathBuf> {
     }
     f
 }
+
+/// The scenes whose only shapes beside built-in ones are `hair` shapes: each renders, or stops
+/// at its `.mitshair` file, which must then be the one that is missing (the public copies of
+/// the collection leave these files out: they are 4 MiB or more).
+const HAIR: [&str; 4] = ["curly-hair", "furball", "hair-curl", "straight-hair"];
 
 /// How loading a scene went.
 enum Outcome {
@@ -149,6 +148,12 @@ fn check(dir: &Path, name: &str) -> Outcome {
             assert!(e.contains("scene.xml:"), "{name}: the error names no line of the scene: {e}");
             if let Some(path) = missing_file(&e) {
                 assert!(!path.exists(), "{name}: {} exists, yet: {e}", path.display());
+                if HAIR.contains(&name) {
+                    assert!(
+                        e.contains("hair file") && path.extension().is_some_and(|x| x == "mitshair"),
+                        "{name} stops at another file than its hair: {e}"
+                    );
+                }
                 return Outcome::MissingFile(e);
             }
             match LACKS.iter().find(|(n, _)| *n == name) {

@@ -6,10 +6,12 @@
 mod common;
 
 use common::root;
-use pcbpt::Result;
+use pcbpt::math::Transform;
+use pcbpt::scene::hair::{Hair, HairParams, hair_from_bytes};
 use pcbpt::scene::mesh::{TriangleMesh, obj_from_bytes, ply_from_bytes};
 use pcbpt::scene::serialized::serialized_from_bytes;
 use pcbpt::scene::{LoadOptions, Scene};
+use pcbpt::{Error, Result};
 use std::path::{Path, PathBuf};
 
 fn inputs(dir: &str) -> Vec<PathBuf> {
@@ -37,16 +39,39 @@ fn mesh(loaded: Result<TriangleMesh>, path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// What the hair target checks: the strands, and the segments Mitsuba 0.6's preparation
+/// makes of them (with and without `reduction`), join distinct, finite vertices.
+fn hair(data: &[u8], path: &Path) -> Result<()> {
+    let strands = hair_from_bytes(data, path)?;
+    assert!(strands.starts.windows(2).all(|w| w[0] < w[1]));
+    assert!(strands.starts.last().is_none_or(|&s| s < strands.vertices.len()));
+    let mut built = Err(Error::in_file(path, "not built"));
+    for reduction in [0.5, 0.0] {
+        let params = HairParams { reduction, ..HairParams::default() };
+        built = Hair::build(&strands, &Transform::default(), params).map_err(|e| Error::in_file(path, e));
+        if let Ok(h) = &built {
+            assert_eq!(h.flags.len(), h.segments.len());
+            assert!((0..h.segments.len()).all(|i| {
+                let (a, b) = h.segment(i);
+                a.is_finite() && b.is_finite() && a != b
+            }));
+        }
+    }
+    built.map(|_| ())
+}
+
 fn run(target: &str, input: &Path) -> Result<()> {
     let data = std::fs::read(input).unwrap();
     let name = Path::new(match target {
         "obj" => "fuzz-input.obj",
         "serialized" => "fuzz-input.serialized",
+        "hair" => "fuzz-input.mitshair",
         _ => "fuzz-input.ply",
     });
     let r = match target {
         "scene_xml" => return scene(&data),
         "obj" => mesh(obj_from_bytes(&data, name), name),
+        "hair" => hair(&data, name),
         // Shape 1 as well, as the target reads it (through the dictionary at the end).
         "serialized" => match serialized_from_bytes(&data, 1, name) {
             Err(e) if !e.to_string().contains(name.to_str().unwrap()) => panic!("{}: {e}", input.display()),
@@ -62,7 +87,7 @@ fn run(target: &str, input: &Path) -> Result<()> {
 
 #[test]
 fn seeds_load_or_fail_cleanly() {
-    for target in ["scene_xml", "obj", "ply", "serialized"] {
+    for target in ["scene_xml", "obj", "ply", "serialized", "hair"] {
         let seeds = inputs(&format!("fuzz/seeds/{target}"));
         assert!(seeds.len() >= 10, "{target}: {} seeds", seeds.len());
         let loaded = seeds.iter().filter(|s| run(target, s).is_ok()).count();
@@ -75,7 +100,7 @@ fn seeds_load_or_fail_cleanly() {
 #[test]
 fn fuzz_regressions_give_their_errors() {
     let mut count = 0;
-    for target in ["scene_xml", "obj", "ply", "serialized"] {
+    for target in ["scene_xml", "obj", "ply", "serialized", "hair"] {
         // A target that never crashed has no regression folder (git keeps no empty folders).
         if !root().join("fuzz/regressions").join(target).is_dir() {
             continue;

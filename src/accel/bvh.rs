@@ -1,7 +1,9 @@
 //! The pure-Rust backend: a compressed wide BVH (CWBVH) from the `obvhs` crate over the
-//! same triangles and spheres Embree sees, with our own primitive tests. Exists so that
+//! same triangles, spheres and hair segments Embree sees, with our own primitive tests
+//! (for hair, [`super::curve`]'s round linear segments). Exists so that
 //! every result can be cross-checked against Embree, ray by ray.
 
+use super::curve::{LEFT, RIGHT, intersect_round_segment};
 use super::{
     BuildOptions, BuildQuality, Cutout, Cutouts, Geometry, Hit, Ray, intersect_sphere, intersect_triangle, keeps_hit,
 };
@@ -11,8 +13,43 @@ use std::sync::Arc;
 
 #[derive(Clone, Copy)]
 enum Prim {
-    Triangle { p: [Vec3; 3] },
-    Sphere { center: Vec3, radius: f32 },
+    Triangle {
+        p: [Vec3; 3],
+    },
+    Sphere {
+        center: Vec3,
+        radius: f32,
+    },
+    /// Segment `seg` of the hair in `curves[curve]`.
+    Segment {
+        curve: u32,
+        seg: u32,
+    },
+}
+
+/// A hair geometry's own copy of its strands.
+struct Curves {
+    vertices: Vec<Vec3>,
+    segments: Vec<u32>,
+    flags: Vec<u8>,
+    radius: f32,
+}
+
+impl Curves {
+    /// The segment's end vertices.
+    fn ends(&self, seg: u32) -> (Vec3, Vec3) {
+        let k = self.segments[seg as usize] as usize;
+        (self.vertices[k], self.vertices[k + 1])
+    }
+
+    /// The first hit on segment `seg` (distance and position along it).
+    fn intersect(&self, r: &Ray, seg: u32) -> Option<(f32, f32)> {
+        let k = self.segments[seg as usize] as usize;
+        let f = self.flags[seg as usize];
+        let left = (f & LEFT != 0).then(|| self.vertices[k - 1]);
+        let right = (f & RIGHT != 0).then(|| self.vertices[k + 2]);
+        intersect_round_segment(r, self.vertices[k], self.vertices[k + 1], left, right, self.radius)
+    }
 }
 
 pub struct ObvhsScene {
@@ -23,12 +60,15 @@ pub struct ObvhsScene {
     ids: Vec<(u32, u32)>,
     /// The cut-out of each geometry, if it has one.
     cutouts: Vec<Option<Arc<dyn Cutout>>>,
+    /// The hair geometries that `Prim::Segment` refers to.
+    curves: Vec<Curves>,
 }
 
 impl ObvhsScene {
     pub fn build(geometry: &[Geometry<'_>], cutouts: &Cutouts, options: BuildOptions) -> ObvhsScene {
         let mut prims = Vec::new();
         let mut ids = Vec::new();
+        let mut curves = Vec::new();
         for (g, geom) in geometry.iter().enumerate() {
             match geom {
                 Geometry::Triangles { positions, indices } => {
@@ -41,6 +81,18 @@ impl ObvhsScene {
                     prims.push(Prim::Sphere { center: *center, radius: *radius });
                     ids.push((g as u32, 0));
                 }
+                Geometry::Curves { vertices, segments, flags, radius } => {
+                    for i in 0..segments.len() {
+                        prims.push(Prim::Segment { curve: curves.len() as u32, seg: i as u32 });
+                        ids.push((g as u32, i as u32));
+                    }
+                    curves.push(Curves {
+                        vertices: vertices.to_vec(),
+                        segments: segments.to_vec(),
+                        flags: flags.to_vec(),
+                        radius: *radius,
+                    });
+                }
             }
         }
         let aabbs: Vec<Aabb> = prims
@@ -49,6 +101,12 @@ impl ObvhsScene {
                 Prim::Triangle { p } => Aabb::from_points(&p.map(Vec3A::from)),
                 Prim::Sphere { center, radius } => {
                     Aabb::new(Vec3A::from(*center - Vec3::splat(*radius)), Vec3A::from(*center + Vec3::splat(*radius)))
+                }
+                Prim::Segment { curve, seg } => {
+                    let c = &curves[*curve as usize];
+                    let (a, b) = c.ends(*seg);
+                    let r = Vec3::splat(c.radius);
+                    Aabb::new(Vec3A::from(a.min(b) - r), Vec3A::from(a.max(b) + r))
                 }
             })
             .collect();
@@ -65,7 +123,7 @@ impl ObvhsScene {
         for (g, c) in cutouts {
             by_geometry[*g as usize] = Some(c.clone());
         }
-        ObvhsScene { bvh, prims: ordered, ids: ordered_ids, cutouts: by_geometry }
+        ObvhsScene { bvh, prims: ordered, ids: ordered_ids, cutouts: by_geometry, curves }
     }
 
     /// Whether a hit with barycentrics `(u, v)` on leaf triangle `id` counts (its
@@ -80,7 +138,10 @@ impl ObvhsScene {
     }
 
     fn bvh_ray(r: &Ray) -> obvhs::ray::Ray {
-        obvhs::ray::Ray::new(Vec3A::from(r.o), Vec3A::from(r.d), r.tmin, r.tmax)
+        // obvhs takes a component of -0 as positive for the ray's octant but inverts it to a
+        // large negative number, and then misses every box: adding +0 turns -0 into +0.
+        let d = Vec3A::from(r.d) + Vec3A::ZERO;
+        obvhs::ray::Ray::new(Vec3A::from(r.o), d, r.tmin, r.tmax)
     }
 
     pub fn intersect(&self, r: &Ray) -> Option<Hit> {
@@ -107,6 +168,14 @@ impl ObvhsScene {
                 }
                 None => f32::INFINITY,
             },
+            Prim::Segment { curve, seg } => match self.curves[curve as usize].intersect(&ray, seg) {
+                Some((t, u)) => {
+                    best = Some((t, id as u32, u, 0.0));
+                    ray.tmax = t;
+                    t
+                }
+                None => f32::INFINITY,
+            },
         });
         best.map(|(t, id, u, v)| {
             let (geom, prim) = self.ids[id as usize];
@@ -124,6 +193,7 @@ impl ObvhsScene {
                     intersect_triangle(r, p[0], p[1], p[2]).filter(|&(_, u, v)| self.keeps(r, id, u, v)).map(|h| h.0)
                 }
                 Prim::Sphere { center, radius } => intersect_sphere(r, center, radius),
+                Prim::Segment { curve, seg } => self.curves[curve as usize].intersect(r, seg).map(|h| h.0),
             };
             t.unwrap_or(f32::INFINITY)
         })

@@ -367,6 +367,12 @@ impl EmbreeScene {
         let kind = match g {
             Geometry::Triangles { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_TRIANGLE,
             Geometry::Sphere { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_SPHERE_POINT,
+            // Round, not flat: a real surface (a tube of constant radius, the cylinders of
+            // Mitsuba 0.6's hair with spheres at the joints), the same for every ray. A flat
+            // curve is a ribbon facing each ray, so a light path and a camera path would see
+            // different surfaces, and Embree 3.13 skips flat-curve hits near the ray origin.
+            // The same call and constant in Embree 3.13 and 4.
+            Geometry::Curves { .. } => ffi::RTCGeometryType::RTC_GEOMETRY_TYPE_ROUND_LINEAR_CURVE,
         };
         // SAFETY: the device is live.
         let raw = unsafe { ffi::rtcNewGeometry(self.device.raw, kind) };
@@ -405,6 +411,31 @@ impl EmbreeScene {
                 )?;
                 v[0] = [center.x, center.y, center.z, *radius];
             }
+            Geometry::Curves { vertices, segments, flags, radius } => {
+                let v = self.new_buffer::<[f32; 4]>(
+                    &handle,
+                    ffi::RTCBufferType::RTC_BUFFER_TYPE_VERTEX,
+                    ffi::RTCFormat::RTC_FORMAT_FLOAT4,
+                    vertices.len(),
+                )?;
+                for (dst, p) in v.iter_mut().zip(vertices.iter()) {
+                    *dst = [p.x, p.y, p.z, *radius];
+                }
+                let index = self.new_buffer::<u32>(
+                    &handle,
+                    ffi::RTCBufferType::RTC_BUFFER_TYPE_INDEX,
+                    ffi::RTCFormat::RTC_FORMAT_UINT,
+                    segments.len(),
+                )?;
+                index.copy_from_slice(segments);
+                let f = self.new_buffer::<u8>(
+                    &handle,
+                    ffi::RTCBufferType::RTC_BUFFER_TYPE_FLAGS,
+                    ffi::RTCFormat::RTC_FORMAT_UCHAR,
+                    flags.len(),
+                )?;
+                f.copy_from_slice(flags);
+            }
         }
         if let Some(c) = cutout {
             // SAFETY: the geometry is live and not committed; the user pointer points to an
@@ -435,15 +466,15 @@ impl EmbreeScene {
         format: ffi::RTCFormat,
         count: usize,
     ) -> Result<&'g mut [T], AccelError> {
-        // SAFETY: the geometry is live and not committed; slot 0 is valid for both buffer
-        // types used here; the stride is the item size.
+        // SAFETY: the geometry is live and not committed; slot 0 is valid for every buffer
+        // type used here (vertices, indices, curve flags); the stride is the item size.
         let ptr = unsafe { ffi::rtcSetNewGeometryBuffer(geom.0, kind, 0, format, size_of::<T>(), count) };
         self.device.check("rtcSetNewGeometryBuffer")?;
         if ptr.is_null() {
             return Err(AccelError::Embree("rtcSetNewGeometryBuffer returned null".into()));
         }
         // SAFETY: Embree allocated `count * size_of::<T>()` bytes (plus padding), aligned to
-        // at least 16 bytes, owned by the geometry, which lives as long as `'g` and is only
+        // at least 16 bytes (so for any `T` used here: `[f32; N]`, `[u32; 3]`, `u32`, `u8`), owned by the geometry, which lives as long as `'g` and is only
         // written through this slice before commit.
         Ok(unsafe { std::slice::from_raw_parts_mut(ptr as *mut T, count) })
     }

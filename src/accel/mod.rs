@@ -1,13 +1,15 @@
 //! Ray queries (contract §7): one small interface, two backends.
 //!
 //! [`Accel`] answers closest-hit and occlusion queries, for single rays and batches, over
-//! the scene's primitives: triangle meshes and exact spheres. The default backend is the
+//! the scene's primitives: triangle meshes, exact spheres and hair ([`curve`]: strands of
+//! round linear segments). The default backend is the
 //! system Embree ([`embree`], over the raw bindings of our own bindgen layer, [`crate::ffi::embree`]);
 //! with the `obvhs` feature the pure-Rust CWBVH of the `obvhs` crate ([`bvh`]) is
 //! available too, and both report the same hits (up to floating-point ties at shared edges).
 
 #[cfg(feature = "obvhs")]
 pub mod bvh;
+pub mod curve;
 #[allow(unsafe_code)]
 pub mod embree;
 pub mod query;
@@ -144,6 +146,28 @@ fn validate(geometry: &[Geometry<'_>]) -> Result<(), AccelError> {
             Geometry::Sphere { center, radius } => {
                 if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
                     return bad(format!("sphere at {center} with radius {radius}"));
+                }
+            }
+            Geometry::Curves { vertices, segments, flags, radius } => {
+                if !(radius.is_finite() && *radius > 0.0) {
+                    return bad(format!("curves of radius {radius}"));
+                }
+                if let Some(p) = vertices.iter().find(|p| !p.is_finite()) {
+                    return bad(format!("non-finite vertex {p}"));
+                }
+                if flags.len() != segments.len() {
+                    return bad(format!("{} curve flags for {} segments", flags.len(), segments.len()));
+                }
+                let n = vertices.len();
+                let fits = |&(&k, &f): &(&u32, &u8)| {
+                    let k = k as usize;
+                    k + 1 < n
+                        && (f & curve::LEFT == 0 || k >= 1)
+                        && (f & curve::RIGHT == 0 || k + 2 < n)
+                        && f & !(curve::LEFT | curve::RIGHT) == 0
+                };
+                if let Some((k, f)) = segments.iter().zip(flags.iter()).find(|s| !fits(s)) {
+                    return bad(format!("segment from vertex {k} (flags {f}) does not fit the {n} vertices"));
                 }
             }
         }

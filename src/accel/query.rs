@@ -43,8 +43,25 @@ pub struct Hit {
 /// geometry id of a hit is the shape index.
 #[derive(Clone, Copy, Debug)]
 pub enum Geometry<'a> {
-    Triangles { positions: &'a [Vec3], indices: &'a [[u32; 3]] },
-    Sphere { center: Vec3, radius: f32 },
+    Triangles {
+        positions: &'a [Vec3],
+        indices: &'a [[u32; 3]],
+    },
+    Sphere {
+        center: Vec3,
+        radius: f32,
+    },
+    /// Strands of straight segments of one radius (a `hair` shape), traced as Embree's
+    /// round linear curves ([`crate::accel::curve`]): segment `i` runs from vertex
+    /// `segments[i]` to the next one, and `flags[i]` says which neighbours it has
+    /// ([`crate::accel::curve::LEFT`], [`crate::accel::curve::RIGHT`]). The primitive id of
+    /// a hit is the segment; its `u` is the position along the segment (0 to 1), `v` is 0.
+    Curves {
+        vertices: &'a [Vec3],
+        segments: &'a [u32],
+        flags: &'a [u8],
+        radius: f32,
+    },
 }
 
 /// A cut-out (Mitsuba's `mask` BSDF) on a triangle mesh: the opacity `α` in `[0, 1]` at a

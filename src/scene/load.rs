@@ -3,6 +3,7 @@
 //! Each plugin reads the properties it knows; whatever is left unread is an error that
 //! names the file and line (as in Mitsuba), as is an unknown plugin type.
 
+use super::hair::{Hair, HairParams};
 use super::mesh::{self, TriangleMesh};
 use super::progress::LoadProgress;
 use super::shape::{Shape, ShapeGeometry};
@@ -373,6 +374,47 @@ impl<'d> Builder<'d> {
         Ok(m)
     }
 
+    /// Reads the `.mitshair` file a `hair` shape names and prepares its strands in world
+    /// space (Mitsuba 0.6's `radius`, `angle_threshold`, `reduction`).
+    fn load_hair(&mut self, node: &Node, to_world: &Transform) -> Result<Hair> {
+        let path = self.resolve_path(node, "filename")?;
+        let size = match std::fs::metadata(&path) {
+            Ok(m) if m.is_file() => m.len(),
+            _ => {
+                return Err(Error::input(
+                    &node.prop_loc("filename"),
+                    format!("hair file {} does not exist", path.display()),
+                ));
+            }
+        };
+        let defaults = HairParams::default();
+        let params = HairParams {
+            radius: node.float_or("radius", defaults.radius)?,
+            angle_threshold: node.float_or("angle_threshold", defaults.angle_threshold)?,
+            reduction: node.float_or("reduction", defaults.reduction)?,
+        };
+        let start = Instant::now();
+        let bar = self.progress.file(&path, size);
+        let strands =
+            super::hair::read_hair(&path).map_err(|e| Error::input(&node.prop_loc("filename"), e.to_string()))?;
+        let hair = Hair::build(&strands, to_world, params).map_err(|e| {
+            let prop = ["radius", "angle_threshold", "reduction", "to_world"].into_iter().find(|p| e.contains(p));
+            let loc = prop.map_or_else(|| node.loc.clone(), |p| node.prop_loc(p));
+            Error::input(&loc, format!("{}: {e}", path.display()))
+        })?;
+        self.stats.files.push(path.clone());
+        let summary = format!(
+            "read {}: {} hair segments in {} strands, {:.1} MB in {:.2} s",
+            path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+            group_thousands(hair.segments.len() as u64),
+            group_thousands(hair.strands as u64),
+            size as f64 / 1e6,
+            start.elapsed().as_secs_f64()
+        );
+        LoadProgress::done(bar, summary);
+        Ok(hair)
+    }
+
     fn shape(&mut self, id: NodeId) -> Result<()> {
         let node = self.doc.node(id);
         let to_world = Transform::new(node.transform("to_world")?.unwrap_or(Mat4::IDENTITY));
@@ -423,10 +465,10 @@ impl<'d> Builder<'d> {
                 }
                 ShapeGeometry::Sphere { center: c, radius: radius * axes[0] }
             }
+            "hair" => ShapeGeometry::Hair(self.load_hair(node, &to_world)?),
             _ => {
-                return Err(
-                    self.unknown_plugin(id, &["obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere"])
-                );
+                return Err(self
+                    .unknown_plugin(id, &["obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere", "hair"]));
             }
         };
         let media = self.medium_interface(id)?;
@@ -451,6 +493,8 @@ impl<'d> Builder<'d> {
             ShapeGeometry::Sphere { center, radius } => (!(center.is_finite()
                 && center.abs().max_element() + radius <= mesh::MAX_COORDINATE))
                 .then(|| format!("the sphere reaches beyond ±{:e}", mesh::MAX_COORDINATE)),
+            // Checked by `Hair::build`.
+            ShapeGeometry::Hair(_) => None,
         };
         if let Some(msg) = placed {
             return Err(Error::input(&node.loc, format!("after to_world, {msg}")));
@@ -468,17 +512,28 @@ impl<'d> Builder<'d> {
                     node.loc, shape.name
                 ));
             }
+        } else if let ShapeGeometry::Hair(h) = &shape.geometry {
+            self.stats.hair_segments += h.segments.len();
         } else {
             self.stats.spheres += 1;
         }
         let masked = self.bsdfs[shape.bsdf].opacity.is_some();
-        if masked && matches!(shape.geometry, ShapeGeometry::Sphere { .. }) {
+        if masked && !matches!(shape.geometry, ShapeGeometry::Mesh(_)) {
             return Err(Error::input(
                 &node.loc,
-                format!("shape \"{}\": a mask (cut-out) is supported on triangle meshes, not on spheres", shape.name),
+                format!(
+                    "shape \"{}\": a mask (cut-out) is supported on triangle meshes, not on spheres or hair",
+                    shape.name
+                ),
             ));
         }
         if let Some(e) = self.single_child(id, "emitter", "a shape")? {
+            if let ShapeGeometry::Hair(_) = &shape.geometry {
+                return Err(Error::input(
+                    &self.node(e).loc,
+                    format!("the hair shape \"{}\" cannot emit: hair is not an area light", shape.name),
+                ));
+            }
             if masked {
                 return Err(Error::input(
                     &self.node(e).loc,
@@ -621,6 +676,12 @@ fn scene_bounds(shapes: &[Shape], camera: Vec3) -> Bounds {
             ShapeGeometry::Sphere { center, radius } => {
                 lo = lo.min(*center - Vec3::splat(*radius));
                 hi = hi.max(*center + Vec3::splat(*radius));
+            }
+            ShapeGeometry::Hair(h) => {
+                for p in &h.vertices {
+                    lo = lo.min(*p - Vec3::splat(h.radius));
+                    hi = hi.max(*p + Vec3::splat(h.radius));
+                }
             }
         }
     }

@@ -1,6 +1,7 @@
 //! Scenes: loading Mitsuba XML into an editable description ([`xml`]), instantiating it
 //! into the render-ready, immutable [`Scene`] ([`load`]), and the queries integrators make.
 
+pub mod hair;
 pub mod load;
 pub mod mesh;
 pub mod ply;
@@ -62,6 +63,8 @@ pub struct LoadStats {
     pub triangles: usize,
     pub vertices: usize,
     pub spheres: usize,
+    /// Segments of the `hair` shapes.
+    pub hair_segments: usize,
     /// Bytes of the shapes' vertex and triangle arrays (positions, normals, uvs, indices,
     /// emitters' sampling tables), not counting the accelerator's own copies and BVH.
     pub mesh_bytes: usize,

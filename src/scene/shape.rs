@@ -1,6 +1,7 @@
-//! Render-ready shapes: triangle meshes and exact spheres, their surface interactions and
-//! the area sampling that area lights use.
+//! Render-ready shapes: triangle meshes, exact spheres and hair, their surface interactions
+//! and the area sampling that area lights use.
 
+use super::hair::Hair;
 use super::mesh::TriangleMesh;
 use crate::accel::{Cutout, Geometry, Hit, Ray};
 use crate::bsdf::At;
@@ -18,7 +19,12 @@ use std::sync::Arc;
 #[derive(Clone, Debug)]
 pub enum ShapeGeometry {
     Mesh(TriangleMesh),
-    Sphere { center: Vec3, radius: f32 },
+    Sphere {
+        center: Vec3,
+        radius: f32,
+    },
+    /// Mitsuba 0.6's `hair`: strands of round segments ([`super::hair`]).
+    Hair(Hair),
 }
 
 /// A shape of the scene with its material and (optional) area emitter.
@@ -37,7 +43,7 @@ pub struct Shape {
     /// the medium it travels in).
     pub media: Option<crate::medium::MediumInterface>,
     area: f32,
-    /// Triangle selection by area (meshes that emit).
+    /// Triangle (or hair segment) selection by area (meshes that emit; hair).
     area_distribution: Option<Distribution1D>,
     /// Unit normals of a sampled mesh's triangles (before `flip_normals`), filled with the
     /// area distribution: sampling a point then needs no cross product.
@@ -97,6 +103,7 @@ impl Shape {
         let area = match &geometry {
             ShapeGeometry::Mesh(m) => (0..m.indices.len()).map(|i| m.triangle_area(i) as f64).sum::<f64>() as f32,
             ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
+            ShapeGeometry::Hair(h) => h.area(),
         };
         Shape {
             geometry,
@@ -113,10 +120,22 @@ impl Shape {
 
     /// Prepares area sampling (called for emitting shapes).
     pub fn prepare_sampling(&mut self) {
-        if let ShapeGeometry::Mesh(m) = &self.geometry {
-            let areas: Vec<f32> = (0..m.indices.len()).map(|i| m.triangle_area(i)).collect();
-            self.area_distribution = Some(Distribution1D::new(&areas));
-            self.sample_normals = (0..m.indices.len()).map(|i| m.triangle_normal(i)).collect();
+        match &self.geometry {
+            ShapeGeometry::Mesh(m) => {
+                let areas: Vec<f32> = (0..m.indices.len()).map(|i| m.triangle_area(i)).collect();
+                self.area_distribution = Some(Distribution1D::new(&areas));
+                self.sample_normals = (0..m.indices.len()).map(|i| m.triangle_normal(i)).collect();
+            }
+            ShapeGeometry::Hair(h) => {
+                let lengths: Vec<f32> = (0..h.segments.len())
+                    .map(|i| {
+                        let (a, b) = h.segment(i);
+                        (b - a).length()
+                    })
+                    .collect();
+                self.area_distribution = Some(Distribution1D::new(&lengths));
+            }
+            ShapeGeometry::Sphere { .. } => {}
         }
     }
 
@@ -125,8 +144,11 @@ impl Shape {
     }
 
     /// Bytes held by the shape's per-vertex and per-triangle arrays (the mesh and, for an
-    /// emitting mesh, its sampling tables); zero for a sphere.
+    /// emitting mesh, its sampling tables); for hair its vertices and segments; zero for a sphere.
     pub fn memory_bytes(&self) -> usize {
+        if let ShapeGeometry::Hair(h) = &self.geometry {
+            return h.memory_bytes();
+        }
         let ShapeGeometry::Mesh(m) = &self.geometry else { return 0 };
         let vec3 = std::mem::size_of::<Vec3>();
         m.positions.capacity() * vec3
@@ -141,11 +163,12 @@ impl Shape {
         match &self.geometry {
             ShapeGeometry::Mesh(m) => Geometry::Triangles { positions: &m.positions, indices: &m.indices },
             ShapeGeometry::Sphere { center, radius } => Geometry::Sphere { center: *center, radius: *radius },
+            ShapeGeometry::Hair(h) => h.accel_geometry(),
         }
     }
 
     /// The cut-out a `mask` of this opacity makes of the shape (a mesh; `None` for a
-    /// sphere, or where the opacity is 1 everywhere).
+    /// sphere or hair, or where the opacity is 1 everywhere).
     pub fn cutout(&self, opacity: &Arc<Opacity>) -> Option<Arc<dyn Cutout>> {
         let ShapeGeometry::Mesh(m) = &self.geometry else { return None };
         if matches!(**opacity, Opacity::Constant(a) if a >= 1.0) {
@@ -210,6 +233,21 @@ impl Shape {
                     wo,
                 }
             }
+            ShapeGeometry::Hair(h) => {
+                let (p, n, frame, uv) = h.surface_point(hit.prim as usize, ray.at(hit.t));
+                let shading = if self.flip_normals { Frame { s: frame.s, t: -frame.t, n: -n } } else { frame };
+                SurfaceInteraction {
+                    p,
+                    t: hit.t,
+                    ng: n * sign,
+                    shading,
+                    uv,
+                    base_n: Vec3::Z,
+                    shape: hit.geom,
+                    prim: hit.prim,
+                    wo,
+                }
+            }
         }
     }
 
@@ -217,7 +255,8 @@ impl Shape {
     /// Mitsuba 3 defines them: on a mesh with texture coordinates from the triangle's
     /// positions and uvs (any tangent basis of the face normal when the uvs are
     /// degenerate), on a mesh without them the edges `p1 - p0`, `p2 - p0` (the barycentric
-    /// parameterisation its `uv` then is); on a sphere those of its `(φ / 2π, θ / π)`.
+    /// parameterisation its `uv` then is); on a sphere those of its `(φ / 2π, θ / π)`; on
+    /// hair those of the segment's cylinder ([`Hair::tangents`]).
     pub fn tangents(&self, si: &SurfaceInteraction) -> (Vec3, Vec3) {
         match &self.geometry {
             ShapeGeometry::Mesh(m) => {
@@ -243,6 +282,10 @@ impl Shape {
                     if rd == 0.0 { Vec3::X } else { Vec3::new(local.z * local.x / rd, local.z * local.y / rd, -rd) };
                 (dp_du, dp_dv * (PI * radius))
             }
+            ShapeGeometry::Hair(h) => {
+                let n = if self.flip_normals { -si.ng } else { si.ng };
+                h.tangents(si.prim as usize, n)
+            }
         }
     }
 
@@ -252,7 +295,8 @@ impl Shape {
     /// of a renderer must supply"). On a mesh with vertex normals the normal is the
     /// normalised barycentric interpolation `N / |N|`, whose derivative is
     /// `(∂N - n (n · ∂N)) / |N|`; on a mesh without them (and where the interpolation
-    /// vanishes) it is the constant face normal, zero derivatives; on a sphere `n = (p - c) / r`.
+    /// vanishes) it is the constant face normal, zero derivatives; on a sphere `n = (p - c) / r`;
+    /// on hair the cylinder's normal, which turns around the axis only (`∂n/∂v = dp/dv / r`).
     /// Both after `flip_normals`. A `bumpmap` or `normalmap` is not differentiated: these
     /// are the derivatives of the unperturbed normal.
     pub fn normal_derivatives(&self, si: &SurfaceInteraction) -> (Vec3, Vec3) {
@@ -293,6 +337,10 @@ impl Shape {
             ShapeGeometry::Sphere { radius, .. } => {
                 let (dp_du, dp_dv) = self.tangents(si);
                 (dp_du * (sign / radius), dp_dv * (sign / radius))
+            }
+            ShapeGeometry::Hair(h) => {
+                let (_, dp_dv) = self.tangents(si);
+                (Vec3::ZERO, dp_dv * (sign / h.radius))
             }
         }
     }
@@ -338,6 +386,19 @@ impl Shape {
             ShapeGeometry::Sphere { center, radius } => {
                 let d = square_to_uniform_sphere(u);
                 PositionSample { p: *center + d * *radius, n: d * sign, uv: sphere_uv(d) }
+            }
+            ShapeGeometry::Hair(h) => {
+                // A segment by length, then a point uniformly on its cylinder.
+                let i = match &self.area_distribution {
+                    Some(d) => d.sample(u1).0,
+                    None => ((u1 * h.segments.len() as f32) as usize).min(h.segments.len() - 1),
+                };
+                let (a, b) = h.segment(i);
+                let around = Frame::from_normal((b - a).normalize());
+                let phi = 2.0 * PI * u.y;
+                let on_axis = a + (b - a) * u.x;
+                let (p, n, _, uv) = h.surface_point(i, on_axis + around.to_world(Vec3::new(phi.cos(), phi.sin(), 0.0)));
+                PositionSample { p, n: n * sign, uv }
             }
         }
     }
@@ -513,6 +574,36 @@ mod tests {
                 assert!(scale > 0.5, "{scale}");
             }
         }
+    }
+
+    #[test]
+    fn hair_is_sampled_uniformly_on_its_cylinders() {
+        use crate::scene::hair::{Hair, HairParams, Strands};
+        // Segments of lengths 1 and 3: a quarter of the samples on the first.
+        let strands = Strands { vertices: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 3.0, 0.0)], starts: vec![0] };
+        let params = HairParams { radius: 0.1, angle_threshold: 0.0, reduction: 0.0 };
+        let hair = Hair::build(&strands, &crate::math::Transform::default(), params).unwrap();
+        let mut shape = Shape::new(ShapeGeometry::Hair(hair), 0, false, "hair".into());
+        shape.prepare_sampling();
+        assert!((shape.area() - 2.0 * PI * 0.1 * 4.0).abs() < 1e-5);
+        let mut sampler = crate::sampling::Sampler::new(&[9]);
+        let n = 20_000;
+        let mut on_first = 0;
+        for _ in 0..n {
+            let ps = shape.sample_area(sampler.next_1d(), sampler.next_2d());
+            // The first segment's normals are perpendicular to x, the second's to y.
+            let first = ps.n.x.abs() < 1e-5;
+            let (axis, dist) = if first {
+                (Vec3::X, Vec2::new(ps.p.y, ps.p.z).length())
+            } else {
+                (Vec3::Y, Vec2::new(ps.p.x - 1.0, ps.p.z).length())
+            };
+            on_first += usize::from(first);
+            assert!((dist - 0.1).abs() < 1e-5 && ps.n.dot(axis).abs() < 1e-5, "{ps:?}");
+            assert!((ps.n.length() - 1.0).abs() < 1e-5 && (0.0..=1.0).contains(&ps.uv.x));
+        }
+        let share = on_first as f32 / n as f32;
+        assert!((share - 0.25).abs() < 0.015, "{share}");
     }
 
     #[test]

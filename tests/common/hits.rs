@@ -30,7 +30,8 @@ pub enum HitMatch {
 pub fn near_edge(h: &Hit, geometry: &[Geometry<'_>]) -> bool {
     match geometry[h.geom as usize] {
         Geometry::Triangles { .. } => h.u.min(h.v).min(1.0 - h.u - h.v) < EDGE,
-        Geometry::Sphere { .. } => false,
+        // A curve's hits are compared by their own test (`tests/hair.rs`).
+        Geometry::Sphere { .. } | Geometry::Curves { .. } => false,
     }
 }
 
@@ -58,6 +59,11 @@ pub fn lies_on(h: &Hit, p: Vec3, geometry: &[Geometry<'_>], eps: f32) -> bool {
             w1 >= -tol && w2 >= -tol && w1 + w2 <= 1.0 + tol
         }
         Geometry::Sphere { center, radius } => ((p - center).length() - radius).abs() <= eps,
+        Geometry::Curves { vertices, segments, radius, .. } => {
+            let k = segments[h.prim as usize] as usize;
+            let (c, _) = pcbpt::accel::curve::closest_on_segment(p, vertices[k], vertices[k + 1]);
+            ((p - c).length() - radius).abs() <= eps
+        }
     }
 }
 
