@@ -520,6 +520,32 @@ impl Film {
         )
     }
 
+    /// The developed image of what this film holds beyond `part`, a film of the same size
+    /// that received some of the same passes (the even iterations of a render whose odd
+    /// ones `part` holds): camera sums, splats and light paths minus `part`'s.
+    pub fn develop_without(&self, part: &Film) -> Vec<Rgb> {
+        assert_eq!((self.width, self.height), (part.width, part.height), "films of one image");
+        let lp = self.light_paths.saturating_sub(part.light_paths);
+        let scale = if lp == 0 { 0.0 } else { (self.width as f64 * self.height as f64) / lp as f64 };
+        (0..self.data.len())
+            .map(|i| {
+                let (a, b) = (&self.data[i], &part.data[i]);
+                let wsum = a[3].value() - b[3].value();
+                let mut v = [0.0f64; 3];
+                if wsum > 0.0 {
+                    v = [0, 1, 2].map(|c| (a[c].value() - b[c].value()) / wsum);
+                }
+                if let Some(sa) = self.splats.get(i) {
+                    let sb = part.splats.get(i);
+                    for c in 0..3 {
+                        v[c] += (sa[c].value() - sb.map_or(0.0, |s| s[c].value())) * scale;
+                    }
+                }
+                Rgb::new(v[0] as f32, v[1] as f32, v[2] as f32)
+            })
+            .collect()
+    }
+
     /// The developed image of one strategy layer (they sum to [`Film::develop`]).
     pub fn develop_layer(&self, layer: usize) -> Vec<Rgb> {
         let n = self.width as usize * self.height as usize;

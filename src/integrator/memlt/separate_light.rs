@@ -121,5 +121,7 @@ fn pass(opts: &RunOptions, key: Keys, spp: u32, stream: u64) -> RunOptions {
     o.seed = crate::sampling::hash_words(&key(stream, 0));
     o.checkpoints.clear();
     o.progress = false;
+    o.aovs.clear();
+    o.noise_threshold = None;
     o
 }

@@ -184,7 +184,17 @@ pub(crate) fn chains_output(
         ..RenderStats::new(scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
     let (width, height) = (scene.film.width, scene.film.height);
-    RenderOutput { image, strategy_images: Vec::new(), snapshots, width, height, stats, film: Some(film) }
+    RenderOutput {
+        image,
+        strategy_images: Vec::new(),
+        snapshots,
+        width,
+        height,
+        stats,
+        film: Some(film),
+        variance: None,
+        aovs: Vec::new(),
+    }
 }
 
 /// Two-stage Metropolis' line of a render's summary (none without a first stage).

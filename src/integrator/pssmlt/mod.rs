@@ -407,6 +407,7 @@ pub fn render(
 
 impl Integrator for PssmltOptions {
     const BIDIRECTIONAL: bool = false;
+    const ITERATIVE: bool = false;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)
