@@ -6,7 +6,7 @@ use crate::errors::{self, integer, warn};
 use crate::images::to_array;
 use crate::scene::Scene;
 use clap::ValueEnum;
-use numpy::PyArray3;
+use numpy::{PyArray3, PyArrayMethods};
 use pcbpt::accel::Backend;
 use pcbpt::integrator::registry::INTEGRATORS;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput, RunOptions};
