@@ -692,6 +692,36 @@ mod tests {
         assert!((1..samples.len()).any(|c| f32_sum(c) != f32_sum(0)), "the control must differ");
     }
 
+    /// A film of two parts, without one of them, develops to the other part's image:
+    /// camera sums, weights, splats and light paths all subtracted.
+    #[test]
+    fn a_film_without_a_part_develops_to_the_rest() {
+        let filter = Filter::Tent { radius: 1.0 };
+        let tile = Tile { x0: 0, y0: 0, width: 5, height: 4 };
+        let mut s = crate::sampling::Sampler::new(&[3]);
+        let mut part = |n: usize, light_paths: u64| {
+            let mut film = Film::new(5, 4, filter);
+            let mut block = ImageBlock::new(tile, filter);
+            let mut splats = Vec::new();
+            for _ in 0..n {
+                let pos = Vec2::new(s.next_1d() * 5.0, s.next_1d() * 4.0);
+                block.put(pos, Rgb::new(s.next_1d(), s.next_1d(), 2.0 * s.next_1d()));
+                splats.push(Splat { pos, value: Rgb::splat(s.next_1d()), layer: 0 });
+            }
+            film.merge(&block);
+            film.add_splats(&splats);
+            film.light_paths = light_paths;
+            film
+        };
+        let (a, b) = (part(200, 30), part(150, 20));
+        let mut both = a.clone();
+        both.merge_film(&b);
+        for (x, y) in both.develop_without(&b).iter().zip(a.develop()) {
+            assert!((*x - y).abs().max_element() < 1e-5, "{x} against {y}");
+        }
+        assert_ne!(both.develop(), a.develop(), "the control: the whole film is not the part");
+    }
+
     #[test]
     fn tiles_cover_the_image_once() {
         let ts = tiles(70, 33, 16);
