@@ -26,6 +26,7 @@
 use crate::bsdf::TransportMode;
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, Tile, tiles};
+use crate::image_io::Channels;
 use crate::math::Rgb;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -137,7 +138,7 @@ fn first_hit(scene: &Scene, pos: Vec2, sampler: &mut Sampler) -> FirstHit {
 /// The first-hit AOVs among `aovs`, as `(channel name, one value per pixel)`, in the order
 /// asked for: [`FIRST_HIT_SPP`] rays per pixel with the random streams of `seed`, on
 /// `threads` worker threads (0 = all cores).
-pub fn first_hits(scene: &Scene, aovs: &[Aov], seed: u64, threads: usize) -> Result<Vec<(String, Vec<f32>)>, Error> {
+pub fn first_hits(scene: &Scene, aovs: &[Aov], seed: u64, threads: usize) -> Result<Channels, Error> {
     let wanted: Vec<Aov> = aovs.iter().copied().filter(|a| a.is_first_hit()).collect();
     if wanted.is_empty() {
         return Ok(Vec::new());
@@ -196,7 +197,7 @@ fn tile_blocks(scene: &Scene, wanted: &[Aov], seed: u64, tile: Tile) -> Vec<Imag
 const AOV_STREAM: u64 = 0x414f_565f_6869_7473;
 
 /// The variance AOV's channels.
-pub fn variance_channels(variance: &[Rgb]) -> Vec<(String, Vec<f32>)> {
+pub fn variance_channels(variance: &[Rgb]) -> Channels {
     Aov::Variance
         .channels()
         .iter()

@@ -248,6 +248,9 @@ pub fn write_with(path: &Path, image: &Image, library: Library) -> Result<()> {
     }
 }
 
+/// Named channels of an image (AOVs): `(name, one value per pixel)`.
+pub type Channels = Vec<(String, Vec<f32>)>;
+
 /// Writes `image` as an EXR file atomically with extra channels `(name, one value per
 /// pixel)` beside its `R`, `G` and `B` (AOVs); the names are sorted as OpenEXR stores them.
 pub fn write_exr_channels(path: &Path, image: &Image, extra: &[(String, Vec<f32>)]) -> Result<()> {
@@ -272,7 +275,7 @@ pub fn write_exr_channels(path: &Path, image: &Image, extra: &[(String, Vec<f32>
 }
 
 /// Reads every channel of an EXR file's first layer as `(name, one value per pixel)`.
-pub fn read_exr_channels(path: &Path) -> Result<(u32, u32, Vec<(String, Vec<f32>)>)> {
+pub fn read_exr_channels(path: &Path) -> Result<(u32, u32, Channels)> {
     use exr::prelude::{ReadChannels, ReadLayers};
     let img = exr::prelude::read()
         .no_deep_data()

@@ -148,5 +148,5 @@ pub struct RenderOutput {
     /// The per-pixel variance of `image` when the render kept half-images.
     pub variance: Option<Vec<Rgb>>,
     /// The AOV channels asked for, `(EXR channel name, one value per pixel)`.
-    pub aovs: Vec<(String, Vec<f32>)>,
+    pub aovs: crate::image_io::Channels,
 }
