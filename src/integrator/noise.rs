@@ -25,9 +25,9 @@
 //! ```
 //!
 //! `F²` in its place would be biased up by `Var(F)` and large exactly where the numerator
-//! is (a pixel with a firefly), and the estimate low: on `cornell-ply` at 8 and 32 samples
-//! per pixel by a third and by an eighth, where `A·B` gives the relMSE measured against a
-//! reference to within a few percent.
+//! is (a pixel with a firefly), and the estimate low. `A·B` is still large where one half
+//! holds a firefly, so where rare paths carry much of the light the estimate stays noisy
+//! and can be low or high by tens of percent (docs/usage.md gives measurements).
 //!
 //! Light-tracing splats go into the halves by iteration like camera samples, each half
 //! divided by its own light paths. The halves are independent only where iterations are:
