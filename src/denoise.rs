@@ -7,6 +7,7 @@
 
 use crate::error::{Error, Result};
 use crate::film::Filter;
+use crate::image_io::Channels;
 use crate::math::Rgb;
 use std::path::{Path, PathBuf};
 
@@ -24,6 +25,27 @@ pub struct Aux<'a> {
     pub albedo: Option<&'a [Rgb]>,
     /// The shading normal there (any length, world or camera space); only with an albedo.
     pub normal: Option<&'a [Rgb]>,
+}
+
+/// The albedo and normal images the denoiser is guided by: the render's own `albedo` and
+/// `normal` AOVs where it has them (`aovs`, as `--aov` gives them), else the first-hit pass
+/// of [`crate::aov`] run for them alone (seed `seed`, `threads` threads).
+pub fn guides(scene: &crate::scene::Scene, aovs: &Channels, seed: u64, threads: usize) -> Result<(Vec<Rgb>, Vec<Rgb>)> {
+    let find = |from: &Channels, names: [&str; 3]| -> Option<Vec<Rgb>> {
+        let c: Vec<&Vec<f32>> =
+            names.iter().map(|n| from.iter().find(|(name, _)| name == n).map(|(_, v)| v)).collect::<Option<_>>()?;
+        Some((0..c[0].len()).map(|i| Rgb::new(c[0][i], c[1][i], c[2][i])).collect())
+    };
+    const ALBEDO: [&str; 3] = ["Albedo.R", "Albedo.G", "Albedo.B"];
+    const NORMAL: [&str; 3] = ["Ns.X", "Ns.Y", "Ns.Z"];
+    if let (Some(a), Some(n)) = (find(aovs, ALBEDO), find(aovs, NORMAL)) {
+        return Ok((a, n));
+    }
+    let own = crate::aov::first_hits(scene, &[crate::aov::Aov::Albedo, crate::aov::Aov::Normal], seed, threads)?;
+    match (find(&own, ALBEDO), find(&own, NORMAL)) {
+        (Some(a), Some(n)) => Ok((a, n)),
+        _ => Err(Error::Usage("--denoise: the first-hit pass gave no albedo or normal".into())),
+    }
 }
 
 /// Where the denoised image of `output` goes: `NAME.denoised.EXT` beside it.

@@ -520,6 +520,32 @@ impl Film {
         )
     }
 
+    /// The developed image of what this film holds beyond `part`, a film of the same size
+    /// that received some of the same passes (the even iterations of a render whose odd
+    /// ones `part` holds): camera sums, splats and light paths minus `part`'s.
+    pub fn develop_without(&self, part: &Film) -> Vec<Rgb> {
+        assert_eq!((self.width, self.height), (part.width, part.height), "films of one image");
+        let lp = self.light_paths.saturating_sub(part.light_paths);
+        let scale = if lp == 0 { 0.0 } else { (self.width as f64 * self.height as f64) / lp as f64 };
+        (0..self.data.len())
+            .map(|i| {
+                let (a, b) = (&self.data[i], &part.data[i]);
+                let wsum = a[3].value() - b[3].value();
+                let mut v = [0.0f64; 3];
+                if wsum > 0.0 {
+                    v = [0, 1, 2].map(|c| (a[c].value() - b[c].value()) / wsum);
+                }
+                if let Some(sa) = self.splats.get(i) {
+                    let sb = part.splats.get(i);
+                    for c in 0..3 {
+                        v[c] += (sa[c].value() - sb.map_or(0.0, |s| s[c].value())) * scale;
+                    }
+                }
+                Rgb::new(v[0] as f32, v[1] as f32, v[2] as f32)
+            })
+            .collect()
+    }
+
     /// The developed image of one strategy layer (they sum to [`Film::develop`]).
     pub fn develop_layer(&self, layer: usize) -> Vec<Rgb> {
         let n = self.width as usize * self.height as usize;
@@ -664,6 +690,36 @@ mod tests {
             (part(a) + part(b)).to_bits()
         };
         assert!((1..samples.len()).any(|c| f32_sum(c) != f32_sum(0)), "the control must differ");
+    }
+
+    /// A film of two parts, without one of them, develops to the other part's image:
+    /// camera sums, weights, splats and light paths all subtracted.
+    #[test]
+    fn a_film_without_a_part_develops_to_the_rest() {
+        let filter = Filter::Tent { radius: 1.0 };
+        let tile = Tile { x0: 0, y0: 0, width: 5, height: 4 };
+        let mut s = crate::sampling::Sampler::new(&[3]);
+        let mut part = |n: usize, light_paths: u64| {
+            let mut film = Film::new(5, 4, filter);
+            let mut block = ImageBlock::new(tile, filter);
+            let mut splats = Vec::new();
+            for _ in 0..n {
+                let pos = Vec2::new(s.next_1d() * 5.0, s.next_1d() * 4.0);
+                block.put(pos, Rgb::new(s.next_1d(), s.next_1d(), 2.0 * s.next_1d()));
+                splats.push(Splat { pos, value: Rgb::splat(s.next_1d()), layer: 0 });
+            }
+            film.merge(&block);
+            film.add_splats(&splats);
+            film.light_paths = light_paths;
+            film
+        };
+        let (a, b) = (part(200, 30), part(150, 20));
+        let mut both = a.clone();
+        both.merge_film(&b);
+        for (x, y) in both.develop_without(&b).iter().zip(a.develop()) {
+            assert!((*x - y).abs().max_element() < 1e-5, "{x} against {y}");
+        }
+        assert_ne!(both.develop(), a.develop(), "the control: the whole film is not the part");
     }
 
     #[test]

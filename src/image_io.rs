@@ -248,6 +248,49 @@ pub fn write_with(path: &Path, image: &Image, library: Library) -> Result<()> {
     }
 }
 
+/// Named channels of an image (AOVs): `(name, one value per pixel)`.
+pub type Channels = Vec<(String, Vec<f32>)>;
+
+/// Writes `image` as an EXR file atomically with extra channels `(name, one value per
+/// pixel)` beside its `R`, `G` and `B` (AOVs); the names are sorted as OpenEXR stores them.
+pub fn write_exr_channels(path: &Path, image: &Image, extra: &[(String, Vec<f32>)]) -> Result<()> {
+    use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes};
+    if Format::from_path(path)? != Format::Exr {
+        return Err(Error::Usage(format!("{}: AOVs are written as channels of an EXR file", path.display())));
+    }
+    let n = image.pixels.len();
+    let mut list = exr::prelude::SmallVec::new();
+    for (c, name) in ["R", "G", "B"].into_iter().enumerate() {
+        list.push(AnyChannel::new(name, FlatSamples::F32(image.pixels.iter().map(|p| p[c]).collect())));
+    }
+    for (name, values) in extra {
+        assert_eq!(values.len(), n, "one value per pixel");
+        list.push(AnyChannel::new(name.as_str(), FlatSamples::F32(values.clone())));
+    }
+    let size = (image.width as usize, image.height as usize);
+    let layer = Layer::new(size, LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(list));
+    write_atomically(path, |tmp| {
+        ExrImage::from_layer(layer).write().non_parallel().to_file(tmp).map_err(|e| format!("cannot write EXR: {e}"))
+    })
+}
+
+/// Reads every channel of an EXR file's first layer as `(name, one value per pixel)`.
+pub fn read_exr_channels(path: &Path) -> Result<(u32, u32, Channels)> {
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let img = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| Error::in_file(path, format!("cannot read EXR: {e}")))?;
+    let layer = &img.layer_data;
+    let channels =
+        layer.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect();
+    Ok((layer.size.width() as u32, layer.size.height() as u32, channels))
+}
+
 /// Writes 8-bit RGB pixels as PNG atomically (false-colour images and figures).
 pub fn write_png_rgb8(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<()> {
     write_atomically(path, |tmp| {

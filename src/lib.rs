@@ -9,6 +9,7 @@
 #![deny(unsafe_code)]
 
 pub mod accel;
+pub mod aov;
 pub mod bsdf;
 pub mod camera;
 pub mod compare;

@@ -155,6 +155,16 @@ struct RenderArgs {
     /// Write one EXR per bidirectional strategy (s,t) into this folder (they sum to the image).
     #[arg(long, value_name = "DIR")]
     strategy_images: Option<PathBuf>,
+    /// Write these AOVs as extra channels of the output EXR, a comma-separated list of
+    /// albedo (Albedo.R/G/B), normal (Ns.X/Y/Z), depth (Z), position (P.X/Y/Z) and variance
+    /// (Variance.R/G/B, the image's per-pixel variance; not for pssmlt and memlt).
+    #[arg(long, value_name = "LIST", value_parser = parse_aovs)]
+    aov: Option<AovList>,
+    /// Stop once the render's own relMSE estimate (from two half-images of its even and odd
+    /// iterations) falls below this, or at --spp/--time, whichever comes first; the estimate
+    /// is in --stats (not for pssmlt and memlt).
+    #[arg(long, value_name = "RELMSE", allow_negative_numbers = true, value_parser = parse_relmse)]
+    noise_threshold: Option<f64>,
     /// Write render statistics as JSON to this file.
     #[arg(long)]
     stats: Option<PathBuf>,
@@ -223,6 +233,22 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         _ => Err(format!("expected a non-negative number of seconds, got {s:?}")),
     }
+}
+
+/// A positive, finite relMSE.
+fn parse_relmse(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a positive relMSE (e.g. 0.01), got {s:?}")),
+    }
+}
+
+/// The AOVs `--aov` lists (one argument, commas between names).
+#[derive(Clone)]
+struct AovList(Vec<pcbpt::aov::Aov>);
+
+fn parse_aovs(s: &str) -> Result<AovList, String> {
+    pcbpt::aov::parse_list(s).map(AovList)
 }
 
 fn parse_range(s: &str) -> std::result::Result<(u32, u32), String> {
@@ -469,6 +495,11 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
     opts.run.log_interval = a.log_interval;
     opts.run.stop = Some(stop);
     opts.run.strategy_images = a.strategy_images.is_some();
+    opts.run.aovs = a.aov.clone().map(|l| l.0).unwrap_or_default();
+    opts.run.noise_threshold = a.noise_threshold;
+    if !opts.run.aovs.is_empty() && image_io::Format::from_path(&output)? != image_io::Format::Exr {
+        return Err(Error::Usage(format!("--aov writes channels of an EXR file, not {}", output.display())));
+    }
     if let Some(dir) = &a.strategy_images {
         if !kind.is_bidirectional() {
             return Err(Error::Usage("--strategy-images needs a bidirectional integrator".into()));
@@ -519,6 +550,9 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         }
         // An interrupted chunk writes no part: a merge would take it for a whole one.
         Some(_) => {}
+        None if !out.aovs.is_empty() => {
+            image_io::write_exr_channels(&output, &Image::new(out.width, out.height, out.image.clone()), &out.aovs)?
+        }
         None => image_io::write_film(
             &output,
             &Image::new(out.width, out.height, out.image.clone()),
@@ -529,7 +563,10 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
         d.finish(&out.image);
     }
     if a.denoise {
-        let denoised = pcbpt::denoise::denoise(out.width, out.height, &out.image, Default::default())?;
+        // Guided by the first hits' albedo and normal, as Open Image Denoise's RT filter wants.
+        let (albedo, normal) = pcbpt::denoise::guides(&scene, &out.aovs, opts.run.seed, opts.run.threads)?;
+        let aux = pcbpt::denoise::Aux { albedo: Some(&albedo), normal: Some(&normal) };
+        let denoised = pcbpt::denoise::denoise(out.width, out.height, &out.image, aux)?;
         let path = pcbpt::denoise::denoised_path(&output);
         image_io::write_film(&path, &Image::new(out.width, out.height, denoised), scene.film.ldr.as_ref())?;
     }
@@ -561,6 +598,14 @@ fn render(args: Vec<String>) -> Result<ExitCode> {
             s.invalid_samples,
             output.display()
         );
+    }
+    if let (false, Some(e)) = (a.quiet, s.relmse_estimate) {
+        let stop = match (a.noise_threshold, s.noise_threshold_reached) {
+            (Some(t), Some(true)) => format!(" (below --noise-threshold {t} after {} spp)", s.spp),
+            (Some(t), _) => format!(" (not below --noise-threshold {t} within the budget)"),
+            _ => String::new(),
+        };
+        eprintln!("  relMSE estimate from the half-images: {e:.3e}{stop}");
     }
     if !a.quiet && kind.is_bidirectional() {
         let c = &s.counters;

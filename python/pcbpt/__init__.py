@@ -111,6 +111,8 @@ def render(
     rr_depth: Optional[int] = None,
     sampler: Optional[str] = None,
     progress: bool = False,
+    aov: Optional[Any] = None,
+    noise_threshold: Optional[float] = None,
     **options: Any,
 ):
     """Render a scene; the image is the one ``pcbpt render`` writes for the same arguments.
@@ -134,6 +136,11 @@ def render(
         sampler: ``"independent"`` or ``"sobol"`` (the path tracer's) instead of the
             file's sampler (``--sampler``).
         progress: draw a progress bar on stderr (when it is a terminal).
+        aov: AOVs to return beside the image (``--aov``): a list of names, or one
+            comma-separated string, of ``"albedo"``, ``"normal"``, ``"depth"``,
+            ``"position"`` and ``"variance"`` (docs/usage.md says what each holds).
+        noise_threshold: stop once the render's own relMSE estimate falls below this
+            (``--noise-threshold``), or at ``spp``/``time``, whichever comes first.
         **options: the integrator's options by their command-line names with ``_`` for
             ``-`` (``light_paths=1000``, ``pc_mis="harmonic"``, ``two_stage=False``);
             values are passed as ``str(value)``, booleans as ``true``/``false``; None
@@ -143,7 +150,11 @@ def render(
         The image, a float32 array of shape ``(height, width, 3)`` (linear RGB, rows from
         the top); with ``stats=True``, a tuple ``(image, stats)`` whose dict is the JSON
         that ``pcbpt render --stats`` writes (``stats["render"]["integrator"]``,
-        ``["spp"]``, ``["seconds"]``, ``["options"]``, …; ``stats["output"]`` is None).
+        ``["spp"]``, ``["seconds"]``, ``["options"]``, ``["relmse_estimate"]`` with a noise
+        threshold or the variance, …; ``stats["output"]`` is None). With ``aov``, a dict of
+        the AOVs' channels by their EXR names (``"Albedo.R"``, ``"Ns.X"``, ``"Z"``,
+        ``"Variance.G"``, …; float32 arrays of shape ``(height, width)``) comes last:
+        ``(image, aovs)`` or ``(image, stats, aovs)``.
 
     Raises:
         ValueError: a bad argument, or an option the integrator does not read (the
@@ -152,7 +163,9 @@ def render(
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a pcbpt.Scene (from pcbpt.load), got {type(scene).__name__}")
-    image, text = _native.render(
+    if isinstance(aov, str):
+        aov = [aov]
+    image, text, aovs = _native.render(
         scene,
         integrator,
         spp,
@@ -163,11 +176,16 @@ def render(
         rr_depth,
         sampler,
         bool(progress),
+        None if aov is None else [str(a) for a in aov],
+        None if noise_threshold is None else float(noise_threshold),
         options,
     )
+    out = (image,)
     if stats:
-        return image, json.loads(text)
-    return image
+        out += (json.loads(text),)
+    if aov is not None:
+        out += (aovs,)
+    return out if len(out) > 1 else image
 
 
 def compare(reference: Any, image: Any, metric: Optional[str] = "relmse") -> Any:

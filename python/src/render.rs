@@ -6,7 +6,7 @@ use crate::errors::{self, integer, warn};
 use crate::images::to_array;
 use crate::scene::Scene;
 use clap::ValueEnum;
-use numpy::PyArray3;
+use numpy::{PyArray3, PyArrayMethods};
 use pcbpt::accel::Backend;
 use pcbpt::integrator::registry::INTEGRATORS;
 use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput, RunOptions};
@@ -28,10 +28,11 @@ pub fn integrators() -> Vec<&'static str> {
     INTEGRATORS.iter().map(|r| r.kind.name()).collect()
 }
 
-/// Renders `scene`; returns the image (`height × width × 3` float32) and the statistics as
-/// the JSON text `--stats` writes. The keywords are `pcbpt.render`'s.
+/// Renders `scene`; returns the image (`height × width × 3` float32), the statistics as
+/// the JSON text `--stats` writes and the AOV channels asked for (`height × width` float32
+/// arrays by channel name). The keywords are `pcbpt.render`'s.
 #[pyfunction]
-#[pyo3(signature = (scene, integrator, spp, time, seed, threads, max_depth, rr_depth, sampler, progress, options))]
+#[pyo3(signature = (scene, integrator, spp, time, seed, threads, max_depth, rr_depth, sampler, progress, aov, noise_threshold, options))]
 #[allow(clippy::too_many_arguments)] // the keywords of `pcbpt.render`
 pub fn render<'py>(
     py: Python<'py>,
@@ -45,8 +46,10 @@ pub fn render<'py>(
     rr_depth: Option<Bound<'py, PyAny>>,
     sampler: Option<&str>,
     progress: bool,
+    aov: Option<Vec<String>>,
+    noise_threshold: Option<f64>,
     options: Bound<'py, PyDict>,
-) -> PyResult<(Bound<'py, PyArray3<f32>>, String)> {
+) -> PyResult<(Bound<'py, PyArray3<f32>>, String, Bound<'py, PyDict>)> {
     let scene = scene.get();
     let named = integrator.map(|name| value_enum::<IntegratorKind>("integrator", name)).transpose()?;
     let kind = named.or(scene.file_integrator()).ok_or_else(|| {
@@ -69,9 +72,24 @@ pub fn render<'py>(
     };
     opts.run.threads = integer::<u16>("threads", &threads, "a number of threads from 0 (every core) to 65535")?.into();
     opts.run.progress = progress;
+    if let Some(names) = aov {
+        opts.run.aovs =
+            pcbpt::aov::parse_list(&names.join(",")).map_err(|e| PyValueError::new_err(format!("aov: {e}")))?;
+    }
+    if let Some(t) = noise_threshold {
+        if !(t > 0.0 && t.is_finite()) {
+            return Err(PyValueError::new_err(format!("noise_threshold must be a positive relMSE, got {t}")));
+        }
+        opts.run.noise_threshold = Some(t);
+    }
     let out = render_on_worker(py, scene.inner.clone(), settings, opts)?;
     let stats = stats_json(scene, &out);
-    Ok((to_array(py, out.width, out.height, &out.image)?, stats))
+    let aovs = PyDict::new(py);
+    for (name, values) in &out.aovs {
+        let array = numpy::PyArray1::from_slice(py, values).reshape([out.height as usize, out.width as usize])?;
+        aovs.set_item(name, array)?;
+    }
+    Ok((to_array(py, out.width, out.height, &out.image)?, stats, aovs))
 }
 
 /// A value of a command-line enum by the name the command line takes.

@@ -117,3 +117,43 @@ def test_an_unknown_integrator_in_the_file_needs_one_named():
     with pytest.raises(ValueError, match="pick one with integrator="):
         pcbpt.render(scene)
     assert pcbpt.render(scene, "path", seed=2, threads=2).shape == (20, 24, 3)
+
+
+def test_aovs_and_the_noise_threshold_come_back_beside_the_image(cornell, cli, tmp_path):
+    exr = tmp_path / "cli.exr"
+    defines = [a for k, v in SMALL.items() for a in ("-D", f"{k}={v}")]
+    subprocess.run(
+        [cli, "render", CORNELL, *defines, "--seed", "5", "--threads", "2", "-q", "-o", exr, "--aov", "albedo,depth,variance", "--noise-threshold", "100"],
+        check=True,
+    )
+    image, stats, aovs = pcbpt.render(
+        cornell, seed=5, threads=2, stats=True, aov=["albedo", "depth", "variance"], noise_threshold=100
+    )
+    assert np.array_equal(image, pcbpt.read_image(exr))
+    names = {"Albedo.R", "Albedo.G", "Albedo.B", "Z", "Variance.R", "Variance.G", "Variance.B"}
+    assert set(aovs) == names
+    for name, channel in aovs.items():
+        assert channel.shape == (cornell.height, cornell.width) and channel.dtype == np.float32, name
+        assert np.isfinite(channel).all() and (channel >= 0).all(), name
+    assert 0 < aovs["Albedo.R"].max() <= 1 and aovs["Z"].max() > 0
+    # A threshold this high stops at the first estimate, after 2 spp.
+    render = stats["render"]
+    assert render["spp"] == 2 and render["noise_threshold_reached"] and render["relmse_estimate"] < 100
+    image, depth = pcbpt.render(cornell, seed=5, threads=2, aov="depth")
+    assert set(depth) == {"Z"}
+
+
+@pytest.mark.parametrize(
+    "keywords,says",
+    [
+        ({"aov": ["albedo", "colour"]}, "colour"),
+        ({"aov": "depth,"}, "aov"),
+        ({"noise_threshold": -1}, "noise_threshold"),
+        ({"noise_threshold": float("nan")}, "noise_threshold"),
+        ({"noise_threshold": 0}, "noise_threshold"),
+        ({"aov": "variance", "spp": 1}, "at least 2"),
+    ],
+)
+def test_bad_aovs_and_thresholds_are_value_errors(cornell, keywords, says):
+    with pytest.raises(ValueError, match=says):
+        pcbpt.render(cornell, threads=2, **keywords)

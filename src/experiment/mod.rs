@@ -46,6 +46,9 @@ pub struct ExperimentFile {
     /// the seeds each run is rendered with (`[1, 2, 3]` or `"1..=9"`): each seed's results
     /// land in `seed-N/` of the output folder, and `summary.md` summarises across them.
     pub seeds: Option<Seeds>,
+    /// A relMSE: the table adds each run's time to reach it against the reference,
+    /// interpolated on the run's convergence curve ([`time_to_relmse`]).
+    pub noise_threshold: Option<f64>,
     pub scene: Vec<SceneEntry>,
     pub method: Vec<MethodEntry>,
 }
@@ -179,6 +182,11 @@ impl ExperimentFile {
             && !(t > 0.0 && t.is_finite())
         {
             return Err(usage(path, format!("`time` must be a positive number of seconds, got {t}")));
+        }
+        if let Some(x) = f.noise_threshold
+            && !(x > 0.0 && x.is_finite())
+        {
+            return Err(usage(path, format!("`noise_threshold` must be a positive relMSE, got {x}")));
         }
         if f.scene.is_empty() || f.method.is_empty() {
             return Err(usage(path, "an experiment needs at least one [[scene]] and one [[method]]"));
@@ -432,7 +440,7 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
     let baseline = f.baseline();
     image_io::write_text(
         &out.join("results.md"),
-        &table(f.name.as_deref().unwrap_or("experiment"), &results, &baseline),
+        &table(f.name.as_deref().unwrap_or("experiment"), &results, &baseline, f.noise_threshold),
     )?;
     image_io::write_text(&out.join("convergence.csv"), &csv(&results))?;
     Ok(results)
@@ -563,11 +571,32 @@ fn read_pfm(path: &Path) -> Result<Image> {
     Ok(Image::new(w, h, pixels))
 }
 
+/// The time a run's convergence curve (`(seconds, spp, relMSE)`, in time order) first
+/// reaches relMSE `x`: interpolated log–log between the checkpoints around the crossing
+/// (relMSE falls as a power of time), the first checkpoint's time when it is already below;
+/// `None` when the run never reaches it.
+pub fn time_to_relmse(curve: &[(f64, u32, f64)], x: f64) -> Option<f64> {
+    let i = curve.iter().position(|&(_, _, e)| e <= x)?;
+    let (t1, _, e1) = curve[i];
+    let Some(&(t0, _, e0)) = i.checked_sub(1).map(|j| &curve[j]) else { return Some(t1) };
+    if !(t0 > 0.0 && e1 > 0.0 && e0 > e1) {
+        return Some(t1);
+    }
+    let f = (x.ln() - e0.ln()) / (e1.ln() - e0.ln());
+    Some((t0.ln() + f * (t1.ln() - t0.ln())).exp())
+}
+
 /// The Markdown table: per scene and method, with the speed-up over the baseline at equal
-/// time (its relMSE over the method's) and the inefficiency `relMSE × seconds`.
-pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
+/// time (its relMSE over the method's), the inefficiency `relMSE × seconds` and, with a
+/// noise threshold, the time to reach it ([`time_to_relmse`]; `> T` when the run of `T`
+/// seconds did not).
+pub fn table(name: &str, results: &[RunResult], baseline: &str, threshold: Option<f64>) -> String {
+    let (extra, rule) = match threshold {
+        Some(x) => (format!(" seconds to relMSE {x} |"), "---|"),
+        None => (String::new(), ""),
+    };
     let mut s = format!(
-        "# {name}\n\n| scene | method | spp | M samples/s | seconds | relMSE | FLIP | mean ratio | speed-up over {baseline} | relMSE × s | seconds in pool / cache / camera / merge |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "# {name}\n\n| scene | method | spp | M samples/s | seconds | relMSE | FLIP | mean ratio | speed-up over {baseline} | relMSE × s | seconds in pool / cache / camera / merge |{extra}\n|---|---|---|---|---|---|---|---|---|---|---|{rule}\n"
     );
     for r in results {
         let base = results.iter().find(|b| b.scene == r.scene && b.method == baseline);
@@ -590,6 +619,11 @@ pub fn table(name: &str, results: &[RunResult], baseline: &str) -> String {
                 .map(|p| format!("{:.1} / {:.1} / {:.1} / {:.1}", p.light_pool, p.cache, p.camera_pass, p.merge))
                 .unwrap_or_default()
         );
+        if let Some(x) = threshold {
+            s.pop();
+            let t = time_to_relmse(&r.curve, x).map_or(format!("> {:.1}", r.seconds), |t| format!("{t:.2}"));
+            let _ = writeln!(s, " {t} |");
+        }
     }
     s
 }
@@ -703,4 +737,44 @@ fn figure(path: &Path, reference: &Image, images: &[(String, Image)], crops: &[[
         y0 += rh;
     }
     image_io::write(path, &Image::new(fig_w, fig_h, px))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_time_to_a_relmse_is_interpolated_log_log_between_checkpoints() {
+        // relMSE = 0.08 / t: 0.02 is reached at 4 s, between the checkpoints at 2 s and 8 s.
+        let curve = [(1.0, 1, 0.08), (2.0, 2, 0.04), (8.0, 8, 0.01)];
+        assert!((time_to_relmse(&curve, 0.02).unwrap() - 4.0).abs() < 1e-9);
+        assert_eq!(time_to_relmse(&curve, 0.1), Some(1.0), "already below at the first checkpoint");
+        assert_eq!(time_to_relmse(&curve, 0.04), Some(2.0));
+        assert_eq!(time_to_relmse(&curve, 0.001), None);
+    }
+
+    #[test]
+    fn the_table_has_the_time_to_the_threshold_only_when_asked() {
+        let run = RunResult {
+            scene: "s".into(),
+            method: "m".into(),
+            seed: 0,
+            spp: 8,
+            seconds: 8.0,
+            samples_per_second: 1e6,
+            relmse: 0.01,
+            flip: 0.1,
+            mean_ratio: 1.0,
+            curve: vec![(2.0, 2, 0.04), (8.0, 8, 0.01)],
+            phases: None,
+        };
+        let plain = table("x", std::slice::from_ref(&run), "m", None);
+        assert!(!plain.contains("seconds to relMSE"), "{plain}");
+        let with = table("x", std::slice::from_ref(&run), "m", Some(0.02));
+        let lines: Vec<&str> = with.lines().collect();
+        assert!(lines[2].ends_with("| seconds to relMSE 0.02 |") && lines[3].ends_with("|---|"), "{with}");
+        assert!(lines[4].ends_with("| 4.00 |"), "{with}");
+        let never = table("x", &[run], "m", Some(0.001));
+        assert!(never.lines().nth(4).unwrap().ends_with("| > 8.0 |"), "{never}");
+    }
 }

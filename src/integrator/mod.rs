@@ -10,6 +10,7 @@ pub mod lvc;
 pub mod manifold;
 pub mod memlt;
 pub mod metropolis;
+pub mod noise;
 pub mod path;
 pub mod pcbpt;
 pub mod pool_base;
@@ -73,8 +74,50 @@ pub fn render_iterations(
         }
     }
     let kind = opts.integrator();
+    check_noise_options(&opts.run, kind, iterations.is_some())?;
     if kind.is_bidirectional() {
         bidir::bdpt::check_lights(scene, kind.name()).map_err(Error::Usage)?;
     }
-    opts.method.render(scene, &opts.run, iterations)
+    let mut out = opts.method.render(scene, &opts.run, iterations)?;
+    // The first-hit AOVs, from a pass of their own whatever the integrator.
+    out.aovs = crate::aov::first_hits(scene, &opts.run.aovs, opts.run.seed, opts.run.threads)?;
+    if let Some(v) = &out.variance
+        && opts.run.aovs.contains(&crate::aov::Aov::Variance)
+    {
+        out.aovs.extend(crate::aov::variance_channels(v));
+    }
+    Ok(out)
+}
+
+/// Refuses what the render loop's half-images cannot give: the variance AOV and the noise
+/// threshold of a Markov-chain integrator, of a chunk, or of a single sample per pixel; an
+/// AOV of a chunk (partial renders keep the film's sums alone); a threshold that is not a
+/// positive number.
+fn check_noise_options(run: &RunOptions, kind: IntegratorKind, chunk: bool) -> Result<(), crate::error::Error> {
+    use crate::error::Error;
+    if let Some(t) = run.noise_threshold
+        && !(t > 0.0 && t.is_finite())
+    {
+        return Err(Error::Usage(format!("--noise-threshold must be a positive relMSE, got {t}")));
+    }
+    if chunk && !run.aovs.is_empty() {
+        return Err(Error::Usage("--aov is not kept in partial renders (--chunk, --iterations)".into()));
+    }
+    if !run.halves() {
+        return Ok(());
+    }
+    let what = if run.noise_threshold.is_some() { "--noise-threshold" } else { "--aov variance" };
+    if chunk {
+        return Err(Error::Usage(format!("{what} needs the whole render, not a chunk of its iterations")));
+    }
+    if !kind.is_iterative() {
+        return Err(Error::Usage(format!(
+            "{what} needs an integrator that renders iterations of one sample per pixel; {}'s Markov chains do not",
+            kind.name()
+        )));
+    }
+    if run.budget == Budget::Spp(1) {
+        return Err(Error::Usage(format!("{what} needs at least 2 samples per pixel (two half-images)")));
+    }
+    Ok(())
 }

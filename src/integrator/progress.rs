@@ -1,7 +1,7 @@
 //! How a render shows its progress: a bar on a terminal, and on anything else (a Slurm log,
 //! a pipe) a line every `log_interval` seconds with the time elapsed, the samples per pixel
-//! done (of how many), the samples per second and the time left, instead of a bar's control
-//! codes.
+//! done (of how many), the samples per second, the time left and, with a noise threshold,
+//! the render's relMSE estimate, instead of a bar's control codes.
 
 use crate::integrator::run::{Budget, RunOptions};
 use std::io::IsTerminal;
@@ -52,8 +52,9 @@ impl Progress {
         }
     }
 
-    /// A pass is done: `done` samples per pixel in all, `samples` samples since `start`.
-    pub fn pass_done(&self, done: u32, samples: u64, start: Instant) {
+    /// A pass is done: `done` samples per pixel in all, `samples` samples since `start`, and
+    /// the relMSE estimate when the render takes one.
+    pub fn pass_done(&self, done: u32, samples: u64, noise: Option<f64>, start: Instant) {
         let secs = start.elapsed().as_secs_f64().max(1e-9);
         let rate = samples as f64 / secs / 1e6;
         match self {
@@ -63,7 +64,7 @@ impl Progress {
                     Budget::Spp(_) => bar.set_position(done as u64 * tiles),
                     Budget::Time(t) => bar.set_position(time_position(start, *t)),
                 }
-                bar.set_message(format!("{done} spp, {rate:.2} M samples/s"));
+                bar.set_message(format!("{done} spp, {rate:.2} M samples/s{}", noise_part(noise)));
             }
             Progress::Log { every, last, budget, w, h, spp } => {
                 let mut last = last.lock().unwrap_or_else(|e| e.into_inner());
@@ -71,7 +72,7 @@ impl Progress {
                     return;
                 }
                 *last = Instant::now();
-                eprintln!("{}", log_line(*budget, (*w, *h), *spp, done, rate, secs));
+                eprintln!("{}{}", log_line(*budget, (*w, *h), *spp, done, rate, secs), noise_part(noise));
             }
         }
     }
@@ -99,6 +100,11 @@ fn log_line(budget: Budget, (w, h): (u32, u32), spp: u32, done: u32, rate: f64, 
     format!("[{secs:.0} s] {w}×{h}: {of}, {rate:.2} M samples/s{left}")
 }
 
+/// The relMSE estimate's part of a progress line (nothing without one).
+fn noise_part(noise: Option<f64>) -> String {
+    noise.map(|e| format!(", relMSE estimate {e:.3e}")).unwrap_or_default()
+}
+
 /// The position of a time budget's progress bar: thousandths of `budget` seconds elapsed.
 fn time_position(start: Instant, budget: f64) -> u64 {
     (start.elapsed().as_secs_f64() / budget * 1000.0).min(1000.0) as u64
@@ -116,5 +122,7 @@ mod tests {
         assert_eq!(t, "[20 s] 8×8: 5 spp in 20 of 60 s, 0.50 M samples/s, about 40 s left");
         let none = log_line(Budget::Spp(4), (8, 8), 4, 0, 0.0, 0.5);
         assert_eq!(none, "[0 s] 8×8: 0 of 4 spp (0%), 0.00 M samples/s");
+        assert_eq!(noise_part(Some(0.0123)), ", relMSE estimate 1.230e-2");
+        assert_eq!(noise_part(None), "");
     }
 }

@@ -66,6 +66,14 @@ macro_rules! integrators {
                     $(IntegratorKind::$variant => <$options as Integrator>::BIDIRECTIONAL,)*
                 }
             }
+
+            /// Whether the integrator renders iterations in the render loop (every one but
+            /// the Markov chains).
+            pub fn is_iterative(self) -> bool {
+                match self {
+                    $(IntegratorKind::$variant => <$options as Integrator>::ITERATIVE,)*
+                }
+            }
         }
 
         /// An integrator and its options (serialized as the options alone).

@@ -20,11 +20,18 @@
 //! stop flag (set by Ctrl-C) ends the render after the pass in flight. Checkpoint snapshots
 //! and a live preview ([`crate::integrator::run::Preview`]) develop the film between passes.
 //!
+//! For the variance AOV and the noise threshold the loop keeps two half-images
+//! ([`crate::integrator::noise`]): passes are then of one iteration each (as with a time
+//! budget; the film's exact sums make the image the same), and the odd ones also go into a
+//! film of their own. With a noise threshold the render's relMSE estimate is taken after
+//! every pass from the second on, and the render stops when it falls below the threshold.
+//!
 //! Light-tracing contributions (`t = 1`) are splatted: each tile (and each part of a light
 //! pool) collects its splats in a list, and the lists are added to the film in order.
 
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
+use crate::integrator::noise::Halves;
 use crate::integrator::progress::Progress;
 use crate::integrator::run::{Budget, RenderOutput, RunOptions, offer_preview, take_snapshots};
 use crate::integrator::stats::{Counters, Details, PhaseRays, PhaseTimes, RenderStats};
@@ -268,18 +275,30 @@ pub(crate) fn add_results<D>(film: &mut Film, splats: &[Splat], light_paths: u64
     }
 }
 
-/// A finished camera pass not yet in the film: the preparation's splats and the tiles.
+/// A finished camera pass not yet in the film: the preparation's splats and the tiles, and
+/// the iterations they hold.
 struct PendingPass<D> {
     splats: Vec<Splat>,
     light_paths: u64,
     results: Vec<TileResult<D>>,
+    iterations: Range<u32>,
 }
 
-/// Adds a finished pass to the film; returns the seconds it took.
-fn add_pass<D>(film: &mut Film, pass: Option<PendingPass<D>>) -> f64 {
+/// Adds a finished pass to the film, and to the odd half when it is an odd iteration's (a
+/// render keeping halves has passes of one iteration); returns the seconds it took.
+fn add_pass<D>(film: &mut Film, halves: Option<&mut Halves>, pass: Option<PendingPass<D>>) -> f64 {
     let Some(pass) = pass else { return 0.0 };
     let t = Instant::now();
     add_results(film, &pass.splats, pass.light_paths, &pass.results);
+    if let Some(h) = halves {
+        let n = pass.iterations.len() as u32;
+        h.iterations += n;
+        if pass.iterations.start % 2 == 1 {
+            debug_assert_eq!(n, 1, "halves are kept by passes of one iteration");
+            add_results(&mut h.odd, &pass.splats, pass.light_paths, &pass.results);
+            h.odd_iterations += n;
+        }
+    }
     t.elapsed().as_secs_f64()
 }
 
@@ -319,8 +338,10 @@ pub(crate) fn run<M: Iterative>(
     };
     let tile_list = tiles(w, h, opts.tile_size.max(1));
     let mut film = Film::with_layers(w, h, scene.film.filter, if layers { STRATEGY_LAYERS } else { 0 });
+    let mut halves = opts.halves().then(|| Halves::new(&film));
     let (range, per) = match opts.budget {
-        Budget::Spp(spp) => (iterations.unwrap_or(0..spp), pass_size(spp, w, h)),
+        Budget::Spp(spp) if halves.is_none() => (iterations.unwrap_or(0..spp), pass_size(spp, w, h)),
+        Budget::Spp(spp) => (iterations.unwrap_or(0..spp), 1),
         Budget::Time(_) => (0..u32::MAX, 1),
     };
     let ctx = Ctx { scene, seed: opts.seed, layers, planned_spp, start: range.start };
@@ -332,6 +353,8 @@ pub(crate) fn run<M: Iterative>(
     let mut passes = 0u32;
     let mut interrupted = false;
     let mut snapshots = Vec::new();
+    let mut noise = None;
+    let mut below_threshold = false;
     let stopped = || opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
     let result = pool.install(|| -> Result<(), Error> {
         method.begin(&ctx)?;
@@ -368,7 +391,7 @@ pub(crate) fn run<M: Iterative>(
             // then joins the tiles). A pass interrupted part-way is discarded whole, so every
             // pixel keeps the same number of samples.
             let (merge_seconds, results) = rayon::join(
-                || add_pass(&mut film, pending.take()),
+                || add_pass(&mut film, halves.as_mut(), pending.take()),
                 || -> Option<Vec<TileResult<M::TileData>>> {
                     tile_list
                         .par_iter()
@@ -403,37 +426,58 @@ pub(crate) fn run<M: Iterative>(
                 splats: prepared.splats,
                 light_paths: prepared.splat_paths.unwrap_or(prepared.counters.light_paths),
                 results,
+                iterations: first..end,
             });
             first = end;
             passes += 1;
             let done = first - range.start;
             take_snapshots(&opts.checkpoints, &mut snapshots, start.elapsed().as_secs_f64(), done, || {
-                work.phases.merge += add_pass(&mut film, pending.take());
+                work.phases.merge += add_pass(&mut film, halves.as_mut(), pending.take());
                 film.develop()
             });
+            if let (Some(threshold), Some(halves)) = (opts.noise_threshold, halves.as_mut())
+                && done >= 2
+            {
+                work.phases.merge += add_pass(&mut film, Some(&mut *halves), pending.take());
+                let (_, estimate) = halves.estimate(&film);
+                noise = Some(estimate);
+                below_threshold = estimate < threshold;
+            }
             offer_preview(opts, w, h, done, || {
-                work.phases.merge += add_pass(&mut film, pending.take());
+                work.phases.merge += add_pass(&mut film, halves.as_mut(), pending.take());
                 film.develop()
             });
-            progress.pass_done(done, counters.samples, start);
+            progress.pass_done(done, counters.samples, noise, start);
+            if below_threshold {
+                break;
+            }
             if stopped() {
                 interrupted = true;
                 break;
             }
+            // Halves need an iteration each.
             if let Budget::Time(t) = opts.budget
                 && start.elapsed() >= Duration::from_secs_f64(t)
+                && (halves.is_none() || done >= 2)
             {
                 break;
             }
         }
-        work.phases.merge += add_pass(&mut film, pending.take());
+        work.phases.merge += add_pass(&mut film, halves.as_mut(), pending.take());
         Ok(())
     });
     progress.finish();
     result?;
     let seconds = start.elapsed().as_secs_f64();
     let spp = first - range.start;
+    let variance = halves.map(|h| {
+        let (variance, estimate) = h.estimate(&film);
+        noise = Some(estimate);
+        variance
+    });
     let stats = RenderStats {
+        relmse_estimate: noise,
+        noise_threshold_reached: opts.noise_threshold.map(|_| below_threshold),
         passes,
         phases: work.phases,
         shadow_rays: work.shadow,
@@ -443,7 +487,17 @@ pub(crate) fn run<M: Iterative>(
     };
     let strategy_images =
         (0..film.layers()).map(|k| (strategy_layer_name(k), film.develop_layer(k))).collect::<Vec<_>>();
-    Ok(RenderOutput { image: film.develop(), strategy_images, snapshots, width: w, height: h, stats, film: Some(film) })
+    Ok(RenderOutput {
+        image: film.develop(),
+        strategy_images,
+        snapshots,
+        width: w,
+        height: h,
+        stats,
+        film: Some(film),
+        variance,
+        aovs: Vec::new(),
+    })
 }
 
 #[cfg(test)]

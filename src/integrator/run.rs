@@ -1,8 +1,10 @@
 //! What every integrator is given and gives back, below the registry that names them: the
 //! [`Integrator`] interface (an options type that renders), the run's settings that are no
 //! integrator's own ([`RunOptions`]: budget, seed, threads, tiles, progress, stop flag,
-//! per-strategy images, checkpoints, a live preview) and the finished render ([`RenderOutput`]).
+//! per-strategy images, checkpoints, a live preview, AOVs, the noise threshold) and the
+//! finished render ([`RenderOutput`]).
 
+use crate::aov::Aov;
 use crate::error::Error;
 use crate::film::Film;
 use crate::integrator::stats::RenderStats;
@@ -43,6 +45,11 @@ pub struct RunOptions {
     pub checkpoints: Vec<f64>,
     /// A viewer shown the image as it renders (`--display-server`).
     pub preview: Option<Arc<dyn Preview>>,
+    /// The AOVs to give beside the image ([`crate::aov`]).
+    pub aovs: Vec<Aov>,
+    /// Stop once the render's own relMSE estimate ([`crate::integrator::noise`]) falls
+    /// below this (or at the budget, whichever comes first).
+    pub noise_threshold: Option<f64>,
 }
 
 impl RunOptions {
@@ -60,7 +67,15 @@ impl RunOptions {
             strategy_images: false,
             checkpoints: Vec::new(),
             preview: None,
+            aovs: Vec::new(),
+            noise_threshold: None,
         }
+    }
+
+    /// Whether the render loop keeps two half-images (for the variance AOV or the noise
+    /// threshold).
+    pub fn halves(&self) -> bool {
+        self.aovs.contains(&Aov::Variance) || self.noise_threshold.is_some()
     }
 }
 
@@ -81,6 +96,11 @@ pub trait Integrator:
     /// Whether the integrator renders participating media and null surfaces (scenes with
     /// them are refused otherwise).
     const MEDIA: bool = false;
+
+    /// Whether the integrator renders iterations of one sample per pixel in the render loop
+    /// (which can keep half-images for the variance AOV and the noise threshold); the
+    /// Markov chains do not.
+    const ITERATIVE: bool = true;
 
     /// Renders iterations `iterations` (all of them when `None`) of the run `run` describes
     /// with this integrator and these options. The statistics' `integrator` and `options`
@@ -150,4 +170,8 @@ pub struct RenderOutput {
     pub stats: RenderStats,
     /// The film's sums (what a chunk of a distributed render keeps).
     pub film: Option<Film>,
+    /// The per-pixel variance of `image` when the render kept half-images.
+    pub variance: Option<Vec<Rgb>>,
+    /// The AOV channels asked for, `(EXR channel name, one value per pixel)`.
+    pub aovs: crate::image_io::Channels,
 }

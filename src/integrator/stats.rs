@@ -141,6 +141,15 @@ pub struct RenderStats {
     /// chains), when known.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub iterations: Option<Range<u32>>,
+    /// The render's own estimate of its relMSE against the true image, from two half-images
+    /// ([`crate::integrator::noise`]), when it kept them (the variance AOV, the noise
+    /// threshold).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub relmse_estimate: Option<f64>,
+    /// With a noise threshold: whether the estimate fell below it (or the budget ran out
+    /// first).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_threshold_reached: Option<bool>,
 }
 
 impl RenderStats {
@@ -174,6 +183,8 @@ impl RenderStats {
             invalid_samples,
             interrupted,
             iterations: None,
+            relmse_estimate: None,
+            noise_threshold_reached: None,
         }
     }
 }

@@ -877,6 +877,7 @@ fn finish(
 
 impl Integrator for MemltOptions {
     const BIDIRECTIONAL: bool = false;
+    const ITERATIVE: bool = false;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)

@@ -123,5 +123,7 @@ fn pass(opts: &RunOptions, key: Keys, spp: u32, stream: u64) -> RunOptions {
     // The preview shows the whole render's image (the chains' rounds), not a pass's part.
     o.preview = None;
     o.progress = false;
+    o.aovs.clear();
+    o.noise_threshold = None;
     o
 }

@@ -134,7 +134,7 @@ pub(crate) fn run_chains<C: Send>(
             })
         });
         done += n * count;
-        progress.pass_done((done / pixels) as u32, done - span.done, start);
+        progress.pass_done((done / pixels) as u32, done - span.done, None, start);
         if !opts.checkpoints.is_empty() {
             let elapsed = start.elapsed().as_secs_f64();
             take_snapshots(&opts.checkpoints, snapshots, elapsed, (done / pixels) as u32, || {
@@ -196,7 +196,17 @@ pub(crate) fn chains_output(
         ..RenderStats::new(scene, threads, counters, seconds, spp, film.invalid_samples, interrupted)
     };
     let (width, height) = (scene.film.width, scene.film.height);
-    RenderOutput { image, strategy_images: Vec::new(), snapshots, width, height, stats, film: Some(film) }
+    RenderOutput {
+        image,
+        strategy_images: Vec::new(),
+        snapshots,
+        width,
+        height,
+        stats,
+        film: Some(film),
+        variance: None,
+        aovs: Vec::new(),
+    }
 }
 
 /// Two-stage Metropolis' line of a render's summary (none without a first stage).

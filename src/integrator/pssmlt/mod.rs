@@ -408,6 +408,7 @@ pub fn render(
 impl Integrator for PssmltOptions {
     const BIDIRECTIONAL: bool = false;
     const MEDIA: bool = true;
+    const ITERATIVE: bool = false;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)
