@@ -748,8 +748,24 @@ fn progress_in_a_log_is_lines_not_a_bar() {
     assert_eq!(lines(&run(&["--log-interval", "3600"])), 0);
     assert_eq!(run(&["--log-interval", "0", "--quiet"]), "");
     // The Markov chains' rounds too (mutations per pixel).
+    let cornell = root().join("scenes/cornell-ply/cornell_mi.xml");
     for chains in ["pssmlt", "memlt"] {
-        let log = run(&["--log-interval", "0", "--integrator", chains]);
+        let out = pcbpt(&[
+            "render",
+            cornell.to_str().unwrap(),
+            "-o",
+            out_path.to_str().unwrap(),
+            "--spp",
+            "16",
+            "--resolution",
+            "8x8",
+            "--log-interval",
+            "0",
+            "--integrator",
+            chains,
+        ]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let log = String::from_utf8_lossy(&out.stderr);
         assert!(log.contains("8×8: 16 of 16 spp (100%)"), "{chains}: {log}");
         assert!(!log.contains('\r') && !log.contains('\u{1b}'), "{chains}: control codes in a log: {log:?}");
     }

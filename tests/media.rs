@@ -169,7 +169,7 @@ fn a_scattering_furnace_keeps_the_environments_radiance() {
     assert!(absorbing < 0.95, "{absorbing}");
 }
 
-/// Integrators without media refuse a scene with them, naming the path tracer.
+/// An integrator without media (MEMLT) refuses a scene with them, naming the path tracer.
 #[test]
 fn integrators_without_media_refuse_them() {
     let dir = tempfile::tempdir().unwrap();
@@ -180,16 +180,19 @@ fn integrators_without_media_refuse_them() {
         sensor(30.0, 4, "0, 0, 4", "")
     );
     let scene = load(&write(&dir, "fog.xml", &xml), &[], Backend::Embree);
-    for kind in [IntegratorKind::Bdpt, IntegratorKind::Pcbpt, IntegratorKind::Memlt, IntegratorKind::Pssmlt] {
+    for kind in [IntegratorKind::Memlt] {
         let e = integrator::render(&scene, &RenderOptions::new(kind, Budget::Spp(1))).err().expect("refused");
         assert!(e.to_string().contains("--integrator path"), "{}: {e}", kind.name());
     }
 }
 
-/// A spot light inside a ball of fog (a null sphere), seen from outside: light subpaths must
-/// start in the fog (the medium found at the light's position), or light tracing and BDPT
-/// would see the ball's inside unlit by their own strategies. Every integrator agrees with
-/// the path tracer; the control, the same fog around nothing, differs from it.
+/// A small sphere light inside a ball of fog (a null sphere), seen from outside: light
+/// subpaths must start in the fog (the medium found at the light's position, which no
+/// boundary of its own names), or light tracing and BDPT would carry its light unattenuated
+/// to the ball's edge. The integrators agree with the path tracer (whose two 4096-spp renders
+/// differ by about 1%: the tolerance is 2.5%); the control, the ball without fog, differs.
+/// (A point light in fog gives next-event estimation from nearby medium points an unbounded
+/// variance, 1/d², which no test of means at these sample counts survives.)
 #[test]
 fn a_light_inside_a_medium_starts_its_paths_there() {
     let dir = tempfile::tempdir().unwrap();
@@ -201,19 +204,19 @@ fn a_light_inside_a_medium_starts_its_paths_there() {
                 <float name="sigma_t" value="{inside}"/><float name="albedo" value="0.9"/></medium></shape>
             <shape type="rectangle"><transform name="to_world"><scale value="4"/><translate z="-2"/></transform>
                 <bsdf type="diffuse"/></shape>
-            <emitter type="spot"><transform name="to_world"><lookat origin="0, 0.2, 0" target="0, 0.2, -1" up="0, 1, 0"/></transform>
-                <rgb name="intensity" value="20"/><float name="cutoff_angle" value="40"/></emitter>
+            <shape type="sphere"><point name="center" x="0" y="0.2" z="-0.3"/><float name="radius" value="0.15"/>
+                <emitter type="area"><rgb name="radiance" value="30"/></emitter></shape>
             </scene>"#,
             sensor(40.0, 16, "0, 0, 4", "")
         )
     };
     let scene = load(&write(&dir, "ball.xml", &ball("1.5")), &[], Backend::Embree);
     let mean = |kind, spp, seed| image(render(&scene, kind, spp, seed, 2)).mean();
-    let reference = (mean(IntegratorKind::Path, 2048, 1) + mean(IntegratorKind::Path, 2048, 2)) / 2.0;
+    let reference = (mean(IntegratorKind::Path, 4096, 1) + mean(IntegratorKind::Path, 4096, 2)) / 2.0;
     for (kind, spp) in [(IntegratorKind::Lighttrace, 512), (IntegratorKind::Bdpt, 256), (IntegratorKind::Pcbpt, 256)] {
         let m = (mean(kind, spp, 3) + mean(kind, spp, 4)) / 2.0;
         eprintln!("{}: {m:.5} against the path tracer's {reference:.5}", kind.name());
-        assert!((m / reference - 1.0).abs() < 0.02, "{}: {m} against {reference}", kind.name());
+        assert!((m / reference - 1.0).abs() < 0.025, "{}: {m} against {reference}", kind.name());
     }
     let clear = load(&write(&dir, "clear.xml", &ball("0")), &[], Backend::Embree);
     let m = image(render(&clear, IntegratorKind::Bdpt, 256, 3, 2)).mean();

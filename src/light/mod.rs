@@ -33,12 +33,6 @@ impl Bounds {
     pub fn beyond(&self, p: Vec3, d: Vec3) -> Vec3 {
         p + d * (2.0 * (self.radius + (p - self.center).length()) + 1.0)
     }
-
-    /// Whether `p` lies within the sphere.
-    #[inline]
-    pub fn contains(&self, p: Vec3) -> bool {
-        (p - self.center).length_squared() <= self.radius * self.radius
-    }
 }
 
 /// A lat-long environment map (Mitsuba 3's `envmap`), importance-sampled by luminance.

@@ -184,7 +184,14 @@ impl Scene {
     /// `ray.at(ray.tmax)`) starting in `medium`: zero when a surface blocks it; null
     /// surfaces (medium boundaries) are crossed, each medium's transmittance applied on its
     /// stretch. Without media, a plain occlusion query.
-    pub fn transmittance(&self, ray: &Ray, mut medium: Option<u32>) -> Rgb {
+    pub fn transmittance(&self, ray: &Ray, medium: Option<u32>) -> Rgb {
+        self.transmittance_to(ray, medium, false)
+    }
+
+    /// [`Scene::transmittance`] towards a light at infinity (`infinite`), whose point
+    /// `ray.at(ray.tmax)` stands for a direction: past the last surface a medium that
+    /// nothing bounds goes on for ever, so light from infinity crosses all of it.
+    pub fn transmittance_to(&self, ray: &Ray, mut medium: Option<u32>, infinite: bool) -> Rgb {
         if !self.volumetric {
             return if self.occluded(ray) { Rgb::ZERO } else { Rgb::ONE };
         }
@@ -194,12 +201,10 @@ impl Scene {
         for _ in 0..MAX_NULL_CROSSINGS {
             let hit = self.intersect(&ray);
             if let Some(m) = medium {
-                // Past the last surface, a medium that nothing bounds goes on for ever: what
-                // comes from beyond the scene (a light at infinity) crosses all of it.
                 let d = match &hit {
                     Some(si) => si.t * ray.d.length(),
-                    None if self.bounds.contains(end) => ray.tmax * ray.d.length(),
-                    None => f32::INFINITY,
+                    None if infinite => f32::INFINITY,
+                    None => ray.tmax * ray.d.length(),
                 };
                 tr *= self.media[m as usize].transmittance(d);
             }

@@ -850,8 +850,13 @@ pub fn light_subpath<R: Random>(
         (y0, Ray::new(o, es.d), le / (origin * es.pdf_dir))
     };
     let mut y0 = y0;
+    let mut beta = beta;
     if scene.volumetric {
         y0.medium = light_medium(scene, l, &y0, ray.d);
+        // Light from infinity crosses all of a medium that nothing bounds.
+        if let (true, Some(m)) = (y0.infinite, y0.medium) {
+            beta *= scene.media[m as usize].transmittance(f32::INFINITY);
+        }
     }
     path.push(y0);
     if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
@@ -922,7 +927,7 @@ pub fn transmittance(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Count
     let e = if b.ng == Vec3::ZERO { b.p } else { offset_origin(b.p, b.ng, -d) };
     let segment = Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON);
     if scene.volumetric {
-        scene.transmittance(&segment, a.medium_towards(scene, d))
+        scene.transmittance_to(&segment, a.medium_towards(scene, d), b.infinite)
     } else {
         scene.transmittance(&segment, None)
     }

@@ -119,7 +119,8 @@ impl PathTracer {
                     let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
                     if f != Rgb::ZERO && agree(ls.wi, wi.z) {
                         counters.shadow_rays += 1;
-                        let tr = scene.transmittance(&si.spawn_ray_to(ls.p), scene.medium_after(&si, ls.wi, s.medium));
+                        let medium = scene.medium_after(&si, ls.wi, s.medium);
+                        let tr = scene.transmittance_to(&si.spawn_ray_to(ls.p), medium, light.is_infinite());
                         if tr != Rgb::ZERO {
                             let pdf_light = pmf * ls.pdf;
                             let w = if ls.delta {
@@ -182,7 +183,8 @@ impl PathTracer {
             if let Some(ls) = light.sample_li(&scene.shapes, &scene.bounds, p, u_light1, u_light2) {
                 let f = medium.phase.eval(wo, ls.wi);
                 counters.shadow_rays += 1;
-                let tr = scene.transmittance(&Ray::segment(p, ls.p - p, 1.0 - SHADOW_EPSILON), s.medium);
+                let segment = Ray::segment(p, ls.p - p, 1.0 - SHADOW_EPSILON);
+                let tr = scene.transmittance_to(&segment, s.medium, light.is_infinite());
                 if f > 0.0 && tr != Rgb::ZERO {
                     let pdf_light = pmf * ls.pdf;
                     let w = if ls.delta { 1.0 } else { power_heuristic(pdf_light, f) };
