@@ -331,19 +331,22 @@ impl<'d> Builder<'d> {
         Ok(self.base.join(f))
     }
 
+    /// The file a shape's `filename` names and its size, or an error naming the line and
+    /// saying that the `what` file does not exist.
+    fn existing_file(&self, node: &Node, what: &str) -> Result<(PathBuf, u64)> {
+        let path = self.resolve_path(node, "filename")?;
+        match std::fs::metadata(&path) {
+            Ok(m) if m.is_file() => Ok((path, m.len())),
+            _ => {
+                Err(Error::input(&node.prop_loc("filename"), format!("{what} file {} does not exist", path.display())))
+            }
+        }
+    }
+
     /// Reads the mesh file a shape names (a PLY file streamed, with a progress bar; shape
     /// `shape_index` of a `.serialized` file).
     fn load_mesh(&mut self, node: &Node) -> Result<TriangleMesh> {
-        let path = self.resolve_path(node, "filename")?;
-        let size = match std::fs::metadata(&path) {
-            Ok(m) if m.is_file() => m.len(),
-            _ => {
-                return Err(Error::input(
-                    &node.prop_loc("filename"),
-                    format!("mesh file {} does not exist", path.display()),
-                ));
-            }
-        };
+        let (path, size) = self.existing_file(node, "mesh")?;
         let start = Instant::now();
         let bar = self.progress.file(&path, size);
         let loaded = if node.plugin == "obj" {
@@ -377,16 +380,7 @@ impl<'d> Builder<'d> {
     /// Reads the `.mitshair` file a `hair` shape names and prepares its strands in world
     /// space (Mitsuba 0.6's `radius`, `angle_threshold`, `reduction`).
     fn load_hair(&mut self, node: &Node, to_world: &Transform) -> Result<Hair> {
-        let path = self.resolve_path(node, "filename")?;
-        let size = match std::fs::metadata(&path) {
-            Ok(m) if m.is_file() => m.len(),
-            _ => {
-                return Err(Error::input(
-                    &node.prop_loc("filename"),
-                    format!("hair file {} does not exist", path.display()),
-                ));
-            }
-        };
+        let (path, size) = self.existing_file(node, "hair")?;
         let defaults = HairParams::default();
         let params = HairParams {
             radius: node.float_or("radius", defaults.radius)?,

@@ -106,33 +106,11 @@ impl PathTracer {
                 break;
             }
 
-            // Next-event estimation.
-            let u_light = sampler.next_1d();
-            let u_light1 = sampler.next_1d();
-            let u_light2 = sampler.next_2d();
-            if !bsdf.is_delta()
-                && let Some((light_index, pmf, _)) = scene.light_sampler.sample(u_light)
-            {
-                let light = &scene.lights[light_index];
-                if let Some(ls) = light.sample_li(&scene.shapes, &scene.bounds, si.p, u_light1, u_light2) {
-                    let wi = si.shading.to_local(ls.wi);
-                    let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
-                    if f != Rgb::ZERO && agree(ls.wi, wi.z) {
-                        counters.shadow_rays += 1;
-                        let medium = scene.medium_after(&si, ls.wi, s.medium);
-                        let tr = scene.transmittance_to(&si.spawn_ray_to(ls.p), medium, light.is_infinite());
-                        if tr != Rgb::ZERO {
-                            let pdf_light = pmf * ls.pdf;
-                            let w = if ls.delta {
-                                1.0
-                            } else {
-                                power_heuristic(pdf_light, bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance))
-                            };
-                            s.l += s.beta * f * tr * ls.li * (w / pdf_light);
-                        }
-                    }
-                }
-            }
+            // Next-event estimation, through the media and null surfaces on the way.
+            let medium = s.medium;
+            s.l += self.surface_nee(scene, &si, bsdf, wo, s.beta, sampler, counters, |ray, infinite| {
+                scene.transmittance_to(ray, scene.medium_after(&si, ray.d, medium), infinite)
+            });
 
             // Continue the path by sampling the BSDF.
             let u_lobe = sampler.next_1d();

@@ -7,6 +7,7 @@
 mod media;
 
 use crate::accel::Ray;
+use crate::bsdf::Bsdf;
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_with};
@@ -16,6 +17,7 @@ use crate::integrator::stats::Counters;
 use crate::math::{Rgb, max_component};
 use crate::sampling::sobol::SobolSampler;
 use crate::sampling::{PixelSampler, Random, Sampler, SamplerKind, power_heuristic};
+use crate::scene::shape::SurfaceInteraction;
 use crate::scene::{IntegratorSpec, Scene};
 use glam::Vec3;
 use std::ops::Range;
@@ -134,30 +136,9 @@ impl PathTracer {
             }
 
             // Next-event estimation.
-            let u_light = sampler.next_1d();
-            let u_light1 = sampler.next_1d();
-            let u_light2 = sampler.next_2d();
-            if !bsdf.is_delta()
-                && let Some((light_index, pmf, _)) = scene.light_sampler.sample(u_light)
-            {
-                let light = &scene.lights[light_index];
-                if let Some(ls) = light.sample_li(&scene.shapes, &scene.bounds, si.p, u_light1, u_light2) {
-                    let wi = si.shading.to_local(ls.wi);
-                    let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
-                    if f != Rgb::ZERO && agree(ls.wi, wi.z) {
-                        counters.shadow_rays += 1;
-                        if !scene.occluded(&si.spawn_ray_to(ls.p)) {
-                            let pdf_light = pmf * ls.pdf;
-                            let w = if ls.delta {
-                                1.0
-                            } else {
-                                power_heuristic(pdf_light, bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance))
-                            };
-                            l += beta * f * ls.li * (w / pdf_light);
-                        }
-                    }
-                }
-            }
+            l += self.surface_nee(scene, &si, bsdf, wo, beta, sampler, counters, |ray, _| {
+                if scene.occluded(ray) { Rgb::ZERO } else { Rgb::ONE }
+            });
 
             // Continue the path by sampling the BSDF.
             let u_lobe = sampler.next_1d();
@@ -187,6 +168,55 @@ impl PathTracer {
             ray = si.spawn_ray(wi_world);
         }
         l
+    }
+}
+
+impl PathTracer {
+    /// Next-event estimation from the surface point `si` (its BSDF `bsdf`, `wo` in its shading
+    /// frame) for a path of throughput `beta`: one light sample weighed by the power heuristic
+    /// against BSDF sampling (none from a Dirac BSDF). `transmittance` gives the fraction of
+    /// the light that reaches `si` along the shadow ray, for a light at infinity or not
+    /// (zero when something blocks it). Draws four numbers whether it samples or not.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn surface_nee<R: Random>(
+        &self,
+        scene: &Scene,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        beta: Rgb,
+        sampler: &mut R,
+        counters: &mut Counters,
+        transmittance: impl FnOnce(&Ray, bool) -> Rgb,
+    ) -> Rgb {
+        let u_light = sampler.next_1d();
+        let u_light1 = sampler.next_1d();
+        let u_light2 = sampler.next_2d();
+        if bsdf.is_delta() {
+            return Rgb::ZERO;
+        }
+        let Some((light_index, pmf, _)) = scene.light_sampler.sample(u_light) else { return Rgb::ZERO };
+        let light = &scene.lights[light_index];
+        let Some(ls) = light.sample_li(&scene.shapes, &scene.bounds, si.p, u_light1, u_light2) else {
+            return Rgb::ZERO;
+        };
+        let wi = si.shading.to_local(ls.wi);
+        let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
+        // With strict normals a direction counts only where the geometric and the shading
+        // normal put it on the same side.
+        if f == Rgb::ZERO || (self.strict_normals && !(ls.wi.dot(si.ng) * wi.z > 0.0)) {
+            return Rgb::ZERO;
+        }
+        counters.shadow_rays += 1;
+        let tr = transmittance(&si.spawn_ray_to(ls.p), light.is_infinite());
+        if tr == Rgb::ZERO {
+            return Rgb::ZERO;
+        }
+        let pdf_light = pmf * ls.pdf;
+        let w =
+            if ls.delta { 1.0 } else { power_heuristic(pdf_light, bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance)) };
+        beta * f * tr * ls.li * (w / pdf_light)
     }
 }
 
