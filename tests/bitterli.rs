@@ -1,9 +1,10 @@
 //! Benedikt Bitterli's scenes as he publishes them (Mitsuba 0.5 files, unchanged): every
 //! scene found loads and renders one sample per pixel with every integrator, or stops with
 //! the error that names what it lacks — a file that is not there, or a feature this
-//! renderer does not have ([`LACKS`]). A file integrator this renderer lacks (`volpath`,
-//! `sppm`) is refused with the hint to pick one, and the scene is then loaded with the path
-//! tracer picked.
+//! renderer does not have ([`LACKS`]); a scene with participating media renders with the
+//! integrators that have them, and MEMLT refuses it. A file integrator this renderer lacks
+//! (`sppm`) is refused with the hint to pick one, and the scene is then loaded with the path
+//! tracer picked (`volpath` is the path tracer).
 //!
 //! The scenes are read from `scenes/bitterli/` (the four small ones whose files are all
 //! there) and, when `PCBPT_BITTERLI` names a folder holding more of the 32 scene folders (as

@@ -109,11 +109,11 @@ def test_keyboard_interrupt_stops_a_render_and_is_raised():
 
 
 def test_an_unknown_integrator_in_the_file_needs_one_named():
-    with pytest.raises(pcbpt.SceneError, match="unknown integrator plugin \"volpath\""):
-        pcbpt.load(CORNELL, integrator="volpath", **{k: v for k, v in SMALL.items()})
+    with pytest.raises(pcbpt.SceneError, match="unknown integrator plugin \"sppm\""):
+        pcbpt.load(CORNELL, integrator="sppm", **{k: v for k, v in SMALL.items()})
     with pytest.warns(UserWarning, match="replaced"):
-        scene = pcbpt.load(CORNELL, integrator="volpath", override_integrator=True, **SMALL)
-    assert scene.integrator is None and scene.plugin == "volpath"
+        scene = pcbpt.load(CORNELL, integrator="sppm", override_integrator=True, **SMALL)
+    assert scene.integrator is None and scene.plugin == "sppm"
     with pytest.raises(ValueError, match="pick one with integrator="):
         pcbpt.render(scene)
     assert pcbpt.render(scene, "path", seed=2, threads=2).shape == (20, 24, 3)
