@@ -128,10 +128,12 @@ impl Verdict {
         );
         eprintln!("{msg}");
         // A mean over no pixel (NaN) passes nothing.
-        if !((m.mean_ratio - 1.0).abs() <= mean_tol) {
+        let mean_within = (m.mean_ratio - 1.0).abs() <= mean_tol;
+        if !mean_within {
             return Err(format!("image mean off by more than {:.2}%: {msg}", mean_tol * 100.0));
         }
-        if !(m.relmse <= self.expected * excess_tol) {
+        let explained = m.relmse <= self.expected * excess_tol;
+        if !explained {
             return Err(format!("relMSE exceeds {excess_tol}× what noise explains: {msg}"));
         }
         Ok(())

@@ -205,7 +205,8 @@ impl PathTracer {
         let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
         // With strict normals a direction counts only where the geometric and the shading
         // normal put it on the same side.
-        if f == Rgb::ZERO || (self.strict_normals && !(ls.wi.dot(si.ng) * wi.z > 0.0)) {
+        let sides_agree = ls.wi.dot(si.ng) * wi.z > 0.0;
+        if f == Rgb::ZERO || (self.strict_normals && !sides_agree) {
             return Rgb::ZERO;
         }
         counters.shadow_rays += 1;

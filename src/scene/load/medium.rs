@@ -2,10 +2,10 @@
 //! functions, declared at the top of a file (with an `id`) or nested in a shape (as its
 //! `interior` or `exterior`) or in the sensor.
 //!
-//! Coefficients are read as the file's version reads them: Mitsuba 3's `sigma_t` (default
-//! 1) and `albedo` (default 0.75); Mitsuba 0.5/0.6's `sigmaA` and `sigmaS`, or `sigmaT` and
-//! `albedo` (each pair given whole: Mitsuba 0.6 filled a missing one from its `Skin1`
-//! preset, which this renderer does not have); both take a `scale`.
+//! Coefficients are read as the file's version reads them: Mitsuba 3's `sigma_t` (by
+//! default one) and `albedo` (by default 0.75); Mitsuba 0.5/0.6's `sigmaA` and `sigmaS`, or
+//! `sigmaT` and `albedo`, each pair given whole (Mitsuba 0.6 filled a missing one from its
+//! `Skin1` preset, which this renderer does not have). Both versions take a `scale`.
 
 use super::Builder;
 use crate::error::{Error, Result};
