@@ -6,10 +6,8 @@
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
 use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_weight_with};
-use crate::integrator::bidir::{
-    Connection, Delivery, End, Sink, Vertex, VertexKind, WalkLimits, camera_subpath, light_origin_pdf, light_subpath,
-    transmittance,
-};
+use crate::integrator::bidir::walk::{WalkLimits, camera_subpath, light_subpath, transmittance};
+use crate::integrator::bidir::{Connection, Delivery, End, Sink, Vertex, VertexKind, light_origin_pdf};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile};
 use crate::integrator::run::RunOptions;
 use crate::integrator::run::{Integrator, Iterations, Rendered};

@@ -33,7 +33,8 @@
 
 use crate::accel::Ray;
 use crate::bsdf::{At, Bsdf, BsdfSample, TransportMode};
-use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf, light_origin_pdf, visible};
+use crate::integrator::bidir::walk::visible;
+use crate::integrator::bidir::{Vertex, VertexKind, disk_pdf, light_origin_pdf};
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, offset_origin};
 use crate::sampling::Random;

@@ -14,7 +14,8 @@
 use crate::film::Splat;
 use crate::integrator::bidir::bdpt::{Bdpt, Connector, Scratch};
 use crate::integrator::bidir::mis::{Counts, Heuristic};
-use crate::integrator::bidir::{Sink, Vertex, WalkLimits};
+use crate::integrator::bidir::walk::WalkLimits;
+use crate::integrator::bidir::{Sink, Vertex};
 use crate::integrator::metropolis::primary::PrimarySampler;
 use crate::integrator::metropolis::two_stage::{Grid, Importance};
 use crate::integrator::metropolis::{ChainOptions, MltBase};

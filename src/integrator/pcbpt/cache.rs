@@ -4,9 +4,10 @@
 
 use crate::bsdf::TransportMode;
 use crate::film::tiles;
+use crate::integrator::bidir::Vertex;
 use crate::integrator::bidir::mis::FullPath;
 use crate::integrator::bidir::pool::LightPool;
-use crate::integrator::bidir::{Vertex, WalkLimits, camera_subpath, visible};
+use crate::integrator::bidir::walk::{WalkLimits, camera_subpath, visible};
 use crate::integrator::pcbpt::{DistanceTerm, PcOptions, PcSampling};
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, luminance};

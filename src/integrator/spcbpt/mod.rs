@@ -776,7 +776,7 @@ pub(crate) fn test_model(
     subspaces: (usize, usize),
     w: impl Fn(f32) -> f32,
 ) -> (Model, LightPool) {
-    let limits = crate::integrator::bidir::WalkLimits::new(8, 3);
+    let limits = crate::integrator::bidir::walk::WalkLimits::new(8, 3);
     let (pool, _, _) = LightPool::trace::<Counts>(scene, &limits, m, 3, 0, None);
     let grid = PcOptions { stride, ..PcOptions::default() };
     let (records, _) = trace_records(scene, &limits, &grid, 3, 0);
@@ -815,7 +815,7 @@ impl Integrator for SpcbptOptions {
 mod tests {
     use super::*;
     use crate::integrator::bidir::pool::draw_one_by_one;
-    use crate::integrator::bidir::{WalkLimits, camera_subpath};
+    use crate::integrator::bidir::walk::{WalkLimits, camera_subpath};
     use crate::integrator::pcbpt::cache::tests::scene;
     use crate::integrator::stats::Counters;
     use crate::sampling::Sampler;

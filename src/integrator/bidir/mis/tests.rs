@@ -8,7 +8,7 @@ use crate::bsdf::{Bsdf, BsdfModel};
 use crate::integrator::Counters;
 use crate::integrator::bidir::mis::*;
 use crate::integrator::bidir::pool::LightPool;
-use crate::integrator::bidir::{WalkLimits, camera_subpath, light_subpath};
+use crate::integrator::bidir::walk::{WalkLimits, camera_subpath, light_subpath};
 use crate::integrator::budget::{Shares, mis_shares};
 use crate::integrator::lvc::LvcCounts;
 use crate::integrator::pcbpt::{Blend, Cache, DistanceTerm, PcCounts, PcMis, PcOptions, PoolOptions, trace_records};
@@ -596,7 +596,7 @@ fn sampled_weights(perturb: f32) -> (f64, f64, usize, usize) {
                     else {
                         continue;
                     };
-                    if !crate::integrator::bidir::visible(&scene, qs, pt, &mut counters) {
+                    if !crate::integrator::bidir::walk::visible(&scene, qs, pt, &mut counters) {
                         continue;
                     }
                     qs.beta * conn.light_end.f * conn.camera_end.f * pt.beta / conn.dist2

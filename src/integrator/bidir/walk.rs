@@ -1,0 +1,386 @@
+//! The random walks of the bidirectional core: camera and light subpaths built vertex by
+//! vertex (BSDF and phase-function sampling, free flights through media, null surfaces
+//! crossed, Russian roulette), each vertex with its forward density and its predecessor's
+//! reverse one, and the shadow rays of connections (their transmittance through media).
+
+use crate::accel::Ray;
+use crate::bsdf::TransportMode;
+use crate::integrator::bidir::{MAX_VERTICES, Vertex, disk_pdf, shading_correction};
+use crate::integrator::stats::Counters;
+use crate::math::{Rgb, max_component, offset_origin};
+use crate::sampling::Random;
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+
+/// How long walks may be and when Russian roulette starts.
+#[derive(Clone, Copy, Debug)]
+pub struct WalkLimits {
+    /// Most vertices of a camera subpath (camera included).
+    pub camera_vertices: usize,
+    /// Most vertices of a light subpath (emitter included).
+    pub light_vertices: usize,
+    /// Bounces after which Russian roulette may end a walk.
+    pub rr_depth: u32,
+}
+
+impl WalkLimits {
+    /// Mitsuba's `max_depth` counts segments from the camera (`u32::MAX` = unlimited): a
+    /// camera subpath has at most `max_depth + 1` vertices, a light subpath `max_depth`.
+    pub fn new(max_depth: u32, rr_depth: u32) -> WalkLimits {
+        let m = (max_depth as usize).min(MAX_VERTICES);
+        WalkLimits { camera_vertices: (m + 1).min(MAX_VERTICES), light_vertices: m, rr_depth }
+    }
+}
+
+/// Extends `path` (which holds the vertex the ray leaves from) by sampling BSDFs, writing
+/// each vertex's forward density and the previous vertex's reverse density as it goes.
+///
+/// The densities and each vertex's direction back (`wo`) are taken from the vertex
+/// positions, not from the ray that found the vertex: a ray leaves an offset origin, and
+/// where a segment is not much longer than that offset (in corners) the sampled direction
+/// and the direction between the two points differ. Every strategy of a path must see the
+/// same densities of the same points for the MIS weights to sum to one; the connections and
+/// the other strategies evaluate them from positions.
+#[allow(clippy::too_many_arguments)]
+fn random_walk<R: Random>(
+    scene: &Scene,
+    mut ray: Ray,
+    mut beta: Rgb,
+    mode: TransportMode,
+    max_vertices: usize,
+    rr_depth: u32,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    // Throughput of the scattering alone (what Russian roulette looks at).
+    let mut rr_beta = Rgb::ONE;
+    let mut bounces = 0u32;
+    // The medium the ray travels in, and the null surfaces it crossed.
+    let mut medium = path[path.len() - 1].medium_towards(scene, ray.d);
+    let mut crossings = 0;
+    while path.len() < max_vertices {
+        counters.extension_rays += 1;
+        let hit = scene.intersect(&ray);
+        if let Some(m) = medium {
+            let len = ray.d.length();
+            let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t * len);
+            let flight = scene.media[m as usize].sample(t_max, rng.next_1d(), rng.next_1d());
+            beta *= flight.weight;
+            rr_beta *= flight.weight;
+            if beta == Rgb::ZERO || !beta.is_finite() {
+                break;
+            }
+            if flight.scattered {
+                let p = ray.o + ray.d * (flight.t / len);
+                let Some(wi) = scatter_in_medium(scene, p, m, &ray, beta, max_vertices, rng, path) else { break };
+                if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
+                    break;
+                }
+                ray = Ray::new(p, wi);
+                continue;
+            }
+        }
+        let Some(mut si) = hit else {
+            // A camera walk that leaves the scene ends on the lights at infinity.
+            if mode == TransportMode::Radiance && !scene.infinite_lights.is_empty() {
+                let n = path.len();
+                let prev = &path[n - 1];
+                let mut v = Vertex::sky(scene, prev.p, ray.d, beta);
+                if !prev.delta {
+                    let (fwd, rev) = prev.densities(scene, &v, ray.d, 1.0);
+                    v.pdf_fwd = fwd;
+                    if n >= 2 {
+                        path[n - 2].pdf_rev = rev;
+                    }
+                }
+                path.push(v);
+            }
+            break;
+        };
+        let bsdf_index = scene.bsdf_index(&si);
+        let bsdf = &scene.bsdfs[bsdf_index];
+        if bsdf.is_null() {
+            // A boundary between media: on into the medium behind it, no vertex.
+            crossings += 1;
+            if crossings > crate::scene::MAX_NULL_CROSSINGS {
+                break;
+            }
+            medium = scene.medium_after(&si, ray.d, medium);
+            ray = si.spawn_ray(ray.d);
+            continue;
+        }
+        let n = path.len();
+        let prev = &path[n - 1];
+        let back = prev.p - si.p;
+        let dist = back.length();
+        if dist == 0.0 || !dist.is_finite() {
+            break;
+        }
+        // Towards a light at infinity the direction is the light's, exactly. After a Dirac
+        // delta (a mirror, glass) it is the ray's: no density of that step enters a weight, and
+        // the direction between the two points can be far from the ray's on the short
+        // segments inside thin glass, where it would bend what the glass shows.
+        si.wo = if n == 1 && prev.at_infinity() {
+            prev.ng
+        } else if prev.delta {
+            -ray.d.normalize()
+        } else {
+            back / dist
+        };
+        let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
+        v.medium = medium;
+        // After a light at infinity the density towards it stays a solid-angle density.
+        v.to_prev = if n == 1 && prev.at_infinity() { 1.0 } else { prev.cos_area(si.wo) / (dist * dist) };
+        // A vertex left through a delta lobe has no density (zero marks the delta).
+        if !prev.delta {
+            let (fwd, rev) = prev.densities(scene, &v, -si.wo, dist);
+            v.pdf_fwd = fwd;
+            if n >= 2 {
+                path[n - 2].pdf_rev = rev;
+            }
+        }
+        path.push(v);
+        if path.len() >= max_vertices {
+            break;
+        }
+        let wo = si.shading.to_local(si.wo);
+        let u1 = rng.next_1d();
+        let u2 = rng.next_2d();
+        let Some(bs) = bsdf.sample(wo, si.at(), u1, u2, mode) else { break };
+        let wi = si.shading.to_world(bs.wi);
+        let mut weight = bs.weight;
+        if mode == TransportMode::Importance {
+            weight *= shading_correction(si.ng, si.shading.n, si.wo, wi);
+        }
+        if bs.delta {
+            let n = path.len();
+            path[n - 1].delta = true;
+        }
+        beta *= weight;
+        rr_beta *= weight;
+        if beta == Rgb::ZERO || !beta.is_finite() {
+            break;
+        }
+        if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
+            break;
+        }
+        medium = scene.medium_after(&si, wi, medium);
+        ray = si.spawn_ray(wi);
+    }
+}
+
+/// Counts a bounce and plays Russian roulette from `rr_depth` bounces on, on the
+/// throughput of the scattering alone (`rr_beta`): `false` when the walk ends.
+#[inline]
+fn roulette<R: Random>(beta: &mut Rgb, rr_beta: &mut Rgb, bounces: &mut u32, rr_depth: u32, rng: &mut R) -> bool {
+    *bounces += 1;
+    if *bounces >= rr_depth {
+        let q = max_component(*rr_beta).min(0.95);
+        if rng.next_1d() >= q {
+            return false;
+        }
+        *beta /= q;
+        *rr_beta /= q;
+    }
+    true
+}
+
+/// A walk's scattering event at `p` in medium `m` (the ray `ray` led there): pushes the
+/// medium vertex with its densities, as [`random_walk`] does for surfaces, and samples the
+/// direction the walk leaves along (`None` when the walk is full).
+#[allow(clippy::too_many_arguments)]
+fn scatter_in_medium<R: Random>(
+    scene: &Scene,
+    p: Vec3,
+    m: u32,
+    ray: &Ray,
+    beta: Rgb,
+    max_vertices: usize,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+) -> Option<Vec3> {
+    let n = path.len();
+    let prev = &path[n - 1];
+    let back = prev.p - p;
+    let dist = back.length();
+    if dist == 0.0 || !dist.is_finite() {
+        return None;
+    }
+    let from_infinity = n == 1 && prev.at_infinity();
+    let wo = if from_infinity {
+        prev.ng
+    } else if prev.delta {
+        -ray.d.normalize()
+    } else {
+        back / dist
+    };
+    let mut v = Vertex::in_medium(p, wo, m, beta);
+    v.to_prev = if from_infinity { 1.0 } else { prev.cos_area(wo) / (dist * dist) };
+    if !prev.delta {
+        let (fwd, rev) = prev.densities(scene, &v, -wo, dist);
+        v.pdf_fwd = fwd;
+        if n >= 2 {
+            path[n - 2].pdf_rev = rev;
+        }
+    }
+    path.push(v);
+    if path.len() >= max_vertices {
+        return None;
+    }
+    // The phase function is sampled exactly: the throughput is unchanged.
+    Some(scene.media[m as usize].phase.sample(wo, rng.next_2d()).0)
+}
+
+/// Traces a camera subpath through film position `pos` (pixel units) into `path`.
+pub fn camera_subpath<R: Random>(
+    scene: &Scene,
+    pos: Vec2,
+    limits: &WalkLimits,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    path.clear();
+    let ray = scene.camera.generate_ray(pos);
+    path.push(Vertex { medium: scene.camera_medium, ..Vertex::camera(ray.o) });
+    if limits.camera_vertices <= 1 {
+        return;
+    }
+    let before = counters.extension_rays;
+    random_walk(
+        scene,
+        ray,
+        Rgb::ONE,
+        TransportMode::Radiance,
+        limits.camera_vertices,
+        limits.rr_depth,
+        rng,
+        path,
+        counters,
+    );
+    // The walk's first ray is the camera ray.
+    if counters.extension_rays > before {
+        counters.extension_rays -= 1;
+        counters.camera_rays += 1;
+    }
+}
+
+/// Traces a light subpath into `path`: a light chosen by power, a point and direction of
+/// emission, then BSDF sampling in importance mode.
+pub fn light_subpath<R: Random>(
+    scene: &Scene,
+    limits: &WalkLimits,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    path.clear();
+    let u_light = rng.next_1d();
+    let u1 = rng.next_1d();
+    let u_pos = rng.next_2d();
+    let u_dir = rng.next_2d();
+    if limits.light_vertices == 0 {
+        return;
+    }
+    let Some((l, pmf, _)) = scene.light_sampler.sample(u_light) else { return };
+    let light = &scene.lights[l];
+    // The first vertex, the ray the walk leaves it along, and the throughput it carries.
+    let (y0, ray, beta) = if light.at_infinity() {
+        let Some(start) = infinite_light_start(scene, l, pmf, u_pos, u_dir) else { return };
+        start
+    } else {
+        let Some(es) = light.sample_emission(&scene.shapes, u1, u_pos, u_dir) else { return };
+        let origin = pmf * es.pdf_pos;
+        if origin <= 0.0 || es.pdf_dir <= 0.0 {
+            return;
+        }
+        let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::splat(1.0 / origin), origin);
+        // What `y0.end(scene, es.d, ..).f` gives, without its direction density.
+        let le = light.emitted(es.n, es.uv, es.d) * y0.cos_area(es.d);
+        let o = if es.n == Vec3::ZERO { es.p } else { offset_origin(es.p, es.n, es.d) };
+        (y0, Ray::new(o, es.d), le / (origin * es.pdf_dir))
+    };
+    let mut y0 = y0;
+    let mut beta = beta;
+    if scene.volumetric {
+        y0.medium = light_medium(scene, l, &y0, ray.d);
+        // Light from infinity crosses all of a medium that nothing bounds.
+        if let (true, Some(m)) = (y0.infinite, y0.medium) {
+            beta *= scene.media[m as usize].transmittance(f32::INFINITY);
+        }
+    }
+    path.push(y0);
+    if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
+        return;
+    }
+    random_walk(
+        scene,
+        ray,
+        beta,
+        TransportMode::Importance,
+        limits.light_vertices,
+        limits.rr_depth,
+        rng,
+        path,
+        counters,
+    );
+}
+
+/// The medium light leaving light `l` at its vertex `y0` in direction `d` travels in: the
+/// side of its shape's medium boundary that `d` leaves to, or the medium at its position.
+fn light_medium(scene: &Scene, l: usize, y0: &Vertex, d: Vec3) -> Option<u32> {
+    if let crate::light::Light::Area { shape, .. } = &scene.lights[l]
+        && let Some(m) = scene.shapes[*shape].media
+    {
+        return m.towards(y0.ng, d);
+    }
+    let p = if y0.ng == Vec3::ZERO { y0.p } else { offset_origin(y0.p, y0.ng, d) };
+    scene.medium_at(p)
+}
+
+/// The start of a light subpath from light `l` at infinity (chosen with probability `pmf`):
+/// a direction from the light's distribution and a point on the disk of the bounding sphere
+/// facing it; the vertex (its density in the measures of [`Vertex`]), the ray into the
+/// scene and the throughput.
+fn infinite_light_start(scene: &Scene, l: usize, pmf: f32, u_pos: Vec2, u_dir: Vec2) -> Option<(Vertex, Ray, Rgb)> {
+    let (wi, pdf_dir, li) = scene.lights[l].sample_infinite_direction(u_dir)?;
+    let p = crate::light::disk_point(&scene.bounds, wi, u_pos);
+    let beta = li / (pmf * pdf_dir * disk_pdf(scene));
+    let mut y0 = Vertex::light(l, p, wi, Vec2::ZERO, beta, 0.0);
+    y0.infinite = true;
+    y0.connectible = false;
+    y0.pdf_fwd = y0.pdf_light_origin(scene);
+    Some((y0, Ray::new(p, -wi), beta))
+}
+
+/// A shadow ray between two vertices, offset at both ends along their geometric normals.
+#[inline]
+pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> bool {
+    transmittance(scene, a, b, counters) != Rgb::ZERO
+}
+
+/// The fraction of light that travels between the light-side vertex `a` and the
+/// camera-side vertex `b` of a connection: zero when something blocks the segment, else the
+/// transmittance of the media along it ([`Scene::transmittance`]). The segment is traced
+/// from the end whose medium its walk knows: `b`, unless `b` lies at infinity.
+#[inline]
+pub fn transmittance(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> Rgb {
+    counters.shadow_rays += 1;
+    let (a, b) = if scene.volumetric && !b.infinite { (b, a) } else { (a, b) };
+    // The segment stops `SHADOW_EPSILON` of its length short of its far end. A vertex at
+    // infinity is a point beyond the scene, some scene diameters away: the ray starts at the
+    // finite vertex, so that margin lies outside the scene rather than in front of the
+    // surface (from the far point it left centimetres before the surface untested, and
+    // light leaked past the edges of whatever stood there).
+    let (a, b) = if a.infinite && !b.infinite { (b, a) } else { (a, b) };
+    let d = b.p - a.p;
+    let o = if a.ng == Vec3::ZERO { a.p } else { offset_origin(a.p, a.ng, d) };
+    let e = if b.ng == Vec3::ZERO { b.p } else { offset_origin(b.p, b.ng, -d) };
+    let segment = Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON);
+    if scene.volumetric {
+        scene.transmittance_to(&segment, a.medium_towards(scene, d), b.infinite)
+    } else {
+        scene.transmittance(&segment, None)
+    }
+}
