@@ -3,6 +3,7 @@
 import _thread
 import json
 import subprocess
+import signal
 import threading
 import time
 
@@ -95,6 +96,9 @@ def test_a_time_budget_renders_whole_passes(cornell):
 
 def test_keyboard_interrupt_stops_a_render_and_is_raised():
     scene = pcbpt.load(CORNELL, resx=64, resy=64)
+    # A process started in the background by a shell inherits SIGINT ignored, and then
+    # interrupt_main() does nothing: Python's own handler is installed for the test.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, _thread.interrupt_main)
     start = time.monotonic()
     timer.start()
@@ -103,6 +107,7 @@ def test_keyboard_interrupt_stops_a_render_and_is_raised():
             pcbpt.render(scene, "bdpt", time=60, threads=2)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - start < 10
     # The scene is free again.
     assert pcbpt.render(scene, spp=1, threads=2).shape == (64, 64, 3)
