@@ -12,7 +12,6 @@
 
 use super::{PathTracer, weighs_against_light_sampling};
 use crate::accel::Ray;
-use crate::bsdf::TransportMode;
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, SHADOW_EPSILON, max_component};
 use crate::medium::Medium;
@@ -101,8 +100,7 @@ impl PathTracer {
                 break;
             }
             let wo = si.shading.to_local(si.wo);
-            let agree = |w: Vec3, local_z: f32| !self.strict_normals || w.dot(si.ng) * local_z > 0.0;
-            if !agree(si.wo, wo.z) {
+            if !self.sides_agree(&si, si.wo, wo.z) {
                 break;
             }
 
@@ -113,15 +111,7 @@ impl PathTracer {
             });
 
             // Continue the path by sampling the BSDF.
-            let u_lobe = sampler.next_1d();
-            let u_dir = sampler.next_2d();
-            let Some(bs) = bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance) else {
-                break;
-            };
-            let wi_world = si.shading.to_world(bs.wi);
-            if !agree(wi_world, bs.wi.z) {
-                break;
-            }
+            let Some((bs, wi_world)) = self.sample_bsdf(&si, bsdf, wo, sampler) else { break };
             s.beta *= bs.weight;
             s.prev_pdf = bs.pdf;
             s.prev_delta = bs.delta;

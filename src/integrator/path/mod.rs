@@ -128,10 +128,7 @@ impl PathTracer {
 
             let bsdf = scene.bsdf(&si);
             let wo = si.shading.to_local(si.wo);
-            // With strict normals a direction counts only where the geometric and the shading
-            // normal put it on the same side.
-            let agree = |w: Vec3, local_z: f32| !self.strict_normals || w.dot(si.ng) * local_z > 0.0;
-            if !agree(si.wo, wo.z) {
+            if !self.sides_agree(&si, si.wo, wo.z) {
                 break;
             }
 
@@ -141,15 +138,7 @@ impl PathTracer {
             });
 
             // Continue the path by sampling the BSDF.
-            let u_lobe = sampler.next_1d();
-            let u_dir = sampler.next_2d();
-            let Some(bs) = bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance) else {
-                break;
-            };
-            let wi_world = si.shading.to_world(bs.wi);
-            if !agree(wi_world, bs.wi.z) {
-                break;
-            }
+            let Some((bs, wi_world)) = self.sample_bsdf(&si, bsdf, wo, sampler) else { break };
             beta *= bs.weight;
             if beta == Rgb::ZERO {
                 break;
@@ -172,6 +161,31 @@ impl PathTracer {
 }
 
 impl PathTracer {
+    /// With strict normals a direction (world `w`, `local_z` its shading-frame cosine)
+    /// counts only where the geometric and the shading normal put it on the same side.
+    #[inline(always)]
+    fn sides_agree(&self, si: &SurfaceInteraction, w: Vec3, local_z: f32) -> bool {
+        !self.strict_normals || w.dot(si.ng) * local_z > 0.0
+    }
+
+    /// The path's next direction sampled from the BSDF at `si` (`wo` in its shading frame):
+    /// the sample and its world direction, or `None` where sampling fails or strict normals
+    /// refuse the direction.
+    #[inline(always)]
+    fn sample_bsdf<R: Random>(
+        &self,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        sampler: &mut R,
+    ) -> Option<(crate::bsdf::BsdfSample, Vec3)> {
+        let u_lobe = sampler.next_1d();
+        let u_dir = sampler.next_2d();
+        let bs = bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance)?;
+        let wi_world = si.shading.to_world(bs.wi);
+        self.sides_agree(si, wi_world, bs.wi.z).then_some((bs, wi_world))
+    }
+
     /// Next-event estimation from the surface point `si` (its BSDF `bsdf`, `wo` in its shading
     /// frame) for a path of throughput `beta`: one light sample weighed by the power heuristic
     /// against BSDF sampling (none from a Dirac BSDF). `transmittance` gives the fraction of
@@ -203,10 +217,7 @@ impl PathTracer {
         };
         let wi = si.shading.to_local(ls.wi);
         let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
-        // With strict normals a direction counts only where the geometric and the shading
-        // normal put it on the same side.
-        let sides_agree = ls.wi.dot(si.ng) * wi.z > 0.0;
-        if f == Rgb::ZERO || (self.strict_normals && !sides_agree) {
+        if f == Rgb::ZERO || !self.sides_agree(si, ls.wi, wi.z) {
             return Rgb::ZERO;
         }
         counters.shadow_rays += 1;
