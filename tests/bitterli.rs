@@ -2,7 +2,8 @@
 //! scene found loads and renders one sample per pixel with every integrator, or stops with
 //! the error that names what it lacks — a file that is not there, or a feature this
 //! renderer does not have ([`LACKS`]); a scene with participating media renders with the
-//! integrators that have them, and MEMLT refuses it. A file integrator this renderer lacks
+//! integrators that have them (all of them today), and any other refuses it. A file
+//! integrator this renderer lacks
 //! (`sppm`) is refused with the hint to pick one, and the scene is then loaded with the path
 //! tracer picked (`volpath` is the path tracer).
 //!
@@ -174,7 +175,7 @@ fn bitterlis_scenes_load_as_published_and_render_with_every_integrator() {
                 continue;
             }
             let line = match check(&dir, name) {
-                Outcome::Rendered => "loads; renders with every integrator (with media: the path tracer)".to_string(),
+                Outcome::Rendered => "loads; renders with every integrator".to_string(),
                 Outcome::MissingFile(e) => format!("stops at a missing file: {e}"),
                 Outcome::Lacks(e) => format!("lacks a feature: {e}"),
             };

@@ -8,7 +8,7 @@ mod common;
 
 use common::*;
 use pcbpt::accel::Backend;
-use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions};
+use pcbpt::integrator::IntegratorKind;
 use std::f64::consts::PI;
 use std::path::PathBuf;
 
@@ -167,22 +167,6 @@ fn a_scattering_furnace_keeps_the_environments_radiance() {
     // Control: light lost to absorption shows.
     let absorbing = furnace(0.8, 0.0);
     assert!(absorbing < 0.95, "{absorbing}");
-}
-
-/// An integrator without media (MEMLT) refuses a scene with them, naming the path tracer.
-#[test]
-fn integrators_without_media_refuse_them() {
-    let dir = tempfile::tempdir().unwrap();
-    let xml = format!(
-        r#"<scene version="3.0.0">{}
-        <emitter type="constant"/>
-        <shape type="sphere"><medium type="homogeneous" name="interior"/></shape></scene>"#,
-        sensor(30.0, 4, "0, 0, 4", "")
-    );
-    let scene = load(&write(&dir, "fog.xml", &xml), &[], Backend::Embree);
-    let e =
-        integrator::render(&scene, &RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1))).err().expect("refused");
-    assert!(e.to_string().contains("--integrator path"), "memlt: {e}");
 }
 
 /// A small sphere light inside a ball of fog (a null sphere), seen from outside: light

@@ -177,6 +177,8 @@ fn media() -> Vec<Row> {
         row(&FOG_CAUSTIC, "pcbpt", 64, ""),
         row(&FOG_CAUSTIC, "spcbpt", 64, ""),
         chains(&FOG_CAUSTIC, "pssmlt", 64, ""),
+        chains(&FOG_CAUSTIC, "memlt", 256, "--direct-samples 256"),
+        chains(&FOG_CAUSTIC, "memlt", 128, "--direct-samples -1"),
     ]
 }
 

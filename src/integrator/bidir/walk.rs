@@ -329,7 +329,7 @@ pub fn light_subpath<R: Random>(
 
 /// The medium light leaving light `l` at its vertex `y0` in direction `d` travels in: the
 /// side of its shape's medium boundary that `d` leaves to, or the medium at its position.
-fn light_medium(scene: &Scene, l: usize, y0: &Vertex, d: Vec3) -> Option<u32> {
+pub fn light_medium(scene: &Scene, l: usize, y0: &Vertex, d: Vec3) -> Option<u32> {
     if let crate::light::Light::Area { shape, .. } = &scene.lights[l]
         && let Some(m) = scene.shapes[*shape].media
     {

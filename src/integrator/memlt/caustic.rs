@@ -92,9 +92,10 @@ pub fn propose<R: Random>(
     let w = leaving(x, m);
     let local = Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
     let mut ray = ray_from(&x[m], Frame::from_normal(w).to_world(local));
+    let mut medium = x[m].medium_towards(scene, ray.d);
     let mut y = x.to_vec();
     for (j, v) in y.iter_mut().enumerate().take(k).skip(m + 1) {
-        *v = retrace(scene, &mut ray, x, j, j + 1 < k, counters)?;
+        *v = retrace(scene, &mut ray, &mut medium, x, j, j + 1 < k, counters)?;
     }
     if !join(scene, &y[k - 1], &y[k], counters) {
         return None;

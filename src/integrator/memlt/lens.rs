@@ -102,8 +102,9 @@ pub fn propose<R: Random>(
     let k = x.len() - 1;
     let mut ray = radii.camera_ray(scene, raster, rng.next_2d(), counters)?;
     let mut y = x.to_vec();
+    let mut medium = scene.camera_medium;
     for i in (m..k).rev() {
-        y[i] = retrace(scene, &mut ray, x, i, i > m, counters)?;
+        y[i] = retrace(scene, &mut ray, &mut medium, x, i, i > m, counters)?;
     }
     settle_sky(scene, &mut y);
     if !join(scene, &y[m - 1], &y[m], counters) {

@@ -395,7 +395,8 @@ fn plan_probability(plan: &Plan, camera: Option<Plan>, n: usize) -> f64 {
 /// Whether the manifold perturbation suits `x`: a plan with its Dirac vertices alone
 /// specular. (Other treatments may admit none; the perturbation then keeps the path.)
 pub fn suits(scene: &Scene, x: &[Vertex]) -> bool {
-    plans(scene, x, &Treatment::dirac(x)).next().is_some()
+    // Its chains are walked on surfaces, through no null surface or free flight.
+    !scene.volumetric && plans(scene, x, &Treatment::dirac(x)).next().is_some()
 }
 
 /// The solid-angle density at `a` of scattering towards its neighbour in the direction of
@@ -554,7 +555,7 @@ fn follow(
         } else if treatment.glossy(x, i) {
             retrace_glossy(scene, &mut ray, x, i, counters)?
         } else {
-            retrace(scene, &mut ray, x, i, i != b, counters)?
+            retrace(scene, &mut ray, &mut None, x, i, i != b, counters)?
         };
     }
     // A light at infinity back on the line from the (possibly moved) `x_1`.

@@ -34,6 +34,7 @@ pub mod direct_balance;
 pub mod independent;
 pub mod lens;
 pub mod manifold_perturbation;
+pub mod media;
 pub mod multichain;
 mod options;
 pub mod path;
@@ -156,7 +157,7 @@ fn generated_path<R: Random>(
         (y, (k, 0))
     } else {
         let (k, s) = strategies.sample((u - walks) / (1.0 - walks), rng.next_1d());
-        let camera = Vertex::camera(scene.camera.position);
+        let camera = path::camera_vertex(scene);
         (path::regenerate(scene, &[], std::slice::from_ref(&camera), s, k - s, rng, counters)?, (k, s))
     };
     if !lengths.covers(&y) {
@@ -878,6 +879,7 @@ fn finish(
 impl Integrator for MemltOptions {
     const BIDIRECTIONAL: bool = false;
     const ITERATIVE: bool = false;
+    const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         render(scene, opts, self, iterations)
@@ -890,3 +892,5 @@ impl Integrator for MemltOptions {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_media;

@@ -25,6 +25,7 @@
 use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::integrator::memlt::bidirectional::Proposal;
 use crate::integrator::memlt::lens::Radii;
+use crate::integrator::memlt::media::has_medium_vertex;
 use crate::integrator::memlt::path::{
     area_factor, as_light, connectible, contribution, hittable_light, join, ray_from, retrace, settle_sky,
 };
@@ -59,7 +60,8 @@ fn first_rough_pair(scene: &Scene, x: &[Vertex]) -> Option<(usize, usize)> {
 /// lies between `x_l` and the pinhole.
 pub fn suits(scene: &Scene, x: &[Vertex]) -> Option<usize> {
     let (i, rough) = first_rough_pair(scene, x)?;
-    (i >= 1 && rough >= 2 && x[i].kind == VertexKind::Surface).then_some(i)
+    // It re-traces surfaces: a medium's scattering event has no counterpart on the new path.
+    (i >= 1 && rough >= 2 && x[i].kind == VertexKind::Surface && !has_medium_vertex(&x[i..])).then_some(i)
 }
 
 /// Where the light hit works: `Some(0)` (no vertex kept; the re-trace ends on the light)
@@ -67,7 +69,7 @@ pub fn suits(scene: &Scene, x: &[Vertex]) -> Option<usize> {
 /// can find.
 pub fn suits_light_hit(scene: &Scene, x: &[Vertex]) -> Option<usize> {
     let (i, _) = first_rough_pair(scene, x)?;
-    (i == 0 && !x[0].infinite && hittable_light(scene, &x[0])).then_some(0)
+    (i == 0 && !x[0].infinite && hittable_light(scene, &x[0]) && !has_medium_vertex(x)).then_some(0)
 }
 
 /// The Jacobian of the re-traced vertices `x_kept .. x_{k-1}` with respect to the film and
@@ -96,9 +98,10 @@ pub fn propose<R: Random>(
     let k = x.len() - 1;
     let mut ray = radii.camera_ray(scene, raster, rng.next_2d(), counters)?;
     let mut y = x.to_vec();
+    let mut medium = scene.camera_medium;
     for i in (kept..k).rev() {
         let specular = x[i].delta;
-        y[i] = retrace(scene, &mut ray, x, i, specular && i > kept, counters)?;
+        y[i] = retrace(scene, &mut ray, &mut medium, x, i, specular && i > kept, counters)?;
         if !specular && i > kept {
             if !connectible(scene, &y[i]) {
                 return None;
@@ -110,6 +113,7 @@ pub fn propose<R: Random>(
             let old = (x[i - 1].p - x[i].p).normalize();
             let local = Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
             ray = ray_from(&y[i], Frame::from_normal(old).to_world(local));
+            medium = y[i].medium_towards(scene, ray.d);
         }
     }
     if kept == 0 {

@@ -18,6 +18,7 @@ use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::sampling::Random;
 use crate::scene::Scene;
+use crate::scene::shape::SurfaceInteraction;
 use std::ops::Range;
 
 /// Camera walks through Dirac lobes alone.
@@ -31,14 +32,16 @@ impl SpecularPass {
     /// The light arriving along a camera ray by paths of two edges or more (at most
     /// `max_edges`) whose every scattering was through a Dirac lobe: the walk follows the
     /// lobe each BSDF sample picks and ends at the first rough one (that path is the chains').
+    /// In media the path takes each edge's transmittance (its scattering events are the
+    /// chains').
     pub fn li<R: Random>(&self, scene: &Scene, mut ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
         let mut l = Rgb::ZERO;
         let mut beta = Rgb::ONE;
+        let mut medium = scene.camera_medium;
         // Edges traced so far.
         let mut edges = 0u32;
         while edges < self.max_edges {
-            counters.extension_rays += 1;
-            let Some(si) = scene.intersect(&ray) else {
+            let Some(si) = next_surface(scene, &mut ray, &mut medium, &mut beta, counters) else {
                 // The ray leaves the scene: a light at infinity ends the path, after at least
                 // one scattering.
                 if edges > 0 {
@@ -71,10 +74,40 @@ impl SpecularPass {
             if beta == Rgb::ZERO {
                 break;
             }
-            ray = si.spawn_ray(si.shading.to_world(bs.wi));
+            let wi = si.shading.to_world(bs.wi);
+            medium = scene.medium_after(&si, wi, medium);
+            ray = si.spawn_ray(wi);
         }
         l
     }
+}
+
+/// The first surface along `ray` that is not a null one (`None` when the ray leaves the
+/// scene), `beta` taking the transmittance of the media crossed up to it (or out of the
+/// scene) and `medium` the medium it is reached in.
+fn next_surface(
+    scene: &Scene,
+    ray: &mut Ray,
+    medium: &mut Option<u32>,
+    beta: &mut Rgb,
+    counters: &mut Counters,
+) -> Option<SurfaceInteraction> {
+    for _ in 0..crate::scene::MAX_NULL_CROSSINGS {
+        counters.extension_rays += 1;
+        let hit = scene.intersect(ray);
+        if let Some(m) = *medium {
+            let d = hit.as_ref().map_or(f32::INFINITY, |si| si.t * ray.d.length());
+            *beta *= scene.media[m as usize].transmittance(d);
+        }
+        let si = hit?;
+        if !scene.bsdf(&si).is_null() {
+            return Some(si);
+        }
+        *medium = scene.medium_after(&si, ray.d, *medium);
+        *ray = si.spawn_ray(ray.d);
+    }
+    *beta = Rgb::ZERO;
+    None
 }
 
 /// The pass in the render loop: no state between iterations, positions in the pixel's cells

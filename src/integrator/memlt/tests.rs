@@ -9,7 +9,7 @@ use crate::integrator::memlt::*;
 use crate::integrator::metropolis::bootstrap::ChainPaths;
 
 /// A scene of the repository with `-D` style overrides.
-fn scene(file: &str, overrides: &[(&str, &str)]) -> Scene {
+pub(super) fn scene(file: &str, overrides: &[(&str, &str)]) -> Scene {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
     let overrides = overrides.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
     Scene::load(&path, &crate::scene::LoadOptions { overrides, ..Default::default() }).unwrap()
@@ -20,7 +20,7 @@ fn cornell() -> Scene {
 }
 
 /// Mean and standard error of `n` values from `f(i)`.
-fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
+pub(super) fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
     let (s, s2) = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -34,7 +34,7 @@ fn mean_and_error(n: usize, f: impl Fn(usize) -> f64 + Sync) -> (f64, f64) {
 
 /// BDPT's estimate of the luminance of `paths` (the bootstrap's, `n` samples of stream
 /// `seed`), with its standard error.
-fn bootstrap_estimate(scene: &Scene, paths: ChainPaths, (seed, n): (u64, usize)) -> (f64, f64) {
+pub(super) fn bootstrap_estimate(scene: &Scene, paths: ChainPaths, (seed, n): (u64, usize)) -> (f64, f64) {
     let heuristic = MemltOptions::default().heuristic;
     let pool = crate::workers::render_pool(2).unwrap();
     crate::integrator::metropolis::bootstrap::bdpt_normalisation(scene, heuristic, &pool, n, paths, None, &|s, i| {
@@ -44,7 +44,7 @@ fn bootstrap_estimate(scene: &Scene, paths: ChainPaths, (seed, n): (u64, usize))
 }
 
 /// BDPT's estimate of the luminance of paths of at least `min` edges.
-fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
+pub(super) fn bdpt_reference(scene: &Scene, min: usize) -> f64 {
     bootstrap_estimate(scene, ChainPaths { min_edges: min, ..ChainPaths::ALL }, (11, 400_000)).0
 }
 
@@ -69,7 +69,7 @@ fn chains_estimate(
 }
 
 /// `|a - b|` in standard errors.
-fn sigmas(a: (f64, f64), b: f64) -> f64 {
+pub(super) fn sigmas(a: (f64, f64), b: f64) -> f64 {
     (a.0 - b).abs() / a.1
 }
 
@@ -77,7 +77,7 @@ fn sigmas(a: (f64, f64), b: f64) -> f64 {
 /// estimate of the same integral: within 4 standard errors, the error under 2% of it. With
 /// each path's density replaced by `skew(path, p)` (the negative control, `control` naming
 /// it) it must land more than 6 standard errors away.
-fn generator_matches_bdpt(
+pub(super) fn generator_matches_bdpt(
     scene: &Scene,
     strategies: &Strategies,
     (seed, n): (u64, usize),
@@ -310,7 +310,7 @@ fn glass_caustic() -> Scene {
 /// `w (r - [r > 0])` over `Σ w [r > 0]`, and its standard error, in those units; `skew`
 /// scales each forward density by a factor that depends on the proposal; `theta_diff`
 /// (degrees) and `lambda` are the manifold perturbation's, `n` the number of paths `x`.
-fn balance(scene: &Scene, mutator: Mutator, skew: bool, settings: (f64, f64, usize)) -> (f64, f64) {
+pub(super) fn balance(scene: &Scene, mutator: Mutator, skew: bool, settings: (f64, f64, usize)) -> (f64, f64) {
     balance_of(scene, mutator, skew, settings, |_| true)
 }
 
