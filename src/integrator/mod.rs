@@ -21,6 +21,7 @@ pub(crate) mod render_loop;
 pub mod run;
 pub mod spcbpt;
 pub mod stats;
+pub mod vcm;
 
 use crate::scene::Scene;
 pub use bidir::pool::CONCENTRATION_DEPTHS;

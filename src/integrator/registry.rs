@@ -155,6 +155,10 @@ integrators! {
     Spcbpt("spcbpt", plugins: []) => SpcbptOptions,
     /// Path-space Metropolis with Manifold Exploration's mutations.
     Memlt("memlt", plugins: ["mlt"]) => MemltOptions,
+    /// Vertex connection and merging: BDPT's connections and photon merging, weighed together.
+    Vcm("vcm", plugins: []) => crate::integrator::vcm::VcmOptions,
+    /// Bidirectional photon mapping: VCM's merges alone.
+    Bpm("bpm", plugins: []) => crate::integrator::vcm::BpmOptions,
 }
 
 /// The registration of `kind`.

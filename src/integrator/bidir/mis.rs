@@ -197,6 +197,12 @@ pub trait StrategyCounts {
     /// to one.
     fn density_factors(&self, _n: usize, _pl: impl Fn(usize) -> f32, _pe: impl Fn(usize) -> f32, _out: &mut [f32]) {}
 
+    /// Merging strategies beside the connections ([`merging`]): `η = N π r²`, the weight of
+    /// a merge at a vertex relative to its density; `None` (the default) when there are none.
+    fn merging(&self) -> Option<f32> {
+        None
+    }
+
     /// The counts of the strategies `s'` of the path for which `needed(s')`, into `out[s']`.
     fn fill(&self, path: &FullPath, needed: &dyn Fn(usize) -> bool, out: &mut [f32]) {
         let n = path.len();
@@ -334,7 +340,11 @@ fn weight_in<const N: usize>(
     let full = FullPath { light, camera };
     let (n, s) = (full.len(), light.len());
     let p = path_pdfs::<N>(scene, light, camera, conn);
-    if counts.path_dependent() || counts.density_dependent() {
+    if let Some(eta) = counts.merging() {
+        let table = count_table(&p, &full, counts);
+        let mergeable = |m| merging::mergeable(&p, &full, m);
+        merging::weight(&p, merging::Strategy::Connect(s), heuristic, &|i| table[i], eta, &mergeable)
+    } else if counts.path_dependent() || counts.density_dependent() {
         // Costly or corrected counts: all those the walk needs, evaluated together first.
         let table = count_table(&p, &full, counts);
         weight_from_pdfs(&p, s, heuristic, &|i| table[i])
@@ -435,5 +445,6 @@ pub fn brute_force_weights(
     dens.iter().map(|d| d / total).collect()
 }
 
+pub mod merging;
 #[cfg(test)]
 mod tests;

@@ -90,6 +90,8 @@ pub struct LightPool {
     pub vertices: Vec<Vertex>,
     /// For each vertex, where its path starts in `vertices`.
     pub path_start: Vec<u32>,
+    /// Where each path starts in `vertices`, in the order traced, and the end of the last.
+    pub offsets: Vec<u32>,
     /// The vertices pool connections draw from: connectible surface vertices after the
     /// emitter (`y_1, y_2, …`; `y_0` is left to next-event estimation).
     pub connectible: Vec<u32>,
@@ -242,6 +244,7 @@ impl LightPool {
             let mut k = 0usize;
             for len in lens {
                 let start = pool.vertices.len() as u32;
+                pool.offsets.push(start);
                 for (depth, v) in verts[k..k + len as usize].iter().enumerate() {
                     let index = pool.vertices.len() as u32;
                     if depth >= 1 && v.scatters() && v.is_connectible() {
@@ -255,6 +258,7 @@ impl LightPool {
             splats.extend(sp);
             counters += c;
         }
+        pool.offsets.push(pool.vertices.len() as u32);
         (pool, splats, counters, all_records)
     }
 
@@ -263,6 +267,12 @@ impl LightPool {
     pub fn prefix(&self, k: usize) -> &[Vertex] {
         let g = self.connectible[k] as usize;
         &self.vertices[self.path_start[g] as usize..=g]
+    }
+
+    /// Light path `i`, `y_0..`, as traced.
+    #[inline]
+    pub fn path(&self, i: usize) -> &[Vertex] {
+        &self.vertices[self.offsets[i] as usize..self.offsets[i + 1] as usize]
     }
 
     /// Connectible vertices per light path (`V / M`).

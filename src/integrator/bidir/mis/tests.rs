@@ -382,6 +382,7 @@ fn check_variant(variant: Variant, seed: u64) {
     assert!((pc_options[1].1.connect[0] / pc_options[0].1.connect[0] - 7.3).abs() < 1e-5);
     assert!((pc_options[1].1.connect[3] / pc_options[0].1.connect[3] - 7.3 / 4.0).abs() < 1e-5);
     let mut checked = 0;
+    let mut merged = 0;
     let mut with_delta = 0;
     let mut resampled = Vec::new();
     let mut sp_resampled = Vec::new();
@@ -463,10 +464,12 @@ fn check_variant(variant: Variant, seed: u64) {
                 .map(|(l, c)| mis_weight(&scene, &l, &c, heuristic, &Counts::LightTrace))
                 .sum();
             assert!((lt - 1.0).abs() < 1e-5 || !x[n - 2].scatters(), "light tracing: {lt}");
+            merged += check_merging(&scene, &x, heuristic, variant) as usize;
         }
         checked += 1;
     }
     assert_eq!(checked, 300);
+    assert!(merged > 100, "{variant:?}: only {merged} weighings with a merge of weight over 0.05");
     if matches!(variant, Variant::Envmap | Variant::Directional | Variant::Sunsky) {
         let far = paths(&scene, seed, 300).iter().filter(|x| x[0].at_infinity()).count();
         assert!(far > 30, "{variant:?}: only {far} paths from a light at infinity");
@@ -490,6 +493,55 @@ fn check_variant(variant: Variant, seed: u64) {
         let in_fog = paths(&scene, seed, 300).iter().filter(|x| x.iter().any(|v| v.kind == VertexKind::Medium)).count();
         assert!(in_fog > 100, "only {in_fog} paths with a medium vertex");
     }
+}
+
+/// Vertex connection and merging (and its merges alone, with the camera subpath's emission
+/// hits): the weights of the connections and of the merges at every rough surface vertex
+/// inside the path sum to one, whichever strategy is asked. With merges weighing next to
+/// nothing the connections' weights are BDPT's. Whether some merge weighs over 0.05.
+fn check_merging(scene: &Scene, x: &[Vertex], heuristic: Heuristic, variant: Variant) -> bool {
+    use crate::integrator::bidir::mis::merging::merge_weight;
+    use crate::integrator::vcm::VcmCounts;
+    let n = x.len();
+    let usable = |s: usize| s == 0 || (x[s - 1].is_connectible() || s == 1 && n > 2) && x[s].is_connectible();
+    let connections = |counts: &VcmCounts| -> Vec<f64> {
+        (0..n)
+            .map(|s| {
+                subpaths(scene, x, s)
+                    .filter(|_| usable(s))
+                    .map_or(0.0, |(l, c)| mis_weight(scene, &l, &c, heuristic, counts) as f64)
+            })
+            .collect()
+    };
+    let merges = |counts: &VcmCounts| -> Vec<f64> {
+        (1..n.saturating_sub(1))
+            .filter(|&i| x[i].kind == VertexKind::Surface && x[i].is_connectible())
+            .filter_map(|i| Some((subpaths(scene, x, i + 1)?.0, subpaths(scene, x, i)?.1)))
+            .map(|(l, c)| merge_weight::<CAP>(scene, &l, &c, heuristic, counts) as f64)
+            .collect()
+    };
+    let mut heavy = false;
+    for (connect, eta) in [(true, 0.37f32), (true, 40.0), (false, 2.0)] {
+        let counts = VcmCounts { connections: connect, light_trace: 0.6, eta };
+        let (c, m) = (connections(&counts), merges(&counts));
+        let sum = c.iter().sum::<f64>() + m.iter().sum::<f64>();
+        // Merges alone cannot make every path (a point light's seen in a mirror).
+        if connect || sum > 0.0 {
+            assert!(
+                (sum - 1.0).abs() < 1e-4,
+                "{variant:?} {heuristic:?} η {eta} n={n}: connections {c:?}, merges {m:?}"
+            );
+        }
+        heavy |= m.iter().any(|&w| w > 0.05);
+    }
+    let faint = connections(&VcmCounts { connections: true, light_trace: 1.0, eta: 1e-9 });
+    for (s, w) in faint.iter().enumerate() {
+        let bdpt = subpaths(scene, x, s)
+            .filter(|_| usable(s))
+            .map_or(0.0, |(l, c)| mis_weight(scene, &l, &c, heuristic, &Counts::Bdpt) as f64);
+        assert!((w - bdpt).abs() < 1e-4, "{variant:?} {heuristic:?} s={s} n={n}: {w} against BDPT's {bdpt}");
+    }
+    heavy
 }
 
 #[test]
