@@ -50,8 +50,10 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
     use IntegratorKind::*;
     let scene = cornell();
     let dir = tempfile::tempdir().unwrap();
-    let mut cases: Vec<(String, RenderOptions)> =
-        [Path, Lighttrace, Bdpt, Eorr, Lvc].into_iter().map(|k| (format!("{k:?}"), options(k, 7, 11))).collect();
+    let mut cases: Vec<(String, RenderOptions)> = [Path, Lighttrace, Bdpt, Eorr, Lvc, Vcm, Bpm]
+        .into_iter()
+        .map(|k| (format!("{k:?}"), options(k, 7, 11)))
+        .collect();
     let mut eorr = options(Eorr, 7, 11);
     eorr.method.eorr_mut().pilot_spp = 4;
     cases.push(("Eorr with a 4-spp pilot".into(), eorr));

@@ -31,6 +31,8 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
         IntegratorKind::Lvc,
         IntegratorKind::Pcbpt,
         IntegratorKind::Spcbpt,
+        IntegratorKind::Vcm,
+        IntegratorKind::Bpm,
     ] {
         // Several passes where an integrator keeps state between them, so EORR's
         // thresholds and LVC's and PCBPT's pools come from earlier passes (light tracing

@@ -155,10 +155,25 @@ impl Row {
 }
 
 fn rows() -> Vec<Row> {
-    [path(), bidirectional(), pcbpt(), spcbpt(), budget(), metropolis(), bump(), media()]
+    [path(), bidirectional(), merging(), pcbpt(), spcbpt(), budget(), metropolis(), bump(), media()]
         .into_iter()
         .flatten()
         .collect()
+}
+
+/// Vertex connection and merging, and its merges alone (consistent: at the default radius
+/// the blur is below the noise). A radius that does not shrink, ten times the default, must
+/// fail.
+fn merging() -> Vec<Row> {
+    vec![
+        row(&CORNELL_PLY, "vcm", 16, ""),
+        row(&CORNELL_PLY, "bpm", 64, ""),
+        row(&CORNELL_PLY, "bpm", 64, "--vcm-radius 0.03 --vcm-alpha 1").must_fail(),
+        row(&VEACH_AJAR, "vcm", 128, ""),
+        row(&GLASS_CAUSTIC, "vcm", 256, ""),
+        row(&GLASS_CAUSTIC, "bpm", 256, ""),
+        row(&FOG_CAUSTIC, "vcm", 64, ""),
+    ]
 }
 
 /// Participating media, against Mitsuba 3's `volpath`: every integrator that renders them

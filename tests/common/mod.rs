@@ -211,6 +211,19 @@ pub const VEACH_MIS: Case = Case {
 
 /// An open box under a point light and a spot light, both out of the camera's view (a
 /// scene made for the tests: lights with a Dirac position).
+/// A glass ball on a floor under a small light: its caustic seen directly and through the
+/// ball.
+pub const GLASS_CAUSTIC: Case = Case {
+    name: "glass-caustic",
+    scene: "scenes/glass-caustic/scene.xml",
+    defines: &[("resx", "160"), ("resy", "90")],
+    reference: "glass-caustic.exr",
+    ref_noise: Some(1.25e-3),
+    mean_cutoff: None,
+    resolution: None,
+    mean_tol: 0.01,
+};
+
 /// Fog through the open front of a box, a glass sphere, a small light (Mitsuba 3's `volpath`).
 pub const FOG_CAUSTIC: Case = Case {
     name: "fog-caustic",
