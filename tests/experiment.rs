@@ -1,4 +1,5 @@
-//! `pcbpt experiment` end to end on a tiny suite: outputs exist, the numbers are consistent.
+//! `pcbpt experiment` end to end on a tiny suite: outputs exist, the numbers are consistent;
+//! a stopped experiment returns what it has done.
 
 mod common;
 
@@ -268,4 +269,29 @@ fn every_suite_in_experiments_loads() {
         }
     }
     assert!(n >= 30, "{n} suites");
+}
+
+/// A stopped experiment returns the runs done: with its flag set before it starts, none,
+/// and no image is rendered (the flag reaches every render, which ends after its pass under
+/// way; `python/tests/test_interrupt.py` interrupts one running).
+#[test]
+fn a_stopped_experiment_returns_the_runs_done() {
+    use std::sync::Arc;
+    use std::sync::atomic::AtomicBool;
+    let d = tempfile::tempdir().unwrap();
+    let body = r#"time = 30
+
+[[scene]]
+name = "cornell"
+file = "SCENE"
+defines = { resx = "16", resy = "12" }
+reference_method = "bdpt"
+reference_time = 30"#;
+    let f = write(d.path(), "stopped.toml", body);
+    let results = experiment::run_stoppable(&f, None, true, &Arc::new(AtomicBool::new(true))).unwrap();
+    assert!(results.is_empty());
+    let out = d.path().join("stopped");
+    for name in ["cornell_reference.exr", "cornell_path.exr", "results.md"] {
+        assert!(!out.join(name).exists(), "{name} written");
+    }
 }

@@ -15,8 +15,8 @@ the command line's, by their names with ``_`` for ``-`` (``light_paths=1000`` fo
 ``--light-paths 1000``); ``pcbpt render --integrator NAME --help`` and docs/cli.md list
 them. Errors are exceptions: :class:`SceneError` (a :class:`ValueError`) for a scene
 file's, naming file and line as the command line does; :class:`ValueError` for a bad
-argument; :class:`FileNotFoundError` for a missing file. Ctrl-C stops a render and raises
-:class:`KeyboardInterrupt`.
+argument; :class:`FileNotFoundError` for a missing file. Ctrl-C interrupts a load, a
+render or an experiment and raises :class:`KeyboardInterrupt`.
 """
 
 from __future__ import annotations
@@ -60,6 +60,10 @@ def load(
 ) -> Scene:
     """Load a Mitsuba XML scene (version 3, or 0.x files upgraded) as ``pcbpt render`` does.
 
+    The scene is read on a worker thread without the GIL; Ctrl-C (KeyboardInterrupt) is
+    raised at once, and the loading, which cannot stop part-way, ends in the background
+    and its scene is dropped.
+
     Args:
         path: the scene file.
         resolution: the film size instead of the scene's, ``(width, height)`` or ``"WxH"``
@@ -85,6 +89,7 @@ def load(
         FileNotFoundError: ``path`` does not exist.
         SceneError: the file, or one it reads, is wrong; the message names file and line.
         ValueError: a bad argument.
+        KeyboardInterrupt: the load was interrupted.
     """
     defines = [(name, _parameter(value)) for name, value in defaults.items()]
     return _native.load(
@@ -113,6 +118,7 @@ def render(
     progress: bool = False,
     aov: Optional[Any] = None,
     noise_threshold: Optional[float] = None,
+    display_server: Optional[str] = None,
     **options: Any,
 ):
     """Render a scene; the image is the one ``pcbpt render`` writes for the same arguments.
@@ -141,6 +147,9 @@ def render(
             ``"position"`` and ``"variance"`` (docs/usage.md says what each holds).
         noise_threshold: stop once the render's own relMSE estimate falls below this
             (``--noise-threshold``), or at ``spp``/``time``, whichever comes first.
+        display_server: ``"HOST:PORT"`` of a tev viewer to stream the image to while it
+            renders (``--display-server``); a viewer that is absent or goes away costs a
+            warning on stderr, never the render.
         **options: the integrator's options by their command-line names with ``_`` for
             ``-`` (``light_paths=1000``, ``pc_mis="harmonic"``, ``two_stage=False``);
             values are passed as ``str(value)``, booleans as ``true``/``false``; None
@@ -178,6 +187,7 @@ def render(
         bool(progress),
         None if aov is None else [str(a) for a in aov],
         None if noise_threshold is None else float(noise_threshold),
+        None if display_server is None else str(display_server),
         options,
     )
     out = (image,)
@@ -230,13 +240,19 @@ def experiment(path: PathLike, *, output: Optional[PathLike] = None, quiet: bool
 
     Every method renders every scene for the same time or sample count, over the file's
     seeds; the outputs (each run's EXR, ``results.md``, ``convergence.csv``, plots, and
-    ``summary.md`` over several seeds) are written into the output folder. The GIL is
-    released meanwhile; Ctrl-C takes effect when the experiment ends.
+    ``summary.md`` over several seeds) are written into the output folder. It runs on
+    worker threads without the GIL; Ctrl-C (KeyboardInterrupt) stops the render under way
+    after its current pass, ends the experiment there (the outputs of the runs finished
+    are kept, without the tables of the scene and seed left unfinished) and is raised
+    again.
 
     Args:
         path: the experiment file.
         output: the output folder (default: the file's ``output``, or its name beside it).
         quiet: print nothing but errors (``False``: the command line's progress lines).
+
+    Raises:
+        KeyboardInterrupt: the experiment was interrupted.
 
     Returns:
         ``{"output": folder, "runs": [...]}``: the folder (a :class:`pathlib.Path`) and one

@@ -1,10 +1,15 @@
-//! `experiment`: an experiment file run as `pcbpt experiment FILE` runs it.
+//! `experiment`: an experiment file run as `pcbpt experiment FILE` runs it, on a worker
+//! thread: Ctrl-C stops the render under way after its current pass, and the experiment
+//! with it ([`crate::worker`]).
 
 use crate::errors::{self, check_exists};
+use crate::worker::run_on_worker;
 use pcbpt::experiment::{ExperimentFile, RunResult};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
 /// Runs the experiment in `path`, writing into `output` (default: the file's); returns the
 /// output folder and one dict per run.
@@ -19,7 +24,12 @@ pub fn experiment<'py>(
     check_exists(&path)?;
     let file = ExperimentFile::load(&path).map_err(errors::error)?;
     let folder = file.output_folder(&path, output.as_deref());
-    let runs = py.detach(|| pcbpt::experiment::run(&path, Some(&folder), quiet)).map_err(errors::error)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let (flag, target) = (stop.clone(), folder.clone());
+    let runs = run_on_worker(py, "pcbpt-exp", "the experiment", Some(stop), move || {
+        pcbpt::experiment::run_stoppable(&path, Some(&target), quiet, &flag)
+    })?
+    .map_err(errors::error)?;
     let runs = runs.iter().map(|r| run_dict(py, r)).collect::<PyResult<_>>()?;
     Ok((folder, runs))
 }

@@ -2,11 +2,11 @@
 //! documents the public API and hands its arguments to these functions.
 //!
 //! Loading reads a scene as `pcbpt render` does ([`scene`]); rendering runs the integrator
-//! the command line would, with its options read by the same parser, on a worker thread while
-//! the calling thread waits without the GIL and answers Ctrl-C ([`render`]). Images cross
-//! as NumPy arrays of shape `(height, width, 3)` ([`images`]). No error is a panic: the
-//! crate's errors become Python exceptions ([`errors`]), and a panic of a render becomes a
-//! `RuntimeError`.
+//! the command line would, with its options read by the same parser. Loads, renders and
+//! experiments run on a worker thread while the calling thread waits without the GIL and
+//! answers Ctrl-C ([`worker`]). Images cross as NumPy arrays of shape `(height, width, 3)`
+//! ([`images`]). No error is a panic: the crate's errors become Python exceptions
+//! ([`errors`]), and a panic on a worker thread becomes a `RuntimeError`.
 
 mod errors;
 mod experiment;
@@ -14,6 +14,7 @@ mod images;
 mod options;
 mod render;
 mod scene;
+mod worker;
 
 use pyo3::prelude::*;
 

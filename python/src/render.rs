@@ -1,26 +1,24 @@
 //! `render`: a loaded scene rendered as `pcbpt render` renders it (the same image for the
 //! same seed, bit for bit), on a worker thread while the calling thread, without the GIL,
-//! waits and answers Ctrl-C by stopping the render.
+//! waits and answers Ctrl-C by stopping the render ([`crate::worker`]).
 
 use crate::errors::{self, integer, warn};
 use crate::images::to_array;
 use crate::scene::Scene;
+use crate::worker::run_on_worker;
 use clap::ValueEnum;
 use numpy::{PyArray3, PyArrayMethods};
 use pcbpt::accel::Backend;
+use pcbpt::display::DisplayServer;
 use pcbpt::integrator::registry::INTEGRATORS;
-use pcbpt::integrator::{self, Budget, IntegratorKind, RenderOptions, RenderOutput, RunOptions};
+use pcbpt::integrator::{self, Budget, IntegratorKind, Preview, RenderOptions, RenderOutput, RunOptions};
 use pcbpt::sampling::SamplerKind;
 use pcbpt::scene::IntegratorSpec;
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
-
-/// How often the waiting thread looks for Ctrl-C (Python's signal handlers run there).
-const POLL: Duration = Duration::from_millis(50);
 
 /// The names of the integrators, as `render` and `--integrator` take them.
 #[pyfunction]
@@ -32,7 +30,7 @@ pub fn integrators() -> Vec<&'static str> {
 /// the JSON text `--stats` writes and the AOV channels asked for (`height × width` float32
 /// arrays by channel name). The keywords are `pcbpt.render`'s.
 #[pyfunction]
-#[pyo3(signature = (scene, integrator, spp, time, seed, threads, max_depth, rr_depth, sampler, progress, aov, noise_threshold, options))]
+#[pyo3(signature = (scene, integrator, spp, time, seed, threads, max_depth, rr_depth, sampler, progress, aov, noise_threshold, display_server, options))]
 #[allow(clippy::too_many_arguments)] // the keywords of `pcbpt.render`
 pub fn render<'py>(
     py: Python<'py>,
@@ -48,6 +46,7 @@ pub fn render<'py>(
     progress: bool,
     aov: Option<Vec<String>>,
     noise_threshold: Option<f64>,
+    display_server: Option<String>,
     options: Bound<'py, PyDict>,
 ) -> PyResult<(Bound<'py, PyArray3<f32>>, String, Bound<'py, PyDict>)> {
     let scene = scene.get();
@@ -82,7 +81,13 @@ pub fn render<'py>(
         }
         opts.run.noise_threshold = Some(t);
     }
-    let out = render_on_worker(py, scene.inner.clone(), settings, opts)?;
+    let display = display_server
+        .map(|address| {
+            pcbpt::display::parse_address(&address).map_err(|e| PyValueError::new_err(format!("display_server: {e}")))
+        })
+        .transpose()?
+        .map(|address| (address, display_name(scene)));
+    let out = render_on_worker(py, scene.inner.clone(), settings, opts, display)?;
     let stats = stats_json(scene, &out);
     let aovs = PyDict::new(py);
     for (name, values) in &out.aovs {
@@ -162,53 +167,39 @@ struct Settings {
     sampler: SamplerKind,
 }
 
-/// Renders on a worker thread; the calling thread waits without the GIL, looking for
-/// signals every [`POLL`]: on an exception from a signal handler (KeyboardInterrupt) it stops
-/// the render, waits for it to end and raises the exception.
+/// The name of the image a viewer shows: the scene file's.
+fn display_name(scene: &Scene) -> String {
+    scene.path().file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "pcbpt".into())
+}
+
+/// Renders on a worker thread ([`run_on_worker`]); Ctrl-C stops the render after its
+/// current pass. With `display` (the viewer's `HOST:PORT` and the image's name), the worker
+/// connects to the viewer, streams the image to it as it renders and sends the final image,
+/// as `--display-server` does.
 fn render_on_worker(
     py: Python<'_>,
     scene: Arc<Mutex<pcbpt::scene::Scene>>,
     settings: Settings,
     mut opts: RenderOptions,
+    display: Option<(String, String)>,
 ) -> PyResult<RenderOutput> {
     let stop = Arc::new(AtomicBool::new(false));
     opts.run.stop = Some(stop.clone());
-    let caller = std::thread::current();
-    let worker = std::thread::Builder::new()
-        .name("pcbpt-render".into())
-        .spawn(move || {
-            let out = {
-                let mut scene = Scene::lock(&scene);
-                scene.integrator = settings.integrator;
-                scene.sampler.kind = settings.sampler;
-                integrator::render(&scene, &opts)
-            };
-            caller.unpark();
-            out
-        })
-        .map_err(|e| PyRuntimeError::new_err(format!("cannot start the render's thread: {e}")))?;
-    while !worker.is_finished() {
-        py.detach(|| std::thread::park_timeout(POLL));
-        if let Err(e) = py.check_signals() {
-            stop.store(true, Ordering::Relaxed);
-            // The render ends after its current pass; its image is not wanted.
-            let _ = py.detach(|| worker.join());
-            return Err(e);
+    let out = run_on_worker(py, "pcbpt-render", "the render", Some(stop), move || {
+        let mut scene = Scene::lock(&scene);
+        scene.integrator = settings.integrator;
+        scene.sampler.kind = settings.sampler;
+        let (w, h) = (scene.film.width, scene.film.height);
+        let viewer =
+            display.and_then(|(address, name)| DisplayServer::connect(&address, &name, w, h, false).map(Arc::new));
+        opts.run.preview = viewer.clone().map(|d| d as Arc<dyn Preview>);
+        let out = integrator::render(&scene, &opts);
+        if let (Some(v), Ok(out)) = (&viewer, &out) {
+            v.finish(&out.image);
         }
-    }
-    match worker.join() {
-        Ok(out) => out.map_err(errors::error),
-        Err(panic) => Err(PyRuntimeError::new_err(format!("the render failed: {}", panic_message(&*panic)))),
-    }
-}
-
-/// The message of a panic's payload.
-fn panic_message(payload: &(dyn std::any::Any + Send)) -> &str {
-    match (payload.downcast_ref::<&str>(), payload.downcast_ref::<String>()) {
-        (Some(s), _) => s,
-        (_, Some(s)) => s,
-        _ => "a panic without a message",
-    }
+        out
+    })?;
+    out.map_err(errors::error)
 }
 
 /// The statistics as `pcbpt render --stats` writes them (no output file).

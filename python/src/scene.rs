@@ -1,6 +1,8 @@
-//! `load`: a scene read as `pcbpt render` reads it, kept for any number of renders.
+//! `load`: a scene read as `pcbpt render` reads it, kept for any number of renders; read
+//! on a worker thread so that Ctrl-C is answered at once ([`crate::worker`]).
 
 use crate::errors::{self, check_exists, scene_error};
+use crate::worker::run_on_worker;
 use clap::ValueEnum;
 use pcbpt::accel::{Backend, BuildOptions};
 use pcbpt::integrator::IntegratorKind;
@@ -167,7 +169,14 @@ pub fn load(
         threads: errors::integer::<u16>("threads", threads, "a number of threads from 0 (every core) to 65535")?.into(),
     };
     let t0 = Instant::now();
-    let scene = py.detach(|| pcbpt::scene::Scene::load(&path, &options)).map_err(|e| scene_error(py, e))?;
+    // Loading cannot be stopped part-way: on Ctrl-C the worker is left to finish and its
+    // scene dropped.
+    let file = path.clone();
+    let load_options = options.clone();
+    let scene = run_on_worker(py, "pcbpt-load", "loading the scene", None, move || {
+        pcbpt::scene::Scene::load(&file, &load_options)
+    })?
+    .map_err(|e| scene_error(py, e))?;
     for w in &scene.stats.warnings {
         crate::errors::warn(py, w)?;
     }

@@ -4,10 +4,14 @@ The command-line binary is `$PCBPT_CLI` when set, otherwise the one `cargo build
 builds from this checkout (the profile the test script builds the wheel with).
 """
 
+import _thread
+import contextlib
 import json
 import os
 import pathlib
+import signal
 import subprocess
+import threading
 
 import pytest
 
@@ -42,3 +46,18 @@ def cli() -> pathlib.Path:
 def cornell() -> pcbpt.Scene:
     """Bitterli's Cornell box at 24x20 pixels and 4 samples per pixel."""
     return pcbpt.load(CORNELL, **SMALL)
+
+
+@contextlib.contextmanager
+def interrupted_after(seconds: float):
+    """Ctrl-C (SIGINT's KeyboardInterrupt) on the main thread `seconds` after entering."""
+    # A process started in the background by a shell inherits SIGINT ignored, and then
+    # interrupt_main() does nothing: Python's own handler is installed for the duration.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(seconds, _thread.interrupt_main)
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)

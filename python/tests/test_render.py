@@ -1,17 +1,14 @@
 """Loading and rendering: the images, their statistics, and that they are the command line's."""
 
-import _thread
 import json
 import subprocess
-import signal
-import threading
 import time
 
 import numpy as np
 import pytest
 
 import pcbpt
-from conftest import CORNELL, SMALL
+from conftest import CORNELL, SMALL, interrupted_after
 
 
 def test_integrators_are_the_command_lines():
@@ -96,18 +93,10 @@ def test_a_time_budget_renders_whole_passes(cornell):
 
 def test_keyboard_interrupt_stops_a_render_and_is_raised():
     scene = pcbpt.load(CORNELL, resx=64, resy=64)
-    # A process started in the background by a shell inherits SIGINT ignored, and then
-    # interrupt_main() does nothing: Python's own handler is installed for the test.
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    timer = threading.Timer(0.5, _thread.interrupt_main)
     start = time.monotonic()
-    timer.start()
-    try:
+    with interrupted_after(0.5):
         with pytest.raises(KeyboardInterrupt):
             pcbpt.render(scene, "bdpt", time=60, threads=2)
-    finally:
-        timer.cancel()
-        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - start < 10
     # The scene is free again.
     assert pcbpt.render(scene, spp=1, threads=2).shape == (64, 64, 3)

@@ -5,7 +5,9 @@
 //! `convergence.csv`, one log–log plot per scene (`convergence_SCENE.svg`) and, where the
 //! scene names crops, a comparison figure (`figure_SCENE.png`).
 //!
-//! Paths in the file are relative to the file's own folder.
+//! Paths in the file are relative to the file's own folder. [`run_stoppable`] takes a stop
+//! flag that another thread may set (Python's Ctrl-C): every render gets it, and the
+//! experiment returns the runs done once the render under way has stopped.
 
 use crate::accel::Backend;
 use crate::compare;
@@ -18,6 +20,8 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 mod seeds;
 pub use seeds::Seeds;
@@ -279,18 +283,33 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
 
 /// Runs an experiment file; returns the results and writes the outputs.
 pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunResult>> {
+    run_stoppable(path, output, quiet, &Arc::new(AtomicBool::new(false)))
+}
+
+/// [`run`], stopped when `stop` is set (from another thread): the render in progress ends
+/// after its current pass and is dropped, and the runs done so far are returned, without
+/// the tables and figures of the seed or scene left unfinished.
+pub fn run_stoppable(
+    path: &Path,
+    output: Option<&Path>,
+    quiet: bool,
+    stop: &Arc<AtomicBool>,
+) -> Result<Vec<RunResult>> {
     let f = ExperimentFile::load(path)?;
     let out = f.output_folder(path, output);
     let baseline = f.baseline();
     let Some(seeds) = &f.seeds else {
-        return run_seed(path, &f, f.seed.unwrap_or(0), &out, quiet);
+        return run_seed(path, &f, f.seed.unwrap_or(0), &out, quiet, stop);
     };
     let mut runs = Vec::new();
     for &seed in &seeds.0 {
         if !quiet {
             eprintln!("seed {seed}");
         }
-        runs.push((seed, run_seed(path, &f, seed, &out.join(format!("seed-{seed}")), quiet)?));
+        runs.push((seed, run_seed(path, &f, seed, &out.join(format!("seed-{seed}")), quiet, stop)?));
+        if stop.load(Ordering::SeqCst) {
+            return Ok(runs.into_iter().flat_map(|(_, r)| r).collect());
+        }
     }
     let text = seeds::summary(f.name.as_deref().unwrap_or("experiment"), &runs, &baseline);
     image_io::write_text(&out.join("summary.md"), &text)?;
@@ -300,8 +319,17 @@ pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunRes
     Ok(runs.into_iter().flat_map(|(_, r)| r).collect())
 }
 
-/// Runs every method on every scene with `seed` and writes the outputs into `out`.
-fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool) -> Result<Vec<RunResult>> {
+/// Runs every method on every scene with `seed` and writes the outputs into `out`; returns
+/// early, with the runs done, once `stop` is set.
+fn run_seed(
+    path: &Path,
+    f: &ExperimentFile,
+    seed: u64,
+    out: &Path,
+    quiet: bool,
+    stop: &Arc<AtomicBool>,
+) -> Result<Vec<RunResult>> {
+    let stopped = || stop.load(Ordering::SeqCst);
     let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
     std::fs::create_dir_all(out).map_err(|e| Error::Output { path: out.to_path_buf(), msg: e.to_string() })?;
     let budget = match (f.time, f.spp) {
@@ -315,6 +343,9 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
     };
     let mut results = Vec::new();
     for s in &f.scene {
+        if stopped() {
+            return Ok(results);
+        }
         let defines: Vec<(String, String)> = s.defines.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
         let load = |backend: Backend| -> Result<Scene> {
             let mut scene = Scene::load(
@@ -353,11 +384,15 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
             (None, Some(m), Some(t)) => {
                 let me = f.method.iter().find(|x| &x.name == m).expect("checked on load");
                 let scene = &scenes[&me.backend];
-                let o = options(path, me, Budget::Time(t), seed ^ 0x0005_eed0_f7ef, f.threads)?;
+                let mut o = options(path, me, Budget::Time(t), seed ^ 0x0005_eed0_f7ef, f.threads)?;
+                o.run.stop = Some(stop.clone());
                 if !quiet {
                     eprintln!("{}: reference by {} for {t} s", s.name, me.name);
                 }
                 let r = integrator::render(scene, &o)?;
+                if stopped() {
+                    return Ok(results);
+                }
                 let img = Image::new(r.width, r.height, r.image);
                 image_io::write(&out.join(format!("{}_reference.exr", s.name)), &img)?;
                 img
@@ -366,6 +401,9 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
         };
         let mut images: Vec<(String, Image)> = Vec::new();
         for m in &f.method {
+            if stopped() {
+                return Ok(results);
+            }
             if PEERS.contains(&m.integrator.as_str()) {
                 let Some(t) = f.time else {
                     return Err(usage(path, format!("peer method {} needs a `time` budget", m.name)));
@@ -401,7 +439,11 @@ fn run_seed(path: &Path, f: &ExperimentFile, seed: u64, out: &Path, quiet: bool)
             let scene = &scenes[&m.backend];
             let mut o = options(path, m, budget, seed, f.threads)?;
             o.run.checkpoints = checkpoints.clone();
+            o.run.stop = Some(stop.clone());
             let r: RenderOutput = integrator::render(scene, &o)?;
+            if r.stats.interrupted {
+                return Ok(results);
+            }
             let img = Image::new(r.width, r.height, r.image.clone());
             let metrics = compare::metrics(&reference, &img)?;
             let mut curve = Vec::new();
