@@ -171,7 +171,6 @@ fn merging() -> Vec<Row> {
         row(&CORNELL_PLY, "bpm", 64, "--vcm-radius 0.03 --vcm-alpha 1").must_fail(),
         row(&VEACH_AJAR, "vcm", 128, ""),
         row(&GLASS_CAUSTIC, "vcm", 256, ""),
-        row(&GLASS_CAUSTIC, "bpm", 256, ""),
         row(&FOG_CAUSTIC, "vcm", 64, ""),
     ]
 }
