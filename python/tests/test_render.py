@@ -12,7 +12,9 @@ from conftest import CORNELL, SMALL, interrupted_after
 
 
 def test_integrators_are_the_command_lines():
-    assert pcbpt.integrators() == ["path", "lighttrace", "bdpt", "eorr", "lvc", "pssmlt", "pcbpt", "spcbpt", "memlt"]
+    assert pcbpt.integrators() == [
+        "path", "lighttrace", "bdpt", "eorr", "lvc", "pssmlt", "pcbpt", "spcbpt", "memlt", "vcm", "bpm"
+    ]
 
 
 def test_scene_attributes_are_the_files_after_the_defaults(cornell):
@@ -56,6 +58,8 @@ SAME_AS_CLI = [
     ("bdpt", {"heuristic": "balance", "max_depth": 4}, ["--integrator", "bdpt", "--heuristic", "balance", "--max-depth", "4"]),
     ("lvc", {"light_paths": 300}, ["--integrator", "lvc", "--light-paths", "300"]),
     ("pssmlt", {"two_stage": False}, ["--integrator", "pssmlt", "--two-stage", "false"]),
+    ("vcm", {"vcm_radius": 0.01}, ["--integrator", "vcm", "--vcm-radius", "0.01"]),
+    ("bpm", {"vcm_alpha": 0.9}, ["--integrator", "bpm", "--vcm-alpha", "0.9"]),
 ]
 
 
