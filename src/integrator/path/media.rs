@@ -55,7 +55,7 @@ impl PathTracer {
             if let Some(m) = s.medium {
                 let medium = &scene.media[m as usize];
                 let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t * len);
-                let flight = medium.sample(t_max, sampler.next_1d(), sampler.next_1d());
+                let flight = medium.sample(ray.o, d, t_max, sampler);
                 s.beta *= flight.weight;
                 if s.beta == Rgb::ZERO {
                     break;
