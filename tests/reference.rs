@@ -177,6 +177,12 @@ fn media() -> Vec<Row> {
         row(&FOG_CAUSTIC, "pcbpt", 64, ""),
         row(&FOG_CAUSTIC, "spcbpt", 64, ""),
         chains(&FOG_CAUSTIC, "pssmlt", 64, ""),
+        // A heterogeneous medium: delta tracking in the walks, ratio tracking in the
+        // connections and next-event estimation.
+        row(&SMOKE, "path", 256, ""),
+        row(&SMOKE, "bdpt", 64, ""),
+        row(&SMOKE, "bdpt", 64, "").max_depth(3).must_fail(),
+        row(&SMOKE, "pcbpt", 64, ""),
     ]
 }
 

@@ -1,6 +1,7 @@
 //! The path tracer in scenes with participating media and null surfaces (contract §1 with
-//! Mitsuba's `volpath` for the media): free flights sampled through each homogeneous medium
-//! ([`crate::medium::Medium::sample`]; an absorbing-only medium is crossed analytically),
+//! Mitsuba's `volpath` for the media): free flights sampled through each medium
+//! ([`crate::medium::Medium::sample`]: closed-form in a homogeneous medium, delta tracking in
+//! a heterogeneous one; an absorbing-only medium is crossed with its transmittance),
 //! phase-function sampling at scattering events, next-event estimation from surfaces and
 //! medium points with the transmittance of the shadow ray through the media and null
 //! surfaces on its way ([`Scene::transmittance`]), MIS by the power heuristic between phase
