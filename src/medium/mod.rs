@@ -39,7 +39,8 @@ pub struct Medium {
 #[derive(Clone, Debug)]
 pub enum MediumKind {
     Homogeneous(Homogeneous),
-    Heterogeneous(Heterogeneous),
+    /// Boxed: a grid's placement and majorant outweigh the homogeneous coefficients.
+    Heterogeneous(Box<Heterogeneous>),
 }
 
 /// Where a sampled free flight ends.

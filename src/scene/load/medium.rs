@@ -77,7 +77,7 @@ impl Builder<'_> {
                 };
             }
         };
-        Ok(MediumKind::Heterogeneous(Heterogeneous::new(grid, scale, albedo.volume)))
+        Ok(MediumKind::Heterogeneous(Box::new(Heterogeneous::new(grid, scale, albedo.volume))))
     }
 
     /// Mitsuba 0.6's `method`: `woodcock` is what this renderer does; `simpson` (a quadrature

@@ -80,7 +80,8 @@ impl Builder<'_> {
         let vol = load_vol(&path).map_err(|e| Error::input(&loc, e.to_string()))?;
         self.stats.files.push(path.clone());
         let to_world = node.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
-        let (samples, nearest, bbox) = if node.legacy { legacy_placement(node, &vol)? } else { placement(node, &vol)? };
+        let Placement { samples, nearest, bbox } =
+            if node.legacy { legacy_placement(node, &vol)? } else { placement(node, &vol)? };
         let to_local = match bbox {
             Some((min, max)) => Affine3A::from_scale(Vec3::ONE / (max - min)) * Affine3A::from_translation(-min),
             None => Affine3A::IDENTITY,
@@ -93,9 +94,17 @@ impl Builder<'_> {
     }
 }
 
+/// Where a grid's values sit, how they are looked up, and the box of the volume's own
+/// space the grid fills (the unit cube where `None`).
+struct Placement {
+    samples: Samples,
+    nearest: bool,
+    bbox: Option<(Vec3, Vec3)>,
+}
+
 /// Mitsuba 3's placement of a grid: cell-centred values, `filter_type`, `wrap_mode` and, with
 /// `use_grid_bbox`, the file's box.
-fn placement(node: &Node, vol: &VolFile) -> Result<(Samples, bool, Option<(Vec3, Vec3)>)> {
+fn placement(node: &Node, vol: &VolFile) -> Result<Placement> {
     let nearest = match node.string("filter_type")?.unwrap_or("trilinear") {
         "trilinear" => false,
         "nearest" => true,
@@ -118,16 +127,16 @@ fn placement(node: &Node, vol: &VolFile) -> Result<(Samples, bool, Option<(Vec3,
     // Mitsuba converts colours to spectra unless `raw`; in RGB there is nothing to convert.
     node.boolean_or("raw", false)?;
     let bbox = node.boolean_or("use_grid_bbox", false)?.then_some(vol.bbox);
-    Ok((Samples::CellCentred, nearest, bbox))
+    Ok(Placement { samples: Samples::CellCentred, nearest, bbox })
 }
 
 /// Mitsuba 0.6's placement of a grid: values on the faces of the file's box, or of the box
 /// `min`–`max` given in the scene.
-fn legacy_placement(node: &Node, vol: &VolFile) -> Result<(Samples, bool, Option<(Vec3, Vec3)>)> {
+fn legacy_placement(node: &Node, vol: &VolFile) -> Result<Placement> {
     let min = node.vector("min")?.unwrap_or(vol.bbox.0);
     let max = node.vector("max")?.unwrap_or(vol.bbox.1);
     if !(min.is_finite() && max.is_finite() && max.cmpgt(min).all()) {
         return Err(Error::input(&node.prop_loc("max"), format!("the volume's box {min} – {max} is empty")));
     }
-    Ok((Samples::Corners, false, Some((min, max))))
+    Ok(Placement { samples: Samples::Corners, nearest: false, bbox: Some((min, max)) })
 }
