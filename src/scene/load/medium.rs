@@ -57,6 +57,13 @@ impl Builder<'_> {
         let extinction = if node.legacy { "density" } else { "sigma_t" };
         if node.legacy {
             self.legacy_method(node)?;
+            let nested = self.doc.children(id, "volume").any(|c| c.name.as_deref() == Some("density"));
+            if !nested && node.prop("density").is_none() {
+                return Err(Error::input(
+                    &node.loc,
+                    "a heterogeneous medium needs a \"density\" volume (as Mitsuba 0.6 did)",
+                ));
+            }
         }
         let sigma_t = self.medium_volume(id, extinction, Rgb::ONE)?;
         let albedo = self.medium_volume(id, "albedo", Rgb::splat(0.75))?;
