@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Fuzzes the scene loaders with cargo-fuzz (libFuzzer + AddressSanitizer, nightly toolchain):
-#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET...]     (default 600 s; scene_xml obj ply serialized hair)
+#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET...]     (default 600 s; scene_xml obj ply serialized hair vol)
 # Each target starts from fuzz/seeds/<target> (the project's scenes and meshes and the
 # bad-input catalogue) and keeps its growing corpus in fuzz/corpus/<target> (not committed).
 # A crash stops the target and leaves the input in fuzz/artifacts/<target>/; copy it to
@@ -9,7 +9,7 @@ set -euo pipefail
 secs=${1:-600}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(scene_xml obj ply serialized hair)
+[ ${#targets[@]} -gt 0 ] || targets=(scene_xml obj ply serialized hair vol)
 cd "$(dirname "$0")/../fuzz"
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz
 rustup toolchain list | grep -q nightly || { echo "cargo fuzz needs a nightly toolchain (rustup toolchain install nightly)" >&2; exit 1; }

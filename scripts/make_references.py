@@ -59,6 +59,9 @@ REFERENCES = {
     # Fog through the open front of a box, a glass sphere, a small light: Mitsuba 3's
     # volpath (the scene's own integrator).
     "fog-caustic": ("scenes/fog-caustic/scene.xml", {"resx": 64, "resy": 64}, 16384, None),
+    # A plume of smoke (a heterogeneous medium over scenes/smoke/smoke.vol) on a floor under
+    # a square light: Mitsuba 3's volpath (the scene's own integrator).
+    "smoke": ("scenes/smoke/scene.xml", {"resx": 64, "resy": 64}, 16384, None),
 }
 
 # Settings the scene file gives, recorded in the JSON beside the reference.

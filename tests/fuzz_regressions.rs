@@ -10,6 +10,7 @@ use pcbpt::math::Transform;
 use pcbpt::scene::hair::{Hair, HairParams, hair_from_bytes};
 use pcbpt::scene::mesh::{TriangleMesh, obj_from_bytes, ply_from_bytes};
 use pcbpt::scene::serialized::serialized_from_bytes;
+use pcbpt::scene::vol::vol_from_bytes;
 use pcbpt::scene::{LoadOptions, Scene};
 use pcbpt::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -60,18 +61,30 @@ fn hair(data: &[u8], path: &Path) -> Result<()> {
     built.map(|_| ())
 }
 
+/// What the vol target checks: the values fill the resolution and channels (one or three)
+/// within a finite, non-empty box.
+fn vol(data: &[u8], path: &Path) -> Result<()> {
+    let vol = vol_from_bytes(data).map_err(|e| Error::in_file(path, e))?;
+    assert!(vol.channels == 1 || vol.channels == 3);
+    assert_eq!(vol.data.len(), vol.res.iter().product::<usize>() * vol.channels);
+    assert!(vol.bbox.0.is_finite() && vol.bbox.1.is_finite() && vol.bbox.1.cmpgt(vol.bbox.0).all());
+    Ok(())
+}
+
 fn run(target: &str, input: &Path) -> Result<()> {
     let data = std::fs::read(input).unwrap();
     let name = Path::new(match target {
         "obj" => "fuzz-input.obj",
         "serialized" => "fuzz-input.serialized",
         "hair" => "fuzz-input.mitshair",
+        "vol" => "fuzz-input.vol",
         _ => "fuzz-input.ply",
     });
     let r = match target {
         "scene_xml" => return scene(&data),
         "obj" => mesh(obj_from_bytes(&data, name), name),
         "hair" => hair(&data, name),
+        "vol" => vol(&data, name),
         // Shape 1 as well, as the target reads it (through the dictionary at the end).
         "serialized" => match serialized_from_bytes(&data, 1, name) {
             Err(e) if !e.to_string().contains(name.to_str().unwrap()) => panic!("{}: {e}", input.display()),
@@ -87,7 +100,7 @@ fn run(target: &str, input: &Path) -> Result<()> {
 
 #[test]
 fn seeds_load_or_fail_cleanly() {
-    for target in ["scene_xml", "obj", "ply", "serialized", "hair"] {
+    for target in ["scene_xml", "obj", "ply", "serialized", "hair", "vol"] {
         let seeds = inputs(&format!("fuzz/seeds/{target}"));
         assert!(seeds.len() >= 10, "{target}: {} seeds", seeds.len());
         let loaded = seeds.iter().filter(|s| run(target, s).is_ok()).count();
@@ -100,7 +113,7 @@ fn seeds_load_or_fail_cleanly() {
 #[test]
 fn fuzz_regressions_give_their_errors() {
     let mut count = 0;
-    for target in ["scene_xml", "obj", "ply", "serialized", "hair"] {
+    for target in ["scene_xml", "obj", "ply", "serialized", "hair", "vol"] {
         // A target that never crashed has no regression folder (git keeps no empty folders).
         if !root().join("fuzz/regressions").join(target).is_dir() {
             continue;

@@ -193,6 +193,12 @@ fn media() -> Vec<Row> {
         chains(&FOG_CAUSTIC, "pssmlt", 64, ""),
         chains(&FOG_CAUSTIC, "memlt", 256, "--direct-samples 256"),
         chains(&FOG_CAUSTIC, "memlt", 128, "--direct-samples -1"),
+        // A heterogeneous medium: delta tracking in the walks, ratio tracking in the
+        // connections and next-event estimation.
+        row(&SMOKE, "path", 256, ""),
+        row(&SMOKE, "bdpt", 64, ""),
+        row(&SMOKE, "bdpt", 64, "").max_depth(3).must_fail(),
+        row(&SMOKE, "pcbpt", 64, ""),
     ]
 }
 

@@ -1,32 +1,46 @@
-//! Participating media: Mitsuba's `homogeneous` medium with its phase function
+//! Participating media: Mitsuba's `homogeneous` ([`homogeneous`]) and `heterogeneous`
+//! ([`heterogeneous`], over the volumes of [`grid`]) media with their phase functions
 //! ([`phase`]), and the interfaces shapes put between media.
 //!
-//! A medium is described by its absorption and scattering coefficients per colour channel
-//! (per unit length of the scene): light travelling a distance `d` through it keeps the
-//! fraction `exp(-σt d)` (σt = σa + σs), and a fraction σs of what is lost per unit length is
-//! scattered into other directions by the phase function.
+//! A medium is described by its extinction σt and albedo (or absorption and scattering
+//! coefficients σa, σs, with σt = σa + σs) per colour channel, per unit length of the scene:
+//! light travelling through it keeps the fraction `exp(-∫σt)`, and a fraction σs of what is
+//! lost per unit length is scattered into other directions by the phase function.
+//! [`Medium`] gives the integrators what they ask of every kind alike: free flights
+//! ([`Medium::sample`]) and the transmittance of a segment ([`Medium::transmittance`]).
 //!
-//! Distances are sampled as Mitsuba 0.6's `balance` strategy does: a colour channel picked
-//! uniformly, then an exponential distance with that channel's σt; the density is the
-//! average over the channels (one-sample MIS between them), so no channel's weight is
-//! unbounded. A medium that does not scatter (σs = 0) is never sampled: its transmittance
-//! is applied analytically.
+//! A heterogeneous medium's transmittance is an unbiased random estimate (ratio tracking).
+//! Its random numbers come from a stream keyed by the segment itself (its origin,
+//! direction and length), so that a shadow ray needs no sampler and the same segment always
+//! gets the same estimate (as a path's Metropolis mutations expect of its contribution).
 
+pub mod grid;
+pub mod heterogeneous;
+pub mod homogeneous;
 pub mod phase;
 
 use crate::math::Rgb;
+use crate::sampling::{Random, Sampler};
 use glam::Vec3;
+pub use heterogeneous::Heterogeneous;
+pub use homogeneous::Homogeneous;
 pub use phase::Phase;
 
-/// A homogeneous medium.
+/// A participating medium: how it attenuates and scatters, and its phase function.
 #[derive(Clone, Debug)]
 pub struct Medium {
-    pub sigma_a: Rgb,
-    pub sigma_s: Rgb,
-    pub sigma_t: Rgb,
+    pub kind: MediumKind,
     pub phase: Phase,
-    /// The file's `id`, or `homogeneous`.
+    /// The file's `id`, or the plugin's name.
     pub name: String,
+}
+
+/// The kinds of media.
+#[derive(Clone, Debug)]
+pub enum MediumKind {
+    Homogeneous(Homogeneous),
+    /// Boxed: a grid's placement and majorant outweigh the homogeneous coefficients.
+    Heterogeneous(Box<Heterogeneous>),
 }
 
 /// Where a sampled free flight ends.
@@ -42,55 +56,58 @@ pub struct MediumSample {
 }
 
 impl Medium {
+    /// A homogeneous medium of absorption `sigma_a` and scattering `sigma_s`.
     pub fn new(sigma_a: Rgb, sigma_s: Rgb, phase: Phase, name: String) -> Medium {
-        Medium { sigma_a, sigma_s, sigma_t: sigma_a + sigma_s, phase, name }
+        Medium { kind: MediumKind::Homogeneous(Homogeneous::new(sigma_a, sigma_s)), phase, name }
+    }
+
+    /// The medium's coefficients when it is homogeneous.
+    #[inline]
+    pub fn homogeneous(&self) -> Option<&Homogeneous> {
+        match &self.kind {
+            MediumKind::Homogeneous(m) => Some(m),
+            MediumKind::Heterogeneous(_) => None,
+        }
     }
 
     /// Whether light scatters in the medium (otherwise it only absorbs).
     #[inline]
     pub fn scatters(&self) -> bool {
-        self.sigma_s.max_element() > 0.0
+        match &self.kind {
+            MediumKind::Homogeneous(m) => m.scatters(),
+            MediumKind::Heterogeneous(m) => m.scatters(),
+        }
     }
 
-    /// The fraction of light that crosses a distance `d`.
+    /// The fraction of light that crosses the segment from `o` along the unit direction `d`
+    /// to the distance `t_max` (infinite for a ray that leaves the scene).
     #[inline]
-    pub fn transmittance(&self, d: f32) -> Rgb {
-        let t = (-self.sigma_t * d).exp();
-        // exp(-0 · ∞) is NaN: a clear channel over an endless distance keeps everything.
-        Vec3::select(self.sigma_t.cmpeq(Vec3::ZERO), Vec3::ONE, t)
+    pub fn transmittance(&self, o: Vec3, d: Vec3, t_max: f32) -> Rgb {
+        match &self.kind {
+            MediumKind::Homogeneous(m) => m.transmittance(t_max),
+            MediumKind::Heterogeneous(m) => Rgb::splat(m.transmittance(o, d, t_max, &mut segment_stream(o, d, t_max))),
+        }
     }
 
-    /// Samples a free flight along a segment of length `t_max` (infinite for a ray that
-    /// leaves the scene) from the uniform numbers `u_channel` and `u`.
-    pub fn sample(&self, t_max: f32, u_channel: f32, u: f32) -> MediumSample {
-        if !self.scatters() {
-            return MediumSample { t: t_max, scattered: false, weight: self.transmittance(t_max) };
+    /// Samples a free flight along the segment from `o` along the unit direction `d` to the
+    /// distance `t_max` (infinite for a ray that leaves the scene). A homogeneous medium
+    /// takes two numbers from `rng`; a heterogeneous one as many as its tracking needs.
+    #[inline]
+    pub fn sample<R: Random>(&self, o: Vec3, d: Vec3, t_max: f32, rng: &mut R) -> MediumSample {
+        match &self.kind {
+            MediumKind::Homogeneous(m) => {
+                let u_channel = rng.next_1d();
+                m.sample(t_max, u_channel, rng.next_1d())
+            }
+            MediumKind::Heterogeneous(m) => m.sample(o, d, t_max, rng),
         }
-        let channel = ((u_channel * 3.0) as usize).min(2);
-        let density = self.sigma_t[channel];
-        let t = if density > 0.0 { -(1.0 - u).ln() / density } else { f32::INFINITY };
-        let scattered = t < t_max;
-        let t = if scattered { t } else { t_max };
-        let tr = self.transmittance(t);
-        let (pdf, weight) = if scattered {
-            let pdf = (self.sigma_t * tr).element_sum() / 3.0;
-            (pdf, self.sigma_s * tr)
-        } else {
-            (tr.element_sum() / 3.0, tr)
-        };
-        let weight = if pdf > 0.0 { weight / pdf } else { Rgb::ZERO };
-        MediumSample { t, scattered, weight }
     }
+}
 
-    /// The density of sampling a scattering event at `t` (per unit length), and the
-    /// probability of flying past `t` (what [`Medium::sample`] gives its two outcomes).
-    pub fn densities(&self, t: f32) -> (f32, f32) {
-        if !self.scatters() {
-            return (0.0, 1.0);
-        }
-        let tr = self.transmittance(t);
-        ((self.sigma_t * tr).element_sum() / 3.0, tr.element_sum() / 3.0)
-    }
+/// The random stream of a segment's transmittance estimate, keyed by the segment.
+fn segment_stream(o: Vec3, d: Vec3, t_max: f32) -> Sampler {
+    let bits = |a: f32, b: f32| (a.to_bits() as u64) << 32 | b.to_bits() as u64;
+    Sampler::new(&[0x6d65_6469_756d, bits(o.x, o.y), bits(o.z, d.x), bits(d.y, d.z), t_max.to_bits() as u64])
 }
 
 /// The media on the two sides of a shape's surface (Mitsuba's `interior` and `exterior`):
@@ -113,74 +130,6 @@ impl MediumInterface {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::Sampler;
-
-    fn fog() -> Medium {
-        Medium::new(Rgb::new(0.1, 0.3, 0.0), Rgb::new(0.5, 0.2, 0.9), Phase::Isotropic, "fog".into())
-    }
-
-    /// The expected weight of flying past `t_max` plus the integral of the scattering
-    /// weights equals what the path's throughput must keep: `T(t_max)` for the flights that
-    /// pass, and `∫ σs T(t) f(t) dt` for the events, estimated for a test function `f`.
-    #[test]
-    fn free_flights_are_unbiased() {
-        let m = fog();
-        let t_max = 2.5f32;
-        let f = |t: f32| 1.0 + t * t;
-        let mut rng = Sampler::new(&[11]);
-        let n = 400_000;
-        let (mut passed, mut scattered) = (Rgb::ZERO, Rgb::ZERO);
-        let (mut passed2, mut scattered2) = (Rgb::ZERO, Rgb::ZERO);
-        for _ in 0..n {
-            let s = m.sample(t_max, rng.next_1d(), rng.next_1d());
-            if s.scattered {
-                let v = s.weight * f(s.t);
-                scattered += v;
-                scattered2 += v * v;
-            } else {
-                assert_eq!(s.t, t_max);
-                passed += s.weight;
-                passed2 += s.weight * s.weight;
-            }
-        }
-        let n = n as f32;
-        // ∫0^tmax σs e^{-σt t} (1 + t²) dt, per channel, by the midpoint rule.
-        let steps = 20_000;
-        let mut exact = Rgb::ZERO;
-        for i in 0..steps {
-            let t = (i as f32 + 0.5) * t_max / steps as f32;
-            exact += m.sigma_s * m.transmittance(t) * f(t) * (t_max / steps as f32);
-        }
-        for c in 0..3 {
-            let (mean, var) = (scattered[c] / n, scattered2[c] / n - (scattered[c] / n).powi(2));
-            assert!((mean - exact[c]).abs() < 4.0 * (var / n).sqrt() + 1e-4, "events {c}: {mean} vs {}", exact[c]);
-            let (mean, var) = (passed[c] / n, passed2[c] / n - (passed[c] / n).powi(2));
-            let tr = m.transmittance(t_max)[c];
-            assert!((mean - tr).abs() < 4.0 * (var / n).sqrt() + 1e-4, "passes {c}: {mean} vs {tr}");
-        }
-    }
-
-    #[test]
-    fn weights_are_the_ratios_of_the_densities() {
-        let m = fog();
-        let mut rng = Sampler::new(&[12]);
-        for _ in 0..1000 {
-            let s = m.sample(1.7, rng.next_1d(), rng.next_1d());
-            let (p_event, p_pass) = m.densities(s.t);
-            let tr = m.transmittance(s.t);
-            let expected = if s.scattered { m.sigma_s * tr / p_event } else { tr / p_pass };
-            assert!((s.weight - expected).abs().max_element() <= 1e-4 * expected.max_element());
-        }
-    }
-
-    #[test]
-    fn absorbing_media_are_never_sampled() {
-        let m = Medium::new(Rgb::new(1.0, 2.0, 0.0), Rgb::ZERO, Phase::Isotropic, "ink".into());
-        let s = m.sample(0.5, 0.3, 0.999);
-        assert!(!s.scattered);
-        assert_eq!(s.weight, Rgb::new((-0.5f32).exp(), (-1.0f32).exp(), 1.0));
-        assert_eq!(m.transmittance(f32::INFINITY), Rgb::new(0.0, 0.0, 1.0));
-    }
 
     #[test]
     fn the_normal_side_is_the_exterior() {

@@ -33,6 +33,7 @@ mod prefetch;
 mod sensor;
 mod sunsky;
 mod texture;
+mod volume;
 
 /// The largest image this renderer accepts (pixels).
 pub const MAX_PIXELS: u64 = 1 << 28;

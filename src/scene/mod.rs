@@ -8,6 +8,7 @@ pub mod ply;
 pub mod progress;
 pub mod serialized;
 pub mod shape;
+pub mod vol;
 pub mod xml;
 
 use crate::accel::{Accel, Backend, BuildOptions, Ray};
@@ -201,12 +202,13 @@ impl Scene {
         for _ in 0..MAX_NULL_CROSSINGS {
             let hit = self.intersect(&ray);
             if let Some(m) = medium {
+                let len = ray.d.length();
                 let d = match &hit {
-                    Some(si) => si.t * ray.d.length(),
+                    Some(si) => si.t * len,
                     None if infinite => f32::INFINITY,
-                    None => ray.tmax * ray.d.length(),
+                    None => ray.tmax * len,
                 };
-                tr *= self.media[m as usize].transmittance(d);
+                tr *= self.media[m as usize].transmittance(ray.o, ray.d / len, d);
             }
             let Some(si) = hit else {
                 return tr;

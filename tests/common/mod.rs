@@ -236,6 +236,19 @@ pub const FOG_CAUSTIC: Case = Case {
     mean_tol: 0.01,
 };
 
+/// A plume of smoke (a heterogeneous medium over a 32³ grid) on a floor under a square
+/// light (Mitsuba 3's `volpath`).
+pub const SMOKE: Case = Case {
+    name: "smoke",
+    scene: "scenes/smoke/scene.xml",
+    defines: &[("resx", "64"), ("resy", "64")],
+    reference: "smoke.exr",
+    ref_noise: Some(1.13e-5),
+    mean_cutoff: None,
+    resolution: None,
+    mean_tol: 0.01,
+};
+
 pub const SPOT_POINT: Case = Case {
     name: "spot-point",
     scene: "scenes/spot-point/scene.xml",

@@ -65,7 +65,7 @@ fn random_walk<R: Random>(
         if let Some(m) = medium {
             let len = ray.d.length();
             let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t * len);
-            let flight = scene.media[m as usize].sample(t_max, rng.next_1d(), rng.next_1d());
+            let flight = scene.media[m as usize].sample(ray.o, ray.d / len, t_max, rng);
             beta *= flight.weight;
             rr_beta *= flight.weight;
             if beta == Rgb::ZERO || !beta.is_finite() {
@@ -307,7 +307,7 @@ pub fn light_subpath<R: Random>(
         y0.medium = light_medium(scene, l, &y0, ray.d);
         // Light from infinity crosses all of a medium that nothing bounds.
         if let (true, Some(m)) = (y0.infinite, y0.medium) {
-            beta *= scene.media[m as usize].transmittance(f32::INFINITY);
+            beta *= scene.media[m as usize].transmittance(ray.o, -ray.d.normalize(), f32::INFINITY);
         }
     }
     path.push(y0);

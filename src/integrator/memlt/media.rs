@@ -4,8 +4,9 @@
 //! factors of the densities with which a walk from either end reaches the other.
 //!
 //! The chains' acceptance needs the exact density of every proposal, so the walks sample
-//! free flights as [`crate::medium::Medium::sample`] does and the densities take
-//! [`crate::medium::Medium::densities`]: a walk from `a` reaches a surface vertex `b` by
+//! free flights as [`Homogeneous::sample`] does and the densities take
+//! [`Homogeneous::densities`]; heterogeneous media, whose delta tracking has no closed-form
+//! density, are refused ([`check`]). A walk from `a` reaches a surface vertex `b` by
 //! flying past every stretch of the edge (one per medium between null surfaces), and a
 //! medium vertex by flying past all but the last and scattering at its end. In area (or
 //! volume) measure these factors multiply the solid-angle density and `|cos| / d²` (no
@@ -14,12 +15,33 @@
 
 use crate::accel::Ray;
 use crate::integrator::bidir::{Vertex, VertexKind};
+use crate::error::Error;
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, offset_origin};
+use crate::medium::Homogeneous;
 use crate::sampling::Random;
 use crate::scene::shape::SurfaceInteraction;
 use crate::scene::{MAX_NULL_CROSSINGS, Scene};
 use glam::Vec3;
+
+/// Refuses a scene with a heterogeneous medium, naming it and the integrators that render it.
+pub fn check(scene: &Scene) -> Result<(), Error> {
+    match scene.media.iter().find(|m| m.homogeneous().is_none()) {
+        Some(m) => Err(Error::Usage(format!(
+            "{}: the medium `{}` is heterogeneous, which --integrator memlt does not render (its acceptance needs \
+             the exact density of a free flight); use --integrator path or a bidirectional integrator",
+            scene.path.display(),
+            m.name
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// The coefficients of medium `m` (MEMLT renders homogeneous media alone: [`check`]).
+#[inline]
+pub fn homogeneous(scene: &Scene, m: u32) -> &Homogeneous {
+    scene.media[m as usize].homogeneous().expect("MEMLT renders homogeneous media alone")
+}
 
 /// Where a walk's ray ends.
 pub enum Stop {
@@ -47,11 +69,12 @@ pub fn advance<R: Random>(
         counters.extension_rays += 1;
         let hit = scene.intersect(ray);
         if let Some(m) = *medium
-            && scene.media[m as usize].scatters()
+            && homogeneous(scene, m).scatters()
         {
             let len = ray.d.length();
             let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t * len);
-            let flight = scene.media[m as usize].sample(t_max, rng.next_1d(), rng.next_1d());
+            let u_channel = rng.next_1d();
+            let flight = homogeneous(scene, m).sample(t_max, u_channel, rng.next_1d());
             if flight.scattered {
                 return Stop::Medium(ray.o + ray.d * (flight.t / len), m);
             }
@@ -99,7 +122,7 @@ pub fn edge(scene: &Scene, a: &Vertex, b: &Vertex) -> Option<Edge> {
         let mut p = 1.0f64;
         for (i, &(m, len)) in stretches.iter().enumerate() {
             let Some(m) = m else { continue };
-            let (scatter, pass) = scene.media[m as usize].densities(len);
+            let (scatter, pass) = homogeneous(scene, m).densities(len);
             // The stretch the walk ends in, at the far vertex.
             let last = if from_first { i + 1 == n } else { i == 0 };
             let far = if from_first { b } else { a };
@@ -110,7 +133,7 @@ pub fn edge(scene: &Scene, a: &Vertex, b: &Vertex) -> Option<Edge> {
     let mut tr = Rgb::ONE;
     for &(m, len) in &stretches {
         if let Some(m) = m {
-            tr *= scene.media[m as usize].transmittance(len);
+            tr *= homogeneous(scene, m).transmittance(len);
         }
     }
     let (from_a, from_b) = (flight(true), flight(false));

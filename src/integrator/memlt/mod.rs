@@ -882,6 +882,7 @@ impl Integrator for MemltOptions {
     const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
+        media::check(scene)?;
         render(scene, opts, self, iterations)
     }
 

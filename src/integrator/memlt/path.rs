@@ -124,8 +124,8 @@ fn scatter(scene: &Scene, v: &[Vertex], i: usize) -> Rgb {
     let (to_camera, _) = towards(x, &v[i + 1]);
     let (to_light, _) = towards(x, &v[i - 1]);
     if x.kind == VertexKind::Medium {
-        let medium = &scene.media[medium_of(x)];
-        return medium.sigma_s * medium.phase.eval(to_camera, to_light);
+        let sigma_s = media::homogeneous(scene, medium_of(x) as u32).sigma_s;
+        return sigma_s * scene.media[medium_of(x)].phase.eval(to_camera, to_light);
     }
     let bsdf = x.bsdf(scene);
     let (lo, li) = (x.frame.to_local(to_camera), x.frame.to_local(to_light));

@@ -97,7 +97,7 @@ fn next_surface(
         let hit = scene.intersect(ray);
         if let Some(m) = *medium {
             let d = hit.as_ref().map_or(f32::INFINITY, |si| si.t * ray.d.length());
-            *beta *= scene.media[m as usize].transmittance(d);
+            *beta *= crate::integrator::memlt::media::homogeneous(scene, m).transmittance(d);
         }
         let si = hit?;
         if !scene.bsdf(&si).is_null() {

@@ -1,6 +1,7 @@
 //! The path tracer in scenes with participating media and null surfaces (contract §1 with
-//! Mitsuba's `volpath` for the media): free flights sampled through each homogeneous medium
-//! ([`crate::medium::Medium::sample`]; an absorbing-only medium is crossed analytically),
+//! Mitsuba's `volpath` for the media): free flights sampled through each medium
+//! ([`crate::medium::Medium::sample`]: closed-form in a homogeneous medium, delta tracking in
+//! a heterogeneous one; an absorbing-only medium is crossed with its transmittance),
 //! phase-function sampling at scattering events, next-event estimation from surfaces and
 //! medium points with the transmittance of the shadow ray through the media and null
 //! surfaces on its way ([`Scene::transmittance`]), MIS by the power heuristic between phase
@@ -55,7 +56,7 @@ impl PathTracer {
             if let Some(m) = s.medium {
                 let medium = &scene.media[m as usize];
                 let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t * len);
-                let flight = medium.sample(t_max, sampler.next_1d(), sampler.next_1d());
+                let flight = medium.sample(ray.o, d, t_max, sampler);
                 s.beta *= flight.weight;
                 if s.beta == Rgb::ZERO {
                     break;

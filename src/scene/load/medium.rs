@@ -1,16 +1,26 @@
-//! Participating media: Mitsuba's `homogeneous` medium and its `isotropic` and `hg` phase
-//! functions, declared at the top of a file (with an `id`) or nested in a shape (as its
-//! `interior` or `exterior`) or in the sensor.
+//! Participating media: Mitsuba's `homogeneous` and `heterogeneous` media and their
+//! `isotropic` and `hg` phase functions, declared at the top of a file (with an `id`) or
+//! nested in a shape (as its `interior` or `exterior`) or in the sensor.
 //!
-//! Coefficients are read as the file's version reads them: Mitsuba 3's `sigma_t` (by
-//! default one) and `albedo` (by default 0.75); Mitsuba 0.5/0.6's `sigmaA` and `sigmaS`, or
-//! `sigmaT` and `albedo`, each pair given whole (Mitsuba 0.6 filled a missing one from its
-//! `Skin1` preset, which this renderer does not have). Both versions take a `scale`.
+//! Homogeneous coefficients are read as the file's version reads them: Mitsuba 3's
+//! `sigma_t` (by default one) and `albedo` (by default 0.75); Mitsuba 0.5/0.6's `sigmaA` and
+//! `sigmaS`, or `sigmaT` and `albedo`, each pair given whole (Mitsuba 0.6 filled a missing
+//! one from its `Skin1` preset, which this renderer does not have). Both versions take a
+//! `scale`.
+//!
+//! A heterogeneous medium's extinction is a one-channel grid volume (`load/volume.rs`):
+//! Mitsuba 3's `sigma_t`, Mitsuba 0.6's `density`, times `scale`; its `albedo` a constant
+//! or a grid of one or three channels. Mitsuba 0.6's `method` (`woodcock`, or `simpson`
+//! with its `stepSize`) is read as this renderer's delta and ratio tracking, which converge
+//! to what either gave. A heterogeneous medium whose extinction and albedo are both
+//! constants is a homogeneous one.
 
 use super::Builder;
+use super::volume::ReadVolume;
 use crate::error::{Error, Result};
 use crate::math::Rgb;
-use crate::medium::{Medium, MediumInterface, Phase};
+use crate::medium::grid::Volume;
+use crate::medium::{Heterogeneous, Homogeneous, Medium, MediumInterface, MediumKind, Phase};
 use crate::scene::xml::{Node, NodeId};
 
 impl Builder<'_> {
@@ -20,24 +30,83 @@ impl Builder<'_> {
             return Ok(m);
         }
         let node = self.node(id);
-        if node.plugin != "homogeneous" {
-            return Err(self.unknown_plugin(id, &["homogeneous"]));
-        }
-        let (sigma_a, sigma_s) = if node.legacy { legacy_coefficients(node)? } else { coefficients(node)? };
-        let scale = node.float_or("scale", 1.0)?;
-        if !(scale.is_finite() && scale >= 0.0) {
-            return Err(Error::input(&node.prop_loc("scale"), format!("medium scale {scale} must be finite and ≥ 0")));
-        }
+        let kind = match node.plugin.as_str() {
+            "homogeneous" => {
+                let (sigma_a, sigma_s) = if node.legacy { legacy_coefficients(node)? } else { coefficients(node)? };
+                let scale = scale(node)?;
+                MediumKind::Homogeneous(Homogeneous::new(sigma_a * scale, sigma_s * scale))
+            }
+            "heterogeneous" => self.heterogeneous(id)?,
+            _ => return Err(self.unknown_plugin(id, &["homogeneous", "heterogeneous"])),
+        };
         let phase = match self.single_child(id, "phase", "a medium")? {
             Some(p) => self.phase(p)?,
             None => Phase::Isotropic,
         };
         let name = node.id.clone().unwrap_or_else(|| node.plugin.clone());
         self.check_unused(id)?;
-        self.media.push(Medium::new(sigma_a * scale, sigma_s * scale, phase, name));
+        self.media.push(Medium { kind, phase, name });
         let m = (self.media.len() - 1) as u32;
         self.medium_ids.insert(id, m);
         Ok(m)
+    }
+
+    /// A `heterogeneous` medium's extinction grid, albedo and scale.
+    fn heterogeneous(&mut self, id: NodeId) -> Result<MediumKind> {
+        let node = self.node(id);
+        let extinction = if node.legacy { "density" } else { "sigma_t" };
+        if node.legacy {
+            self.legacy_method(node)?;
+            let nested = self.doc.children(id, "volume").any(|c| c.name.as_deref() == Some("density"));
+            if !nested && node.prop("density").is_none() {
+                return Err(Error::input(
+                    &node.loc,
+                    "a heterogeneous medium needs a \"density\" volume (as Mitsuba 0.6 did)",
+                ));
+            }
+        }
+        let sigma_t = self.medium_volume(id, extinction, Rgb::ONE)?;
+        let albedo = self.medium_volume(id, "albedo", Rgb::splat(0.75))?;
+        let scale = scale(node)?;
+        check_albedo(&albedo)?;
+        check_extinction(&sigma_t, extinction)?;
+        let grid = match sigma_t.volume {
+            Volume::Grid(grid) => grid,
+            Volume::Constant(st) => {
+                let st = non_negative(node, extinction, st)?;
+                return match albedo.volume {
+                    Volume::Constant(al) => {
+                        Ok(MediumKind::Homogeneous(Homogeneous::new(st * (Rgb::ONE - al) * scale, st * al * scale)))
+                    }
+                    Volume::Grid(_) => Err(albedo.error(format!(
+                        "a heterogeneous medium with a grid albedo needs a grid \"{extinction}\" too (the medium fills that grid's box)"
+                    ))),
+                };
+            }
+        };
+        Ok(MediumKind::Heterogeneous(Box::new(Heterogeneous::new(grid, scale, albedo.volume))))
+    }
+
+    /// Mitsuba 0.6's `method`: `woodcock` is what this renderer does; `simpson` (a quadrature
+    /// of step `stepSize`) converges to the same image, with a warning.
+    fn legacy_method(&mut self, node: &Node) -> Result<()> {
+        match node.string("method")?.unwrap_or("woodcock") {
+            "woodcock" => {}
+            "simpson" => {
+                node.float("step_size")?;
+                self.stats.warnings.push(format!(
+                    "{}: the heterogeneous medium's method \"simpson\" (a quadrature of stepSize) is rendered by delta and ratio tracking, unbiased estimators of the same transmittance",
+                    node.prop_loc("method")
+                ));
+            }
+            other => {
+                return Err(Error::input(
+                    &node.prop_loc("method"),
+                    format!("unknown heterogeneous medium method \"{other}\" (woodcock or simpson)"),
+                ));
+            }
+        }
+        Ok(())
     }
 
     fn phase(&mut self, id: NodeId) -> Result<Phase> {
@@ -94,6 +163,45 @@ impl Builder<'_> {
             Some(m) => Ok(Some(self.medium(m)?)),
             None => Ok(None),
         }
+    }
+}
+
+/// A medium's `scale`: finite and non-negative.
+fn scale(node: &Node) -> Result<f32> {
+    let scale = node.float_or("scale", 1.0)?;
+    if !(scale.is_finite() && scale >= 0.0) {
+        return Err(Error::input(&node.prop_loc("scale"), format!("medium scale {scale} must be finite and ≥ 0")));
+    }
+    Ok(scale)
+}
+
+/// A heterogeneous medium's extinction grid, if it is one: one channel of finite,
+/// non-negative values.
+fn check_extinction(read: &ReadVolume, name: &str) -> Result<()> {
+    let Volume::Grid(grid) = &read.volume else { return Ok(()) };
+    if grid.channels() != 1 {
+        return Err(read.error(format!(
+            "the \"{name}\" grid has {} channels: extinction is read from one channel (coloured extinction is not supported)",
+            grid.channels()
+        )));
+    }
+    if let Some((i, v)) = grid.values().iter().enumerate().find(|(_, v)| !(v.is_finite() && **v >= 0.0)) {
+        return Err(read.error(format!("the \"{name}\" grid's value {v} (at index {i}) must be finite and ≥ 0")));
+    }
+    Ok(())
+}
+
+/// A heterogeneous medium's albedo: values in [0, 1], one channel or three.
+fn check_albedo(read: &ReadVolume) -> Result<()> {
+    let bad = match &read.volume {
+        Volume::Constant(v) => {
+            (!(v.is_finite() && v.min_element() >= 0.0 && v.max_element() <= 1.0)).then(|| v.to_string())
+        }
+        Volume::Grid(g) => g.values().iter().find(|v| !(0.0..=1.0).contains(*v)).map(|v| v.to_string()),
+    };
+    match bad {
+        Some(v) => Err(read.error(format!("medium albedo {v} must lie in [0, 1]"))),
+        None => Ok(()),
     }
 }
 
