@@ -333,9 +333,8 @@ fn memlt_refuses_heterogeneous_media() {
         <volume type="gridvolume" name="sigma_t"><string name="filename" value="ramp.vol"/></volume>
         <float name="albedo" value="0.8"/></medium>"#;
     let scene = load(&write(&dir, "smoke.xml", &medium_cube(smoke, 40.0, false)), &[], Backend::Embree);
-    let e = integrator::render(&scene, &RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1)))
-        .err()
-        .expect("refused");
+    let e =
+        integrator::render(&scene, &RenderOptions::new(IntegratorKind::Memlt, Budget::Spp(1))).err().expect("refused");
     let text = e.to_string();
     assert!(text.contains("`smoke` is heterogeneous") && text.contains("--integrator path"), "{text}");
     // The bidirectional integrators render it.

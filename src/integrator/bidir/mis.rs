@@ -39,6 +39,25 @@ pub struct PathPdfs<const N: usize = CAP> {
 }
 
 impl<const N: usize> PathPdfs<N> {
+    /// The densities of the path `light ++ reverse(camera)` as its vertices hold them, before
+    /// the patches of the strategy that joins them.
+    pub fn copied(light: &[Vertex], camera: &[Vertex]) -> PathPdfs<N> {
+        let n = light.len() + camera.len();
+        let mut p = PathPdfs::new(n);
+        for (i, v) in light.iter().enumerate() {
+            p.pl[i] = v.pdf_fwd;
+            p.pe[i] = v.pdf_rev;
+            p.delta[i] = v.delta;
+        }
+        for (j, v) in camera.iter().enumerate() {
+            let i = n - 1 - j;
+            p.pe[i] = v.pdf_fwd;
+            p.pl[i] = v.pdf_rev;
+            p.delta[i] = v.delta;
+        }
+        p
+    }
+
     pub fn new(n: usize) -> PathPdfs<N> {
         assert!(n <= N, "a path of {n} vertices does not fit in {N}");
         PathPdfs {
@@ -260,18 +279,7 @@ pub fn path_pdfs<const N: usize>(
     let (s, t) = (light.len(), camera.len());
     let n = s + t;
     debug_assert!(t >= 1 && n <= CAP);
-    let mut p = PathPdfs::new(n);
-    for (i, v) in light.iter().enumerate() {
-        p.pl[i] = v.pdf_fwd;
-        p.pe[i] = v.pdf_rev;
-        p.delta[i] = v.delta;
-    }
-    for (j, v) in camera.iter().enumerate() {
-        let i = n - 1 - j;
-        p.pe[i] = v.pdf_fwd;
-        p.pl[i] = v.pdf_rev;
-        p.delta[i] = v.delta;
-    }
+    let mut p = PathPdfs::copied(light, camera);
     let pt = &camera[t - 1];
     match conn {
         Some(c) => {

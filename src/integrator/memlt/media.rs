@@ -14,8 +14,8 @@
 //! always pass, and its transmittance stays in the contribution.
 
 use crate::accel::Ray;
-use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::error::Error;
+use crate::integrator::bidir::{Vertex, VertexKind};
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, offset_origin};
 use crate::medium::Homogeneous;

@@ -663,6 +663,25 @@ fn chains_beside_the_specular_pass_take_the_paths_with_a_rough_vertex() {
     );
 }
 
+/// A pass's mean luminance and its standard error over four seeds.
+pub(super) fn pass<M: crate::integrator::render_loop::Iterative + Clone>(
+    scene: &Scene,
+    method: M,
+    spp: u32,
+) -> (f64, f64) {
+    let means: Vec<f64> = (0..4)
+        .map(|seed| {
+            let mut o = RunOptions::new(Budget::Spp(spp));
+            (o.threads, o.progress, o.seed) = (2, false, 43 + seed);
+            let out = crate::integrator::render_loop::run(scene, &o, method.clone(), false, None).unwrap();
+            let image = out.film.unwrap().develop();
+            image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / image.len() as f64
+        })
+        .collect();
+    let m = means.iter().sum::<f64>() / 4.0;
+    (m, (means.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / 12.0).sqrt())
+}
+
 #[test]
 fn the_direct_and_specular_passes_and_the_chains_share_every_path() {
     // MEMLT's direct-light pass (paths of one edge and of two through a rough vertex), its
@@ -671,26 +690,11 @@ fn the_direct_and_specular_passes_and_the_chains_share_every_path() {
     // passes' mean luminances plus BDPT's estimate of the chains' part is BDPT's estimate of
     // every path. A specular pass that stops at two edges must be caught.
     use crate::integrator::path::PathTracer;
-    use crate::integrator::render_loop::{Iterative, run};
     use specular_pass::SpecularPass;
     let scene = sky();
     let bdpt = |paths: ChainPaths| bootstrap_estimate(&scene, paths, (41, 1_000_000));
     let chains = ChainPaths { min_edges: 3, dirac_two_edges: false, dirac_only: false };
     let (all, chains) = (bdpt(ChainPaths::ALL), bdpt(chains));
-    // A pass's mean luminance and its standard error over four seeds.
-    fn pass<M: Iterative + Clone>(scene: &Scene, method: M, spp: u32) -> (f64, f64) {
-        let means: Vec<f64> = (0..4)
-            .map(|seed| {
-                let mut o = RunOptions::new(Budget::Spp(spp));
-                (o.threads, o.progress, o.seed) = (2, false, 43 + seed);
-                let out = run(scene, &o, method.clone(), false, None).unwrap();
-                let image = out.film.unwrap().develop();
-                image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / image.len() as f64
-            })
-            .collect();
-        let m = means.iter().sum::<f64>() / 4.0;
-        (m, (means.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / 12.0).sqrt())
-    }
     let direct =
         pass(&scene, PathTracer { max_depth: 2, dirac_emission: false, ..PathTracer::new(&scene.integrator) }, 512);
     let check = |specular: (f64, f64)| {

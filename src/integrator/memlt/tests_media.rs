@@ -3,7 +3,7 @@
 //! balance, and the separate passes and the chains sharing every path, on the fog box
 //! (`scenes/fog-caustic`: fog behind a null front, a glass ball, a small light).
 
-use super::tests::{balance, bootstrap_estimate, generator_matches_bdpt, scene};
+use super::tests::{balance, bootstrap_estimate, generator_matches_bdpt, pass, scene};
 use crate::integrator::bidir::VertexKind;
 use crate::integrator::memlt::*;
 use crate::integrator::metropolis::bootstrap::ChainPaths;
@@ -63,25 +63,11 @@ fn the_direct_and_specular_passes_and_the_chains_share_every_path_in_media() {
     // each edge's transmittance taken) and the chains' paths make the whole image in fog.
     // A direct pass that also takes the paths of three edges must be caught.
     use crate::integrator::path::PathTracer;
-    use crate::integrator::render_loop::{Iterative, run};
     use specular_pass::SpecularPass;
     let scene = fog();
     let bdpt = |paths: ChainPaths| bootstrap_estimate(&scene, paths, (41, 1_000_000));
     let chains = ChainPaths { min_edges: 3, dirac_two_edges: false, dirac_only: false };
     let (all, chains) = (bdpt(ChainPaths::ALL), bdpt(chains));
-    fn pass<M: Iterative + Clone>(scene: &Scene, method: M, spp: u32) -> (f64, f64) {
-        let means: Vec<f64> = (0..4)
-            .map(|seed| {
-                let mut o = RunOptions::new(Budget::Spp(spp));
-                (o.threads, o.progress, o.seed) = (2, false, 43 + seed);
-                let out = run(scene, &o, method.clone(), false, None).unwrap();
-                let image = out.film.unwrap().develop();
-                image.iter().map(|p| luminance(*p) as f64).sum::<f64>() / image.len() as f64
-            })
-            .collect();
-        let m = means.iter().sum::<f64>() / 4.0;
-        (m, (means.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / 12.0).sqrt())
-    }
     let direct_to = |max_depth| PathTracer { max_depth, dirac_emission: false, ..PathTracer::new(&scene.integrator) };
     let specular = pass(&scene, SpecularPass { max_edges: 5 }, 1024);
     let gap = |direct: (f64, f64)| {

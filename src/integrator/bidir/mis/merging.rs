@@ -92,19 +92,7 @@ pub fn merge_pdfs<const N: usize>(scene: &Scene, light: &[Vertex], camera: &[Ver
     let i = light.len() - 1;
     let t = camera.len();
     debug_assert!(i >= 1 && t >= 2);
-    let n = i + t;
-    let mut p = PathPdfs::new(n);
-    for (j, v) in light[..i].iter().enumerate() {
-        p.pl[j] = v.pdf_fwd;
-        p.pe[j] = v.pdf_rev;
-        p.delta[j] = v.delta;
-    }
-    for (j, v) in camera.iter().enumerate() {
-        let k = n - 1 - j;
-        p.pe[k] = v.pdf_fwd;
-        p.pl[k] = v.pdf_rev;
-        p.delta[k] = v.delta;
-    }
+    let mut p = PathPdfs::copied(&light[..i], camera);
     let (y, z) = (&light[i], &camera[t - 1]);
     let prev = &light[i - 1];
     // x_i from the light side: the light walk's density of `y_i`.
