@@ -60,7 +60,16 @@ SAME_AS_CLI = [
     ("pssmlt", {"two_stage": False}, ["--integrator", "pssmlt", "--two-stage", "false"]),
     ("vcm", {"vcm_radius": 0.01}, ["--integrator", "vcm", "--vcm-radius", "0.01"]),
     ("bpm", {"vcm_alpha": 0.9}, ["--integrator", "bpm", "--vcm-alpha", "0.9"]),
+    ("lighttrace", {}, ["--integrator", "lighttrace"]),
+    ("eorr", {}, ["--integrator", "eorr"]),
+    ("pcbpt", {}, ["--integrator", "pcbpt"]),
+    ("spcbpt", {}, ["--integrator", "spcbpt"]),
+    ("memlt", {"bootstrap": 5000}, ["--integrator", "memlt", "--bootstrap", "5000"]),
 ]
+
+
+def test_every_integrator_is_compared_with_the_command_line():
+    assert {i for i, _, _ in SAME_AS_CLI if i} == set(pcbpt.integrators()) - {"path"}
 
 
 @pytest.mark.parametrize("integrator,options,args", SAME_AS_CLI)
