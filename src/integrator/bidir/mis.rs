@@ -41,6 +41,7 @@ pub struct PathPdfs<const N: usize = CAP> {
 impl<const N: usize> PathPdfs<N> {
     /// The densities of the path `light ++ reverse(camera)` as its vertices hold them, before
     /// the patches of the strategy that joins them.
+    #[inline(always)]
     pub fn copied(light: &[Vertex], camera: &[Vertex]) -> PathPdfs<N> {
         let n = light.len() + camera.len();
         let mut p = PathPdfs::new(n);

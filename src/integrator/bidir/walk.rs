@@ -364,10 +364,28 @@ pub fn visible(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -
 /// camera-side vertex `b` of a connection: zero when something blocks the segment, else the
 /// transmittance of the media along it ([`Scene::transmittance`]). The segment is traced
 /// from the end whose medium its walk knows: `b`, unless `b` lies at infinity.
-#[inline]
+#[inline(always)]
 pub fn transmittance(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Counters) -> Rgb {
     counters.shadow_rays += 1;
-    let (a, b) = if scene.volumetric && !b.infinite { (b, a) } else { (a, b) };
+    if !scene.volumetric {
+        // Without media a plain occlusion query, inlined where connections are made.
+        return if scene.occluded(&shadow_segment(a, b).0) { Rgb::ZERO } else { Rgb::ONE };
+    }
+    transmittance_in_media(scene, a, b)
+}
+
+/// [`transmittance`] in a scene with media or null surfaces.
+#[inline(never)]
+fn transmittance_in_media(scene: &Scene, a: &Vertex, b: &Vertex) -> Rgb {
+    let (a, b) = if !b.infinite { (b, a) } else { (a, b) };
+    let (segment, from, to) = shadow_segment(a, b);
+    scene.transmittance_to(&segment, from.medium_towards(scene, to.p - from.p), to.infinite)
+}
+
+/// The shadow ray between `a` and `b`, from the finite one when the other lies at infinity,
+/// with the vertices it starts from and ends at.
+#[inline(always)]
+fn shadow_segment<'v>(a: &'v Vertex, b: &'v Vertex) -> (Ray, &'v Vertex, &'v Vertex) {
     // The segment stops `SHADOW_EPSILON` of its length short of its far end. A vertex at
     // infinity is a point beyond the scene, some scene diameters away: the ray starts at the
     // finite vertex, so that margin lies outside the scene rather than in front of the
@@ -377,10 +395,5 @@ pub fn transmittance(scene: &Scene, a: &Vertex, b: &Vertex, counters: &mut Count
     let d = b.p - a.p;
     let o = if a.ng == Vec3::ZERO { a.p } else { offset_origin(a.p, a.ng, d) };
     let e = if b.ng == Vec3::ZERO { b.p } else { offset_origin(b.p, b.ng, -d) };
-    let segment = Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON);
-    if scene.volumetric {
-        scene.transmittance_to(&segment, a.medium_towards(scene, d), b.infinite)
-    } else {
-        scene.transmittance(&segment, None)
-    }
+    (Ray::segment(o, e - o, 1.0 - crate::math::SHADOW_EPSILON), a, b)
 }
