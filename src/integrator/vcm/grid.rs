@@ -84,7 +84,7 @@ fn bucket(c: IVec3, n: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::{Random, Sampler};
+    use crate::sampling::Sampler;
 
     #[test]
     fn queries_find_exactly_the_points_within_the_radius() {
