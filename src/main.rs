@@ -79,6 +79,18 @@ struct ExperimentArgs {
     /// Output folder (default: the file's `output`, or its name beside it).
     #[arg(short, long)]
     output: Option<PathBuf>,
+    /// Only these of the file's scenes (their names, comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// Only these of the file's methods (their names, comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
+    /// These seeds instead of the file's: a range (1..=9, 1..10) or a list (1,2,5).
+    #[arg(long, value_parser = parse_seeds)]
+    seeds: Option<pcbpt::experiment::Seeds>,
+    /// Seconds per run instead of the file's `time` or `spp`.
+    #[arg(long, value_parser = parse_seconds)]
+    time: Option<f64>,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
@@ -236,6 +248,10 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 }
 
 /// A positive, finite relMSE.
+fn parse_seeds(s: &str) -> Result<pcbpt::experiment::Seeds, String> {
+    pcbpt::experiment::Seeds::parse(s)
+}
+
 fn parse_relmse(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
@@ -344,7 +360,12 @@ fn main() -> ExitCode {
         }
         Command::Compare(a) => compare_images(a),
         Command::Merge(a) => merge_parts(a),
-        Command::Experiment(a) => pcbpt::experiment::run(&a.file, a.output.as_deref(), a.quiet).map(|r| {
+        Command::Experiment(a) => {
+            let selection = pcbpt::experiment::Selection { scenes: a.scenes, methods: a.methods, seeds: a.seeds, time: a.time };
+            let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+            pcbpt::experiment::run_selected(&a.file, &selection, a.output.as_deref(), a.quiet, &stop)
+        }
+        .map(|r| {
             if !a.quiet {
                 eprintln!("{} runs done", r.len());
             }

@@ -295,3 +295,57 @@ reference_time = 30"#;
         assert!(!out.join(name).exists(), "{name} written");
     }
 }
+
+/// `--scenes`, `--methods`, `--seeds` and `--time` run a part of a file: only the runs named,
+/// with the seeds and budget given; a name the file lacks, or a selection without the
+/// baseline, is an error naming the file.
+#[test]
+fn the_command_line_selects_scenes_methods_seeds_and_time() {
+    let d = tempfile::tempdir().unwrap();
+    let scene = "[[scene]]\nname = \"NAME\"\nfile = \"SCENE\"\ndefines = { resx = \"16\", resy = \"16\" }\nreference_method = \"bdpt\"\nreference_time = 0.2\n";
+    let f = write(d.path(), "part.toml", &format!("spp = 2\n{}{}", scene.replace("NAME", "a"), scene.replace("NAME", "b")));
+    let out = d.path().join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pcbpt"))
+        .args(["experiment", f.to_str().unwrap(), "--quiet", "--scenes", "b", "--methods", "path,bdpt"])
+        .args(["--seeds", "7,9", "--time", "0.1", "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for seed in [7, 9] {
+        let table = std::fs::read_to_string(out.join(format!("seed-{seed}/results.md"))).unwrap();
+        assert!(table.contains("| b |") && !table.contains("| a |"), "{table}");
+        assert!(out.join(format!("seed-{seed}/b_path.exr")).exists());
+        assert!(!out.join(format!("seed-{seed}/a_path.exr")).exists());
+    }
+    assert!(!out.join("seed-1").exists());
+    let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(summary.contains("summary over 2 seeds (7, 9)"), "{summary}");
+    // The library takes the same selection: a time budget instead of the file's 2 spp.
+    let selection = experiment::Selection {
+        scenes: vec!["a".into()],
+        methods: vec!["path".into()],
+        seeds: None,
+        time: Some(0.1),
+    };
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let err = experiment::run_selected(&f, &selection, Some(&d.path().join("lib")), true, &stop).unwrap_err();
+    assert!(err.to_string().contains("reference method \"bdpt\" is not a method"), "{err}");
+    let selection = experiment::Selection { methods: vec!["path".into(), "bdpt".into()], ..selection };
+    let runs = experiment::run_selected(&f, &selection, Some(&d.path().join("lib")), true, &stop).unwrap();
+    assert_eq!(runs.len(), 2);
+    assert!(runs.iter().all(|r| r.scene == "a" && r.spp > 2), "{runs:?}");
+    for (args, wanted) in [
+        (&["--scenes", "c"][..], "no scene \"c\" here (its scenes: a, b)"),
+        (&["--methods", "bdpt"][..], "the baseline method \"path\" is not among the selected methods"),
+        (&["--seeds", "3,3"][..], "names seed 3 twice"),
+    ] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_pcbpt"))
+            .args(["experiment", f.to_str().unwrap(), "--quiet"])
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(wanted), "{args:?}: {err}");
+        assert!(args[0] == "--seeds" || err.contains("part.toml"), "{args:?}: {err}");
+    }
+}

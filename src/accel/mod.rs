@@ -13,6 +13,8 @@ pub mod curve;
 #[allow(unsafe_code)]
 pub mod embree;
 pub mod query;
+#[cfg(feature = "ray-record")]
+pub mod record;
 pub use query::{
     AccelError, BuildOptions, BuildQuality, BvhLayout, Cutout, Cutouts, Geometry, Hit, Ray, hit_hash01, keeps_hit,
 };
@@ -91,6 +93,8 @@ impl Accel {
     /// The closest hit along the ray, if any.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        #[cfg(feature = "ray-record")]
+        record::push(record::Query::Intersect(*ray));
         match self {
             Accel::Embree(s) => s.intersect(ray),
             #[cfg(feature = "obvhs")]
@@ -101,6 +105,8 @@ impl Accel {
     /// `true` when anything blocks the ray within `[tmin, tmax]`.
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
+        #[cfg(feature = "ray-record")]
+        record::push(record::Query::Occluded(*ray));
         match self {
             Accel::Embree(s) => s.occluded(ray),
             #[cfg(feature = "obvhs")]
@@ -111,6 +117,8 @@ impl Accel {
     /// Closest hits for a batch of rays; `coherent` tells the backend the rays are similar
     /// (camera rays), which Embree's stream traversal can exploit.
     pub fn intersect_batch(&self, rays: &[Ray], coherent: bool, out: &mut Vec<Option<Hit>>) {
+        #[cfg(feature = "ray-record")]
+        rays.iter().for_each(|r| record::push(record::Query::Intersect(*r)));
         out.clear();
         match self {
             Accel::Embree(s) => s.intersect_batch(rays, coherent, out),
@@ -121,6 +129,8 @@ impl Accel {
 
     /// Occlusion for a batch of rays.
     pub fn occluded_batch(&self, rays: &[Ray], coherent: bool, out: &mut Vec<bool>) {
+        #[cfg(feature = "ray-record")]
+        rays.iter().for_each(|r| record::push(record::Query::Occluded(*r)));
         out.clear();
         match self {
             Accel::Embree(s) => s.occluded_batch(rays, coherent, out),

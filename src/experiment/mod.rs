@@ -176,6 +176,35 @@ impl ExperimentFile {
                 None => usage(path, e.message()),
             }
         })?;
+        f.check(path)?;
+        Ok(f)
+    }
+
+    /// Keeps the scenes and methods `selection` names and replaces the seeds and the budget
+    /// it gives; a name the file does not have is an error listing the file's.
+    pub fn select(&mut self, path: &Path, selection: &Selection) -> Result<()> {
+        keep(path, &mut self.scene, &selection.scenes, "scene", |s| &s.name)?;
+        keep(path, &mut self.method, &selection.methods, "method", |m| &m.name)?;
+        if let Some(seeds) = &selection.seeds {
+            self.seeds = Some(seeds.clone());
+            self.seed = None;
+        }
+        if let Some(t) = selection.time {
+            self.time = Some(t);
+            self.spp = None;
+        }
+        if let Some(b) = &self.baseline
+            && !self.method.iter().any(|m| &m.name == b)
+        {
+            return Err(usage(path, format!("the baseline method \"{b}\" is not among the selected methods")));
+        }
+        self.check(path)
+    }
+
+    /// The checks of a file's contents that [`ExperimentFile::load`] and
+    /// [`ExperimentFile::select`] make.
+    fn check(&self, path: &Path) -> Result<()> {
+        let f = self;
         if f.seed.is_some() && f.seeds.is_some() {
             return Err(usage(path, "give `seed` (one seed) or `seeds` (a list or range), not both"));
         }
@@ -234,8 +263,34 @@ impl ExperimentFile {
                 }
             }
         }
-        Ok(f)
+        Ok(())
     }
+}
+
+/// A part of an experiment file to run, from the command line (`--scenes`, `--methods`,
+/// `--seeds`, `--time`): empty lists keep every scene or method, `None` the file's seeds or
+/// budget.
+#[derive(Clone, Debug, Default)]
+pub struct Selection {
+    pub scenes: Vec<String>,
+    pub methods: Vec<String>,
+    pub seeds: Option<Seeds>,
+    /// Seconds per run, instead of the file's `time` or `spp`.
+    pub time: Option<f64>,
+}
+
+/// Keeps the entries of `items` that `names` names (all of them when `names` is empty), in
+/// the file's order.
+fn keep<T>(path: &Path, items: &mut Vec<T>, names: &[String], what: &str, name: impl Fn(&T) -> &String) -> Result<()> {
+    if names.is_empty() {
+        return Ok(());
+    }
+    if let Some(n) = names.iter().find(|n| !items.iter().any(|i| name(i) == *n)) {
+        let known: Vec<&str> = items.iter().map(|i| name(i).as_str()).collect();
+        return Err(usage(path, format!("no {what} \"{n}\" here (its {what}s: {})", known.join(", "))));
+    }
+    items.retain(|i| names.contains(name(i)));
+    Ok(())
 }
 
 /// The command-line arguments a method's options stand for (`key = value` as `--key value`).
@@ -283,7 +338,7 @@ fn options(file: &Path, m: &MethodEntry, budget: Budget, seed: u64, threads: usi
 
 /// Runs an experiment file; returns the results and writes the outputs.
 pub fn run(path: &Path, output: Option<&Path>, quiet: bool) -> Result<Vec<RunResult>> {
-    run_stoppable(path, output, quiet, &Arc::new(AtomicBool::new(false)))
+    run_selected(path, &Selection::default(), output, quiet, &Arc::new(AtomicBool::new(false)))
 }
 
 /// [`run`], stopped when `stop` is set (from another thread): the render in progress ends
@@ -295,7 +350,19 @@ pub fn run_stoppable(
     quiet: bool,
     stop: &Arc<AtomicBool>,
 ) -> Result<Vec<RunResult>> {
-    let f = ExperimentFile::load(path)?;
+    run_selected(path, &Selection::default(), output, quiet, stop)
+}
+
+/// [`run_stoppable`] over the part of the file that `selection` keeps.
+pub fn run_selected(
+    path: &Path,
+    selection: &Selection,
+    output: Option<&Path>,
+    quiet: bool,
+    stop: &Arc<AtomicBool>,
+) -> Result<Vec<RunResult>> {
+    let mut f = ExperimentFile::load(path)?;
+    f.select(path, selection)?;
     let out = f.output_folder(path, output);
     let baseline = f.baseline();
     let Some(seeds) = &f.seeds else {

@@ -28,15 +28,34 @@ impl<'de> Deserialize<'de> for Seeds {
             Raw::Range(r) => parse_range(&r),
         }
         .map_err(serde::de::Error::custom)?;
+        Seeds::new(seeds).map_err(serde::de::Error::custom)
+    }
+}
+
+impl Seeds {
+    /// The seeds `seeds`: at least one, none twice.
+    pub fn new(seeds: Vec<u64>) -> Result<Seeds, String> {
         if seeds.is_empty() {
-            return Err(serde::de::Error::custom("`seeds` names no seed"));
+            return Err("`seeds` names no seed".into());
         }
         let mut sorted = seeds.clone();
         sorted.sort_unstable();
         if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
-            return Err(serde::de::Error::custom(format!("`seeds` names seed {} twice", w[0])));
+            return Err(format!("`seeds` names seed {} twice", w[0]));
         }
         Ok(Seeds(seeds))
+    }
+
+    /// Seeds written on a command line: a range (`1..=9`, `1..10`) or a list (`1,2,5`).
+    pub fn parse(s: &str) -> Result<Seeds, String> {
+        let seeds = if s.contains("..") {
+            parse_range(s)?
+        } else {
+            s.split(',')
+                .map(|x| x.trim().parse::<u64>().map_err(|_| format!("\"{s}\" is not a list (1,2,5) or range (1..=9) of seeds")))
+                .collect::<Result<Vec<u64>, String>>()?
+        };
+        Seeds::new(seeds)
     }
 }
 
