@@ -11,11 +11,13 @@
 //!
 //! In a training pass the continuation also keeps the path's non-Dirac vertices and, as
 //! radiance reaches the camera, the radiance each of them receives along its sampled
-//! direction (the contribution divided by the throughput after the vertex). Emission found
-//! by a vertex's own direction counts there without its MIS weight: the tree learns all the
-//! light arriving along a direction, not the share BSDF sampling keeps. When the path ends,
+//! direction: the contribution divided by the throughput after the vertex (before the
+//! roulette, so that a vertex whose path the roulette ends records nothing and one that
+//! survives records its radiance over the survival probability). Contributions count with
+//! their MIS weights: the tree learns the light a direction brings to the image, so that
+//! emission next-event estimation finds well draws few guided samples. When the path ends,
 //! each vertex becomes a record of `mean(L_i) / p(ω_i)` for its quadtree leaf
-//! ([`Guided::take_records`]).
+//! ([`Guided::take_records`]), `p` the mixture's density.
 
 use crate::bsdf::{Bsdf, BsdfSample, TransportMode};
 use crate::integrator::guided::sdtree::{DirTree, Record, SdTree, from_square, sphere_pdf, to_square};
@@ -44,13 +46,11 @@ pub(crate) struct Guided<'a> {
     /// Whether the path's vertices are kept for records (a training pass).
     pub recording: bool,
     vertices: Vec<PathVertex>,
-    /// The vertex the last sampled direction left from, if it is kept.
-    latest: Option<usize>,
 }
 
 impl<'a> Guided<'a> {
     pub fn new(tree: &'a SdTree, bsdf_fraction: f32, recording: bool) -> Guided<'a> {
-        Guided { tree, bsdf_fraction, recording, vertices: Vec::new(), latest: None }
+        Guided { tree, bsdf_fraction, recording, vertices: Vec::new() }
     }
 
     /// The quadtree that guides the vertex `si` with BSDF `bsdf`, if any.
@@ -75,7 +75,6 @@ impl<'a> Guided<'a> {
             let value = if value.is_finite() && value > 0.0 { value } else { 0.0 };
             out.push(self.tree.record_for(v.p, v.wi, value));
         }
-        self.latest = None;
     }
 }
 
@@ -120,24 +119,54 @@ impl Continuation for Guided<'_> {
 
     #[inline]
     fn continued(&mut self, si: &SurfaceInteraction, wi: Vec3, sample: &BsdfSample, beta: Rgb) {
-        if !self.recording {
-            return;
-        }
-        self.latest = (!sample.delta).then(|| {
+        if self.recording && !sample.delta {
             self.vertices.push(PathVertex { p: si.p, wi, pdf: sample.pdf, beta, radiance: Rgb::ZERO });
-            self.vertices.len() - 1
-        });
+        }
     }
 
     #[inline]
-    fn gathered(&mut self, value: Rgb, unweighted: Option<Rgb>) {
-        for (i, v) in self.vertices.iter_mut().enumerate() {
-            let c = match unweighted {
-                Some(u) if self.latest == Some(i) => u,
-                _ => value,
-            };
-            let per = Rgb::select(v.beta.cmpgt(Rgb::ZERO), c / v.beta, Rgb::ZERO);
-            v.radiance += per;
+    fn gathered(&mut self, value: Rgb) {
+        for v in &mut self.vertices {
+            v.radiance += Rgb::select(v.beta.cmpgt(Rgb::ZERO), value / v.beta, Rgb::ZERO);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A path's records by hand: vertex A (density 0.5, throughput 2 after it), a Dirac
+    /// vertex (which records nothing), vertex B (density 0.2, throughput 4 after it); then
+    /// 8 arrives (next-event estimation after B) and (0, 12, 0) (emission found from B).
+    /// A receives a mean of (8 + 4) / 2 = 6 and records 6 / 0.5, B (8 + 4) / 4 = 3 and
+    /// records 3 / 0.2; what arrived before A counts for neither.
+    #[test]
+    fn each_vertex_records_the_radiance_along_its_direction_over_its_density() {
+        let tree = SdTree::new(Vec3::ZERO, 1.0);
+        let mut g = Guided::new(&tree, 0.5, true);
+        let si = SurfaceInteraction {
+            p: Vec3::ZERO,
+            t: 1.0,
+            ng: Vec3::Z,
+            shading: crate::math::Frame::from_normal(Vec3::Z),
+            uv: glam::Vec2::ZERO,
+            base_n: Vec3::Z,
+            shape: 0,
+            prim: 0,
+            wo: Vec3::Z,
+        };
+        let sample = |pdf: f32, delta: bool| BsdfSample { wi: Vec3::Z, f: Rgb::ONE, pdf, weight: Rgb::ONE, delta };
+        g.gathered(Rgb::splat(100.0));
+        g.continued(&si, Vec3::Z, &sample(0.5, false), Rgb::splat(2.0));
+        g.continued(&si, Vec3::Z, &sample(1.0, true), Rgb::splat(2.0));
+        g.continued(&si, -Vec3::Z, &sample(0.2, false), Rgb::splat(4.0));
+        g.gathered(Rgb::splat(8.0));
+        g.gathered(Rgb::new(0.0, 12.0, 0.0));
+        let mut records = Vec::new();
+        g.take_records(&mut records);
+        let values: Vec<f32> = records.iter().map(|r| r.value).collect();
+        assert_eq!(values, vec![6.0 / 0.5, 3.0 / 0.2]);
+        assert!(g.vertices.is_empty(), "the next path starts afresh");
     }
 }

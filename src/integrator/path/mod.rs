@@ -62,15 +62,13 @@ pub(crate) trait Continuation {
     fn pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32;
 
     /// The path went on from `si` along `wi` (world) with the sample `sample`, its
-    /// throughput now `beta` (this vertex's weight and the roulette included).
+    /// throughput now `beta` (this vertex's weight included, before the roulette).
     #[inline(always)]
     fn continued(&mut self, _si: &SurfaceInteraction, _wi: Vec3, _sample: &BsdfSample, _beta: Rgb) {}
 
-    /// Radiance `value` reached the camera (throughput and MIS weight included). For
-    /// emission found by the path's last direction, `unweighted` is the same without its
-    /// MIS weight; next-event estimation gives `None`.
+    /// Radiance `value` reached the camera (throughput and MIS weight included).
     #[inline(always)]
-    fn gathered(&mut self, _value: Rgb, _unweighted: Option<Rgb>) {}
+    fn gathered(&mut self, _value: Rgb) {}
 }
 
 /// The path tracer's continuation: the BSDF samples the next direction.
@@ -187,7 +185,7 @@ impl PathTracer {
                     let w = self
                         .emission_weight(depth, prev_delta, prev_pdf, || scene.light_sampler.pmf(light_index) * pdf);
                     l += beta * le * w;
-                    cont.gathered(beta * le * w, Some(beta * le));
+                    cont.gathered(beta * le * w);
                 }
                 break;
             };
@@ -200,7 +198,7 @@ impl PathTracer {
                         scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, prev_p, &si)
                     });
                     l += beta * le * w;
-                    cont.gathered(beta * le * w, Some(beta * le));
+                    cont.gathered(beta * le * w);
                 }
             }
             if depth >= self.max_depth {
@@ -218,7 +216,7 @@ impl PathTracer {
                 if scene.occluded(ray) { Rgb::ZERO } else { Rgb::ONE }
             });
             l += direct;
-            cont.gathered(direct, None);
+            cont.gathered(direct);
 
             // Continue the path.
             let Some((bs, wi_world)) = self.sample_next(&si, bsdf, wo, sampler, cont) else { break };
@@ -229,6 +227,7 @@ impl PathTracer {
             prev_pdf = bs.pdf;
             prev_delta = bs.delta;
             prev_p = si.p;
+            cont.continued(&si, wi_world, &bs, beta);
 
             if depth >= self.rr_depth {
                 let q = max_component(beta).min(0.95);
@@ -237,7 +236,6 @@ impl PathTracer {
                 }
                 beta /= q;
             }
-            cont.continued(&si, wi_world, &bs, beta);
             ray = si.spawn_ray(wi_world);
         }
         l
