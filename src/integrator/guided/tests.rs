@@ -18,8 +18,13 @@ fn cornell() -> Scene {
 /// A tree trained on `scene` in passes of 1, 2 and 4 samples per pixel, its spatial
 /// threshold low enough that it splits.
 fn trained(scene: &Scene) -> SdTree {
+    trained_in_tiles(scene, 8)
+}
+
+/// [`trained`] with tiles of `tile_size` pixels.
+fn trained_in_tiles(scene: &Scene, tile_size: u32) -> SdTree {
     let pt = PathTracer::new(&scene.integrator);
-    let tile_list = tiles(scene.film.width, scene.film.height, 8);
+    let tile_list = tiles(scene.film.width, scene.film.height, tile_size);
     let options = GuidedOptions { spatial_threshold: 100.0, ..GuidedOptions::default() };
     let t = Training {
         pt: &pt,
@@ -124,19 +129,22 @@ fn nee_and_the_mixtures_hits_weigh_each_path_to_one() {
     assert!(off > paths / 4, "the tree's density alone weighed {} of {paths} paths to one", paths - off);
 }
 
-/// Training is a function of the seed: the same tree from one thread and from two.
+/// Training is a function of the seed: the same tree from one thread and from two, with
+/// tiles of 8 pixels and of 5.
 #[test]
-fn training_gives_the_same_tree_whatever_the_threads() {
+fn training_gives_the_same_tree_whatever_the_threads_and_tiles() {
     let scene = cornell();
     let one = crate::workers::render_pool(1).unwrap().install(|| trained(&scene));
     let two = crate::workers::render_pool(2).unwrap().install(|| trained(&scene));
-    assert_eq!(one.leaves.len(), two.leaves.len());
+    let tiled = crate::workers::render_pool(2).unwrap().install(|| trained_in_tiles(&scene, 5));
     let mut rng = Sampler::new(&[21]);
-    for _ in 0..2000 {
-        let p = scene.bounds.center + (rng.next_2d().extend(rng.next_1d()) - 0.5) * scene.bounds.radius;
-        let d = crate::integrator::guided::sdtree::from_square(rng.next_2d());
-        let q = crate::integrator::guided::sdtree::to_square(d);
-        let (a, b) = (one.guide_at(p).map(|t| t.pdf(q)), two.guide_at(p).map(|t| t.pdf(q)));
-        assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+    for other in [&two, &tiled] {
+        assert_eq!(one.leaves.len(), other.leaves.len());
+        for _ in 0..2000 {
+            let p = scene.bounds.center + (rng.next_2d().extend(rng.next_1d()) - 0.5) * scene.bounds.radius;
+            let q = rng.next_2d();
+            let (a, b) = (one.guide_at(p).map(|t| t.pdf(q)), other.guide_at(p).map(|t| t.pdf(q)));
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        }
     }
 }

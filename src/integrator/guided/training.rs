@@ -10,9 +10,11 @@
 //!
 //! Training iterations draw their random numbers from streams keyed by their own seed (the
 //! render's, mixed with a constant), pixel and training iteration, apart from the final
-//! pass's. Each tile's records are kept in a list and the lists are added to the tree in
-//! tile order, so the tree does not depend on the number of threads; a pass is cut into
-//! parts of at most [`PART_SAMPLES`] camera samples so the lists stay small.
+//! pass's. Each tile keeps its records in a list with their pixels; the lists are put in
+//! pixel order (each pixel's records in the order its paths made them) and added to the
+//! tree in that order, so the tree depends neither on the number of threads nor on the
+//! tiles' size. A pass is cut into parts of at most [`PART_SAMPLES`] camera samples per
+//! part so the lists stay small.
 
 use crate::film::Tile;
 use crate::integrator::guided::mixture::Guided;
@@ -103,9 +105,7 @@ pub(crate) fn train<S: PixelSampler>(
             }
             let count = part.min(end - first);
             let (records, counters) = pass_part::<S>(&ctx, t, tree, first, count);
-            for r in &records {
-                tree.add(r);
-            }
+            tree.add(&records);
             done.counters += counters;
             first += count;
         }
@@ -124,39 +124,45 @@ pub(crate) fn train<S: PixelSampler>(
     done
 }
 
-/// Training iterations `first..first + count` of every tile: each tile's records, in tile
-/// order, and the counters summed in that order.
+/// Training iterations `first..first + count` of every tile: the records, in pixel order,
+/// and the counters summed in tile order.
 fn pass_part<S: PixelSampler>(
     ctx: &Ctx,
     t: &Training,
     tree: &SdTree,
     first: u32,
     count: u32,
-) -> (Vec<Vec<Record>>, Counters) {
-    let parts: Vec<(Vec<Record>, Counters)> = t
+) -> (Vec<Record>, Counters) {
+    let width = ctx.scene.film.width;
+    let parts: Vec<(Vec<(u32, Record)>, Counters)> = t
         .tiles
         .par_iter()
         .with_max_len(1)
         .map(|&tile| {
             let mut records = Vec::new();
+            let mut path_records = Vec::new();
             let mut cont = Guided::new(tree, t.bsdf_fraction, true);
             let r = sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
                 let ray = ctx.scene.camera.generate_ray(pos);
                 counters.camera_rays += 1;
                 sink.l = t.pt.li_with(ctx.scene, ray, sampler, counters, &mut cont);
-                cont.take_records(&mut records);
+                cont.take_records(&mut path_records);
+                let pixel = pos.y as u32 * width + pos.x as u32;
+                records.extend(path_records.drain(..).map(|r| (pixel, r)));
                 true
             });
             (records, r.counters)
         })
         .collect();
     let mut counters = Counters::default();
-    let mut records = Vec::with_capacity(parts.len());
+    let mut records = Vec::new();
     for (r, c) in parts {
         counters += c;
-        records.push(r);
+        records.extend(r);
     }
-    (records, counters)
+    // A stable sort: each pixel's records stay in the order its samples made them.
+    records.sort_by_key(|&(pixel, _)| pixel);
+    (records.into_iter().map(|(_, r)| r).collect(), counters)
 }
 
 #[cfg(test)]
