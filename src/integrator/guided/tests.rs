@@ -148,3 +148,19 @@ fn training_gives_the_same_tree_whatever_the_threads_and_tiles() {
         }
     }
 }
+
+#[test]
+fn bad_options_are_refused_naming_the_option() {
+    let bad = [
+        (GuidedOptions { bsdf_fraction: 0.0, ..GuidedOptions::default() }, "--guided-bsdf-fraction"),
+        (GuidedOptions { bsdf_fraction: 1.5, ..GuidedOptions::default() }, "--guided-bsdf-fraction"),
+        (GuidedOptions { spatial_threshold: f64::NAN, ..GuidedOptions::default() }, "--guided-spatial-threshold"),
+        (GuidedOptions { flux_fraction: 0.0, ..GuidedOptions::default() }, "--guided-flux-fraction"),
+        (GuidedOptions { max_tree_depth: 0, ..GuidedOptions::default() }, "--guided-max-depth"),
+    ];
+    for (options, flag) in bad {
+        let e = options.check().unwrap_err().to_string();
+        assert!(e.contains(flag), "{e}");
+    }
+    assert!(GuidedOptions::default().check().is_ok());
+}
