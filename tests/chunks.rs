@@ -50,7 +50,7 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
     use IntegratorKind::*;
     let scene = cornell();
     let dir = tempfile::tempdir().unwrap();
-    let mut cases: Vec<(String, RenderOptions)> = [Path, Lighttrace, Bdpt, Eorr, Lvc, Vcm, Bpm]
+    let mut cases: Vec<(String, RenderOptions)> = [Path, Guided, Lighttrace, Bdpt, Eorr, Lvc, Vcm, Bpm]
         .into_iter()
         .map(|k| (format!("{k:?}"), options(k, 7, 11)))
         .collect();

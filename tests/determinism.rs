@@ -33,6 +33,7 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
         IntegratorKind::Spcbpt,
         IntegratorKind::Vcm,
         IntegratorKind::Bpm,
+        IntegratorKind::Guided,
     ] {
         // Several passes where an integrator keeps state between them, so EORR's
         // thresholds and LVC's and PCBPT's pools come from earlier passes (light tracing

@@ -21,7 +21,7 @@ use pcbpt::scene::Scene;
 fn methods() -> Vec<(String, RenderOptions)> {
     use IntegratorKind::*;
     let mut out: Vec<(String, RenderOptions)> =
-        [Path, Lighttrace, Bdpt, Eorr, Lvc, Vcm].into_iter().map(|k| (format!("{k:?}"), options(k))).collect();
+        [Path, Guided, Lighttrace, Bdpt, Eorr, Lvc, Vcm].into_iter().map(|k| (format!("{k:?}"), options(k))).collect();
     // Each MIS option with the connections it weighs (no budget), and the defaults (a budget).
     for mis in [PcMis::Harmonic, PcMis::Uniform, PcMis::Resampling, PcMis::Correlated] {
         let mut o = options(Pcbpt);

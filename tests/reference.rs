@@ -155,7 +155,7 @@ impl Row {
 }
 
 fn rows() -> Vec<Row> {
-    [path(), bidirectional(), merging(), pcbpt(), spcbpt(), budget(), metropolis(), bump(), media()]
+    [path(), guided(), bidirectional(), merging(), pcbpt(), spcbpt(), budget(), metropolis(), bump(), media()]
         .into_iter()
         .flatten()
         .collect()
@@ -233,6 +233,14 @@ fn path() -> Vec<Row> {
         // leaf.png's alpha (the reference got the same alpha).
         row(&LIVING_ROOM, "path", 48, "").same_estimator(1024),
     ]
+}
+
+/// The guided path tracer. Its image is its final pass's alone, about half the samples (the
+/// rest train the tree), so it renders twice what a path-tracer row of the same noise would.
+/// On veach-ajar the means of single 512-spp renders spread by about ±1% (seeds 3–6:
+/// 0.992–1.010), too much for a 0.5% check of two; 1024 spp halve that spread.
+fn guided() -> Vec<Row> {
+    vec![row(&CORNELL_PLY, "guided", 128, ""), row(&VEACH_AJAR, "guided", 1024, "")]
 }
 
 /// Light tracing, BDPT, EORR and LVC.

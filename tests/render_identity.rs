@@ -37,6 +37,7 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
     };
     vec![
         ("path", base(Path)),
+        ("guided", base(Guided)),
         ("lighttrace", base(Lighttrace)),
         ("bdpt", base(Bdpt)),
         ("bdpt_balance", with(Bdpt, &|o| *o.method.heuristic_mut().unwrap() = Heuristic::Balance)),

@@ -13,7 +13,7 @@ from conftest import CORNELL, SMALL, interrupted_after
 
 def test_integrators_are_the_command_lines():
     assert pcbpt.integrators() == [
-        "path", "lighttrace", "bdpt", "eorr", "lvc", "pssmlt", "pcbpt", "spcbpt", "memlt", "vcm", "bpm"
+        "path", "guided", "lighttrace", "bdpt", "eorr", "lvc", "pssmlt", "pcbpt", "spcbpt", "memlt", "vcm", "bpm"
     ]
 
 
@@ -60,6 +60,7 @@ SAME_AS_CLI = [
     ("pssmlt", {"two_stage": False}, ["--integrator", "pssmlt", "--two-stage", "false"]),
     ("vcm", {"vcm_radius": 0.01}, ["--integrator", "vcm", "--vcm-radius", "0.01"]),
     ("bpm", {"vcm_alpha": 0.9}, ["--integrator", "bpm", "--vcm-alpha", "0.9"]),
+    ("guided", {"guided_bsdf_fraction": 0.3}, ["--integrator", "guided", "--guided-bsdf-fraction", "0.3"]),
     ("lighttrace", {}, ["--integrator", "lighttrace"]),
     ("eorr", {}, ["--integrator", "eorr"]),
     ("pcbpt", {}, ["--integrator", "pcbpt"]),

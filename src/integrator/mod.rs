@@ -6,6 +6,7 @@
 pub mod bidir;
 pub mod budget;
 pub mod eorr;
+pub mod guided;
 pub mod lvc;
 pub mod manifold;
 pub mod memlt;

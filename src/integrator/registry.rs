@@ -138,6 +138,8 @@ macro_rules! integrators {
 integrators! {
     /// Unidirectional path tracing with next-event estimation and MIS.
     Path("path", plugins: ["path", "volpath", "volpath_simple"]) => crate::integrator::path::PathOptions,
+    /// Path tracing guided by a spatio-directional tree learnt in doubling training passes.
+    Guided("guided", plugins: []) => crate::integrator::guided::GuidedOptions,
     /// Light tracing: light subpaths connected to the camera (`t = 1`) only.
     Lighttrace("lighttrace", plugins: ["ptracer"]) => crate::integrator::bidir::bdpt::LighttraceOptions,
     /// Bidirectional path tracing with every strategy.

@@ -11,7 +11,7 @@
 //! Russian roulette); crossing a null surface (a boundary between media) is not: the ray
 //! goes on unchanged in the medium on the other side.
 
-use super::{PathTracer, weighs_against_light_sampling};
+use super::{BsdfSampling, PathTracer, weighs_against_light_sampling};
 use crate::accel::Ray;
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, SHADOW_EPSILON, max_component};
@@ -107,12 +107,12 @@ impl PathTracer {
 
             // Next-event estimation, through the media and null surfaces on the way.
             let medium = s.medium;
-            s.l += self.surface_nee(scene, &si, bsdf, wo, s.beta, sampler, counters, |ray, infinite| {
+            s.l += self.surface_nee(scene, &si, bsdf, wo, s.beta, sampler, counters, &BsdfSampling, |ray, infinite| {
                 scene.transmittance_to(ray, scene.medium_after(&si, ray.d, medium), infinite)
             });
 
             // Continue the path by sampling the BSDF.
-            let Some((bs, wi_world)) = self.sample_bsdf(&si, bsdf, wo, sampler) else { break };
+            let Some((bs, wi_world)) = self.sample_next(&si, bsdf, wo, sampler, &mut BsdfSampling) else { break };
             s.beta *= bs.weight;
             s.prev_pdf = bs.pdf;
             s.prev_delta = bs.delta;

@@ -3,12 +3,18 @@
 //! from `rr_depth` on, and Mitsuba's `max_depth` (segments from the camera; -1 unlimited).
 //! In scenes with participating media or null surfaces, [`PathTracer::li_media`] (`media.rs`)
 //! tracks the medium along the path.
+//!
+//! How a path continues at a surface is a hook, [`Continuation`]: it samples the next
+//! direction, says with what density it samples a direction (next-event estimation's MIS
+//! weight is taken against it) and sees the radiance the path gathers. The path tracer's own
+//! is [`BsdfSampling`]; an integrator that samples from another distribution, or learns
+//! from the paths, runs the same loop ([`PathTracer::li_with`]) with its own.
 
 mod media;
 
 use crate::accel::Ray;
-use crate::bsdf::Bsdf;
 use crate::bsdf::TransportMode;
+use crate::bsdf::{Bsdf, BsdfSample};
 use crate::film::Tile;
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Work, sample_tile_with};
 use crate::integrator::run::RunOptions;
@@ -37,6 +43,58 @@ pub struct PathTracer {
     pub sampler: SamplerKind,
 }
 
+/// How a path continues at a surface vertex whose BSDF is `bsdf` (`wo` in the shading frame
+/// of `si`): what samples the next direction and with what density, and what sees the
+/// radiance the path gathers on its way to the camera.
+pub(crate) trait Continuation {
+    /// Samples the next direction: its weight `f |cos θ| / pdf`, its density `pdf` (solid
+    /// angle) and whether it came from a Dirac lobe, as [`Bsdf::sample`] gives them.
+    fn sample<R: Random>(
+        &mut self,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        sampler: &mut R,
+    ) -> Option<BsdfSample>;
+
+    /// The density (solid angle) with which [`Continuation::sample`] draws the non-Dirac
+    /// direction `wi` (shading frame): what next-event estimation is weighed against.
+    fn pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32;
+
+    /// The path went on from `si` along `wi` (world) with the sample `sample`, its
+    /// throughput now `beta` (this vertex's weight included, before the roulette).
+    #[inline(always)]
+    fn continued(&mut self, _si: &SurfaceInteraction, _wi: Vec3, _sample: &BsdfSample, _beta: Rgb) {}
+
+    /// Radiance `value` reached the camera (throughput and MIS weight included).
+    #[inline(always)]
+    fn gathered(&mut self, _value: Rgb) {}
+}
+
+/// The path tracer's continuation: the BSDF samples the next direction.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct BsdfSampling;
+
+impl Continuation for BsdfSampling {
+    #[inline(always)]
+    fn sample<R: Random>(
+        &mut self,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        sampler: &mut R,
+    ) -> Option<BsdfSample> {
+        let u_lobe = sampler.next_1d();
+        let u_dir = sampler.next_2d();
+        bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance)
+    }
+
+    #[inline(always)]
+    fn pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {
+        bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance)
+    }
+}
+
 impl PathTracer {
     pub fn new(spec: &IntegratorSpec) -> PathTracer {
         PathTracer {
@@ -54,7 +112,13 @@ impl PathTracer {
     /// sampling against light sampling (whose density `pdf_light` is computed only when
     /// needed).
     #[inline]
-    fn emission_weight(&self, segments: u32, prev_delta: bool, prev_pdf: f32, pdf_light: impl FnOnce() -> f32) -> f32 {
+    pub(crate) fn emission_weight(
+        &self,
+        segments: u32,
+        prev_delta: bool,
+        prev_pdf: f32,
+        pdf_light: impl FnOnce() -> f32,
+    ) -> f32 {
         if weighs_against_light_sampling(segments, prev_delta) {
             power_heuristic(prev_pdf, pdf_light())
         } else if segments == 0 {
@@ -78,7 +142,20 @@ impl PathTracer {
     }
 
     /// Radiance arriving along a camera ray in a scene without media.
-    pub fn li<R: Random>(&self, scene: &Scene, mut ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
+    #[inline]
+    pub fn li<R: Random>(&self, scene: &Scene, ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
+        self.li_with(scene, ray, sampler, counters, &mut BsdfSampling)
+    }
+
+    /// [`PathTracer::li`] with the path continued at each surface by `cont`.
+    pub(crate) fn li_with<R: Random, C: Continuation>(
+        &self,
+        scene: &Scene,
+        mut ray: Ray,
+        sampler: &mut R,
+        counters: &mut Counters,
+        cont: &mut C,
+    ) -> Rgb {
         let mut l = Rgb::ZERO;
         let mut beta = Rgb::ONE;
         let mut depth = 0u32;
@@ -108,6 +185,7 @@ impl PathTracer {
                     let w = self
                         .emission_weight(depth, prev_delta, prev_pdf, || scene.light_sampler.pmf(light_index) * pdf);
                     l += beta * le * w;
+                    cont.gathered(beta * le * w);
                 }
                 break;
             };
@@ -120,6 +198,7 @@ impl PathTracer {
                         scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, prev_p, &si)
                     });
                     l += beta * le * w;
+                    cont.gathered(beta * le * w);
                 }
             }
             if depth >= self.max_depth {
@@ -133,12 +212,14 @@ impl PathTracer {
             }
 
             // Next-event estimation.
-            l += self.surface_nee(scene, &si, bsdf, wo, beta, sampler, counters, |ray, _| {
+            let direct = self.surface_nee(scene, &si, bsdf, wo, beta, sampler, counters, &*cont, |ray, _| {
                 if scene.occluded(ray) { Rgb::ZERO } else { Rgb::ONE }
             });
+            l += direct;
+            cont.gathered(direct);
 
-            // Continue the path by sampling the BSDF.
-            let Some((bs, wi_world)) = self.sample_bsdf(&si, bsdf, wo, sampler) else { break };
+            // Continue the path.
+            let Some((bs, wi_world)) = self.sample_next(&si, bsdf, wo, sampler, cont) else { break };
             beta *= bs.weight;
             if beta == Rgb::ZERO {
                 break;
@@ -146,6 +227,7 @@ impl PathTracer {
             prev_pdf = bs.pdf;
             prev_delta = bs.delta;
             prev_p = si.p;
+            cont.continued(&si, wi_world, &bs, beta);
 
             if depth >= self.rr_depth {
                 let q = max_component(beta).min(0.95);
@@ -168,27 +250,26 @@ impl PathTracer {
         !self.strict_normals || w.dot(si.ng) * local_z > 0.0
     }
 
-    /// The path's next direction sampled from the BSDF at `si` (`wo` in its shading frame):
+    /// The path's next direction at `si` (`wo` in its shading frame), sampled by `cont`:
     /// the sample and its world direction, or `None` where sampling fails or strict normals
     /// refuse the direction.
     #[inline(always)]
-    fn sample_bsdf<R: Random>(
+    fn sample_next<R: Random, C: Continuation>(
         &self,
         si: &SurfaceInteraction,
         bsdf: &Bsdf,
         wo: Vec3,
         sampler: &mut R,
-    ) -> Option<(crate::bsdf::BsdfSample, Vec3)> {
-        let u_lobe = sampler.next_1d();
-        let u_dir = sampler.next_2d();
-        let bs = bsdf.sample(wo, si.at(), u_lobe, u_dir, TransportMode::Radiance)?;
+        cont: &mut C,
+    ) -> Option<(BsdfSample, Vec3)> {
+        let bs = cont.sample(si, bsdf, wo, sampler)?;
         let wi_world = si.shading.to_world(bs.wi);
         self.sides_agree(si, wi_world, bs.wi.z).then_some((bs, wi_world))
     }
 
     /// Next-event estimation from the surface point `si` (its BSDF `bsdf`, `wo` in its shading
     /// frame) for a path of throughput `beta`: one light sample weighed by the power heuristic
-    /// against BSDF sampling (none from a Dirac BSDF). `transmittance` gives the fraction of
+    /// against the continuation `cont`'s sampling (none from a Dirac BSDF). `transmittance` gives the fraction of
     /// the light that reaches `si` along the shadow ray, for a light at infinity or not
     /// (zero when something blocks it). Draws four numbers whether it samples or not.
     #[allow(clippy::too_many_arguments)]
@@ -202,6 +283,7 @@ impl PathTracer {
         beta: Rgb,
         sampler: &mut R,
         counters: &mut Counters,
+        cont: &impl Continuation,
         transmittance: impl FnOnce(&Ray, bool) -> Rgb,
     ) -> Rgb {
         let u_light = sampler.next_1d();
@@ -226,10 +308,16 @@ impl PathTracer {
             return Rgb::ZERO;
         }
         let pdf_light = pmf * ls.pdf;
-        let w =
-            if ls.delta { 1.0 } else { power_heuristic(pdf_light, bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance)) };
+        let w = if ls.delta { 1.0 } else { light_sampling_weight(pdf_light, cont.pdf(si, bsdf, wo, wi)) };
         beta * f * tr * ls.li * (w / pdf_light)
     }
+}
+
+/// MIS weight of a light sample of density `pdf_light` against the continuation's sampling
+/// of the same direction with density `pdf_continuation` (power heuristic).
+#[inline(always)]
+pub(crate) fn light_sampling_weight(pdf_light: f32, pdf_continuation: f32) -> f32 {
+    power_heuristic(pdf_light, pdf_continuation)
 }
 
 /// Whether emission reached after `segments` earlier segments, the last one sampled from a
