@@ -52,14 +52,7 @@ fn usage(message: &str) -> ! {
 
 fn parse_args() -> Args {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut args = Args {
-        threads: 2,
-        spp: 16,
-        record_spp: 4,
-        rounds: 5,
-        resolution: (320, 180),
-        scenes: Vec::new(),
-    };
+    let mut args = Args { threads: 2, spp: 16, record_spp: 4, rounds: 5, resolution: (320, 180), scenes: Vec::new() };
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut value = |name: &str| it.next().unwrap_or_else(|| usage(&format!("{name} needs a value")));
@@ -202,9 +195,10 @@ fn main() {
         }
         let samples = args.resolution.0 as f64 * args.resolution.1 as f64 * args.record_spp as f64;
         let (r, s, one, b) = (median(render_rays), median(render_samples), median(single), median(batch));
-        let name = path.parent().and_then(|p| p.file_name()).map_or(path.display().to_string(), |n| {
-            n.to_string_lossy().into_owned()
-        });
+        let name = path
+            .parent()
+            .and_then(|p| p.file_name())
+            .map_or(path.display().to_string(), |n| n.to_string_lossy().into_owned());
         println!(
             "| {name} | {:.2} | {:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
             log.len() as f64 / samples,

@@ -361,7 +361,8 @@ fn main() -> ExitCode {
         Command::Compare(a) => compare_images(a),
         Command::Merge(a) => merge_parts(a),
         Command::Experiment(a) => {
-            let selection = pcbpt::experiment::Selection { scenes: a.scenes, methods: a.methods, seeds: a.seeds, time: a.time };
+            let selection =
+                pcbpt::experiment::Selection { scenes: a.scenes, methods: a.methods, seeds: a.seeds, time: a.time };
             let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
             pcbpt::experiment::run_selected(&a.file, &selection, a.output.as_deref(), a.quiet, &stop)
         }

@@ -303,7 +303,8 @@ reference_time = 30"#;
 fn the_command_line_selects_scenes_methods_seeds_and_time() {
     let d = tempfile::tempdir().unwrap();
     let scene = "[[scene]]\nname = \"NAME\"\nfile = \"SCENE\"\ndefines = { resx = \"16\", resy = \"16\" }\nreference_method = \"bdpt\"\nreference_time = 0.2\n";
-    let f = write(d.path(), "part.toml", &format!("spp = 2\n{}{}", scene.replace("NAME", "a"), scene.replace("NAME", "b")));
+    let f =
+        write(d.path(), "part.toml", &format!("spp = 2\n{}{}", scene.replace("NAME", "a"), scene.replace("NAME", "b")));
     let out = d.path().join("out");
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_pcbpt"))
         .args(["experiment", f.to_str().unwrap(), "--quiet", "--scenes", "b", "--methods", "path,bdpt"])
@@ -321,12 +322,8 @@ fn the_command_line_selects_scenes_methods_seeds_and_time() {
     let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(summary.contains("summary over 2 seeds (7, 9)"), "{summary}");
     // The library takes the same selection: a time budget instead of the file's 2 spp.
-    let selection = experiment::Selection {
-        scenes: vec!["a".into()],
-        methods: vec!["path".into()],
-        seeds: None,
-        time: Some(0.1),
-    };
+    let selection =
+        experiment::Selection { scenes: vec!["a".into()], methods: vec!["path".into()], seeds: None, time: Some(0.1) };
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let err = experiment::run_selected(&f, &selection, Some(&d.path().join("lib")), true, &stop).unwrap_err();
     assert!(err.to_string().contains("reference method \"bdpt\" is not a method"), "{err}");

@@ -52,7 +52,11 @@ impl Seeds {
             parse_range(s)?
         } else {
             s.split(',')
-                .map(|x| x.trim().parse::<u64>().map_err(|_| format!("\"{s}\" is not a list (1,2,5) or range (1..=9) of seeds")))
+                .map(|x| {
+                    x.trim()
+                        .parse::<u64>()
+                        .map_err(|_| format!("\"{s}\" is not a list (1,2,5) or range (1..=9) of seeds"))
+                })
                 .collect::<Result<Vec<u64>, String>>()?
         };
         Seeds::new(seeds)

@@ -76,6 +76,21 @@ pub struct Counters {
     pub connections_occluded: u64,
 }
 
+impl Counters {
+    /// Runs `trace`, a walk from the camera that counts every ray it traces as an extension
+    /// ray, and counts its first ray as the camera ray instead (none when it traced none).
+    #[inline]
+    pub fn camera_path<T>(&mut self, trace: impl FnOnce(&mut Counters) -> T) -> T {
+        let before = self.extension_rays;
+        let out = trace(self);
+        if self.extension_rays > before {
+            self.extension_rays -= 1;
+            self.camera_rays += 1;
+        }
+        out
+    }
+}
+
 impl std::ops::AddAssign for Counters {
     fn add_assign(&mut self, o: Counters) {
         self.samples += o.samples;

@@ -250,8 +250,7 @@ fn path_traced_tile(ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult
     let pt = PathTracer::new(&ctx.scene.integrator);
     sample_tile(ctx, tile, first, count, |pos, sampler, sink, counters| {
         let ray = ctx.scene.camera.generate_ray(pos);
-        counters.camera_rays += 1;
-        sink.l = pt.radiance(ctx.scene, ray, sampler, counters);
+        sink.l = counters.camera_path(|c| pt.radiance(ctx.scene, ray, sampler, c));
         true
     })
 }

@@ -126,8 +126,7 @@ impl GuidedRender {
         let mut cont = Guided::new(&self.tree, self.options.bsdf_fraction, false);
         sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
             let ray = ctx.scene.camera.generate_ray(pos);
-            counters.camera_rays += 1;
-            sink.l = self.pt.li_with(ctx.scene, ray, sampler, counters, &mut cont);
+            sink.l = counters.camera_path(|c| self.pt.li_with(ctx.scene, ray, sampler, c, &mut cont));
             true
         })
     }

@@ -144,8 +144,7 @@ fn pass_part<S: PixelSampler>(
             let mut cont = Guided::new(tree, t.bsdf_fraction, true);
             let r = sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
                 let ray = ctx.scene.camera.generate_ray(pos);
-                counters.camera_rays += 1;
-                sink.l = t.pt.li_with(ctx.scene, ray, sampler, counters, &mut cont);
+                sink.l = counters.camera_path(|c| t.pt.li_with(ctx.scene, ray, sampler, c, &mut cont));
                 cont.take_records(&mut path_records);
                 let pixel = pos.y as u32 * width + pos.x as u32;
                 records.extend(path_records.drain(..).map(|r| (pixel, r)));

@@ -123,8 +123,7 @@ impl Iterative for SpecularPass {
     fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
         sample_tile_in(ctx, tile, (first, count), ctx.planned_spp, |pos, sampler, sink, counters| {
             let ray = ctx.scene.camera.generate_ray(pos);
-            counters.camera_rays += 1;
-            sink.l = self.li(ctx.scene, ray, sampler, counters);
+            sink.l = counters.camera_path(|c| self.li(ctx.scene, ray, sampler, c));
             true
         })
     }

@@ -164,8 +164,7 @@ impl Evaluator<'_> {
             }
             MltBase::Path => {
                 let ray = scene.camera.generate_ray(out.pos);
-                c.camera_rays += 1;
-                out.pixel = self.path.radiance(scene, ray, rng, c);
+                out.pixel = c.camera_path(|c| self.path.radiance(scene, ray, rng, c));
             }
         }
         out.finish()

@@ -333,8 +333,7 @@ impl PathTracer {
     fn tile_with<S: PixelSampler>(&self, ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult {
         sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
             let ray = ctx.scene.camera.generate_ray(pos);
-            counters.camera_rays += 1;
-            sink.l = self.radiance(ctx.scene, ray, sampler, counters);
+            sink.l = counters.camera_path(|c| self.radiance(ctx.scene, ray, sampler, c));
             true
         })
     }
