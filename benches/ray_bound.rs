@@ -87,8 +87,7 @@ fn render_rate(scene: &Scene, spp: u32, threads: usize) -> (f64, f64) {
     opts.run.threads = threads;
     let out = render(scene, &opts).expect("the scene renders");
     let c = &out.stats.counters;
-    let rays = (c.camera_rays + c.extension_rays + c.shadow_rays) as f64;
-    (rays / out.stats.seconds, c.samples as f64 / out.stats.seconds)
+    (c.rays() as f64 / out.stats.seconds, c.samples as f64 / out.stats.seconds)
 }
 
 /// The queries of a one-thread render of `spp` samples per pixel, and the render's own count
@@ -99,11 +98,11 @@ fn record_render(scene: &Scene, spp: u32) -> (Vec<Query>, u64) {
     record::start();
     let out = render(scene, &opts).expect("the scene renders");
     let log = record::stop();
-    let c = &out.stats.counters;
-    (log, c.camera_rays + c.extension_rays + c.shadow_rays)
+    (log, out.stats.counters.rays())
 }
 
-/// Seconds to answer every query of `chunks`, one at a time, the chunks over the pool's threads.
+/// Seconds to answer every query of `log`, one at a time, in chunks spread over the pool's
+/// threads.
 fn replay_single(pool: &rayon::ThreadPool, accel: &Accel, log: &[Query]) -> f64 {
     let t = Instant::now();
     pool.install(|| {

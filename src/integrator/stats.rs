@@ -77,6 +77,12 @@ pub struct Counters {
 }
 
 impl Counters {
+    /// Every ray traced: camera, extension and shadow rays.
+    #[inline]
+    pub fn rays(&self) -> u64 {
+        self.camera_rays + self.extension_rays + self.shadow_rays
+    }
+
     /// Runs `trace`, a walk from the camera that counts every ray it traces as an extension
     /// ray, and counts its first ray as the camera ray instead (none when it traced none).
     #[inline]
@@ -178,8 +184,7 @@ impl RenderStats {
         invalid_samples: u64,
         interrupted: bool,
     ) -> RenderStats {
-        let rays = counters.camera_rays + counters.extension_rays + counters.shadow_rays;
-        RenderStats {
+        let mut stats = RenderStats {
             integrator: "",
             backend: scene.accel.backend().to_string(),
             threads,
@@ -188,8 +193,8 @@ impl RenderStats {
             spp,
             passes: 1,
             seconds,
-            samples_per_second: counters.samples as f64 / seconds.max(1e-9),
-            rays_per_second: rays as f64 / seconds.max(1e-9),
+            samples_per_second: 0.0,
+            rays_per_second: 0.0,
             counters,
             phases: PhaseTimes::default(),
             shadow_rays: PhaseRays::default(),
@@ -200,6 +205,14 @@ impl RenderStats {
             iterations: None,
             relmse_estimate: None,
             noise_threshold_reached: None,
-        }
+        };
+        stats.set_rates();
+        stats
+    }
+
+    /// Samples and rays per second from the counters and the seconds.
+    pub(crate) fn set_rates(&mut self) {
+        self.samples_per_second = self.counters.samples as f64 / self.seconds.max(1e-9);
+        self.rays_per_second = self.counters.rays() as f64 / self.seconds.max(1e-9);
     }
 }

@@ -247,23 +247,20 @@ pub fn camera_subpath<R: Random>(
     if limits.camera_vertices <= 1 {
         return;
     }
-    let before = counters.extension_rays;
-    random_walk(
-        scene,
-        ray,
-        Rgb::ONE,
-        TransportMode::Radiance,
-        limits.camera_vertices,
-        limits.rr_depth,
-        rng,
-        path,
-        counters,
-    );
     // The walk's first ray is the camera ray.
-    if counters.extension_rays > before {
-        counters.extension_rays -= 1;
-        counters.camera_rays += 1;
-    }
+    counters.camera_path(|c| {
+        random_walk(
+            scene,
+            ray,
+            Rgb::ONE,
+            TransportMode::Radiance,
+            limits.camera_vertices,
+            limits.rr_depth,
+            rng,
+            path,
+            c,
+        )
+    });
 }
 
 /// Traces a light subpath into `path`: a light chosen by power, a point and direction of

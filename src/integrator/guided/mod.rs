@@ -261,9 +261,7 @@ impl Integrator for GuidedOptions {
         s.spp = s.iterations.as_ref().map_or(s.spp, |r| r.len() as u32);
         s.passes += trained.training_passes;
         s.counters += trained.training;
-        let rays = s.counters.camera_rays + s.counters.extension_rays + s.counters.shadow_rays;
-        s.samples_per_second = s.counters.samples as f64 / s.seconds.max(1e-9);
-        s.rays_per_second = rays as f64 / s.seconds.max(1e-9);
+        s.set_rates();
         Ok(out)
     }
 }
