@@ -26,12 +26,14 @@ use crate::math::Rgb;
 use crate::sampling::{ONE_BELOW, Random};
 use crate::scene::shape::SurfaceInteraction;
 use glam::Vec3;
+use std::cell::Cell;
 
 /// A vertex of a training path: where it is, the direction it sampled (world) and that
 /// direction's density, the throughput after it, and the radiance it received so far.
 #[derive(Clone, Copy, Debug)]
 struct PathVertex {
-    p: Vec3,
+    /// The spatial leaf of the vertex.
+    leaf: u32,
     wi: Vec3,
     pdf: f32,
     beta: Rgb,
@@ -46,25 +48,46 @@ pub(crate) struct Guided<'a> {
     /// Whether the path's vertices are kept for records (a training pass).
     pub recording: bool,
     vertices: Vec<PathVertex>,
+    /// The position last looked up and its spatial leaf: next-event estimation, the
+    /// sampling and the record of one vertex share one lookup.
+    last: Cell<(Vec3, u32)>,
 }
 
 impl<'a> Guided<'a> {
     pub fn new(tree: &'a SdTree, bsdf_fraction: f32, recording: bool) -> Guided<'a> {
-        Guided { tree, bsdf_fraction, recording, vertices: Vec::new() }
+        Guided { tree, bsdf_fraction, recording, vertices: Vec::new(), last: Cell::new((Vec3::NAN, 0)) }
+    }
+
+    /// The spatial leaf holding `p`.
+    #[inline]
+    fn leaf(&self, p: Vec3) -> u32 {
+        let (q, leaf) = self.last.get();
+        if q == p {
+            return leaf;
+        }
+        let leaf = self.tree.leaf_at(p);
+        self.last.set((p, leaf));
+        leaf
     }
 
     /// The quadtree that guides the vertex `si` with BSDF `bsdf`, if any.
     #[inline]
     fn guide(&self, si: &SurfaceInteraction, bsdf: &Bsdf) -> Option<&'a DirTree> {
-        if bsdf.is_delta() { None } else { self.tree.guide_at(si.p) }
+        if bsdf.is_delta() { None } else { self.tree.guide_in(self.leaf(si.p)) }
     }
 
     /// The mixture's density of the non-Dirac direction `wi` (shading frame) at `si`.
     #[inline]
     fn mixture_pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, guide: &DirTree, wo: Vec3, wi: Vec3) -> f32 {
+        let p_tree = sphere_pdf(guide.pdf(to_square(si.shading.to_world(wi))));
+        self.mixture(si, bsdf, wo, wi, p_tree)
+    }
+
+    /// The mixture's density of `wi` given the tree's density `p_tree` of it.
+    #[inline]
+    fn mixture(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3, p_tree: f32) -> f32 {
         let a = self.bsdf_fraction;
         let p_bsdf = bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance);
-        let p_tree = sphere_pdf(guide.pdf(to_square(si.shading.to_world(wi))));
         a * p_bsdf + (1.0 - a) * p_tree
     }
 
@@ -73,7 +96,7 @@ impl<'a> Guided<'a> {
         for v in self.vertices.drain(..) {
             let value = (v.radiance.x + v.radiance.y + v.radiance.z) / 3.0 / v.pdf;
             let value = if value.is_finite() && value > 0.0 { value } else { 0.0 };
-            out.push(self.tree.record_for(v.p, v.wi, value));
+            out.push(self.tree.record_in(v.leaf, v.wi, value));
         }
     }
 }
@@ -91,18 +114,19 @@ impl Continuation for Guided<'_> {
         };
         let a = self.bsdf_fraction;
         let u = sampler.next_1d();
-        let wi = if u < a {
+        let (wi, pdf) = if u < a {
             let bs = bsdf.sample(wo, si.at(), (u / a).min(ONE_BELOW), sampler.next_2d(), TransportMode::Radiance)?;
             if bs.delta {
                 return Some(BsdfSample { pdf: bs.pdf * a, weight: bs.weight / a, ..bs });
             }
-            bs.wi
+            (bs.wi, self.mixture_pdf(si, bsdf, guide, wo, bs.wi))
         } else {
             let u_tree = sampler.next_2d();
             let u_leaf = sampler.next_2d();
-            si.shading.to_local(from_square(guide.sample(u_tree, u_leaf)))
+            let (square, p_square) = guide.sample(u_tree, u_leaf);
+            let wi = si.shading.to_local(from_square(square));
+            (wi, self.mixture(si, bsdf, wo, wi, sphere_pdf(p_square)))
         };
-        let pdf = self.mixture_pdf(si, bsdf, guide, wo, wi);
         let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance);
         if !(pdf > 0.0 && pdf.is_finite()) || f == Rgb::ZERO {
             return None;
@@ -120,7 +144,8 @@ impl Continuation for Guided<'_> {
     #[inline]
     fn continued(&mut self, si: &SurfaceInteraction, wi: Vec3, sample: &BsdfSample, beta: Rgb) {
         if self.recording && !sample.delta {
-            self.vertices.push(PathVertex { p: si.p, wi, pdf: sample.pdf, beta, radiance: Rgb::ZERO });
+            let leaf = self.leaf(si.p);
+            self.vertices.push(PathVertex { leaf, wi, pdf: sample.pdf, beta, radiance: Rgb::ZERO });
         }
     }
 

@@ -8,7 +8,8 @@
 //! of the radiance integrated over it); sampling descends from the root choosing each child
 //! in proportion to its sum and draws uniformly in the leaf, so the density of a point is
 //! the product of `4 · sum(child) / sum(node)` down its path ([`DirTree::sample`],
-//! [`DirTree::pdf`]).
+//! [`DirTree::pdf`]). Building a tree stores these fractions in its nodes, so both descents
+//! only multiply.
 //!
 //! The spatial tree covers the cube around the scene's bounding sphere and splits a leaf in
 //! the middle of one axis, the axes taken in turn with depth. After each training pass
@@ -50,11 +51,14 @@ pub fn sphere_pdf(square_pdf: f64) -> f32 {
 }
 
 /// A quadtree node: the sum recorded in its square and its four children (child `ix + 2 iy`
-/// covers the half `ix` in `u` and `iy` in `v`), all zero for a leaf (the root is no child).
+/// covers the half `ix` in `u` and `iy` in `v`), all zero for a leaf (the root is no child);
+/// for an inner node of a built tree, the fraction of its sum each child holds (what
+/// sampling and the density descend by, without a division per level).
 #[derive(Clone, Copy, Debug, Default)]
 struct QuadNode {
     sum: f64,
     children: [u32; 4],
+    fractions: [f64; 4],
 }
 
 impl QuadNode {
@@ -105,23 +109,25 @@ impl DirTree {
     }
 
     /// A point of the square drawn with [`DirTree::pdf`] from the uniform numbers `u` (the
-    /// descent) and `u_leaf` (the position in the leaf). The tree must have a positive
-    /// [`DirTree::total`].
-    pub fn sample(&self, u: Vec2, u_leaf: Vec2) -> Vec2 {
+    /// descent) and `u_leaf` (the position in the leaf), and its density. The tree must be
+    /// built ([`DirTree::build`]) with a positive [`DirTree::total`].
+    pub fn sample(&self, u: Vec2, u_leaf: Vec2) -> (Vec2, f64) {
         let mut u = u.as_dvec2();
         let (mut origin, mut size) = (DVec2::ZERO, 1.0f64);
         let mut node = &self.nodes[0];
+        let mut pdf = 1.0f64;
         while !node.is_leaf() {
-            let s = node.children.map(|c| self.nodes[c as usize].sum);
+            let s = node.fractions;
             let (ix, ux) = choose(u.x, s[0] + s[2], s[1] + s[3]);
             let (iy, uy) = choose(u.y, s[ix], s[ix + 2]);
             u = DVec2::new(ux, uy);
             size *= 0.5;
             origin += DVec2::new(ix as f64, iy as f64) * size;
+            pdf *= 4.0 * s[ix + 2 * iy];
             node = &self.nodes[node.children[ix + 2 * iy] as usize];
         }
         let p = origin + u_leaf.as_dvec2() * size;
-        p.as_vec2().clamp(Vec2::ZERO, Vec2::splat(1.0f32.next_down()))
+        (p.as_vec2().clamp(Vec2::ZERO, Vec2::splat(1.0f32.next_down())), pdf)
     }
 
     /// The density (over the unit square) with which [`DirTree::sample`] draws `p`; zero
@@ -135,12 +141,11 @@ impl DirTree {
         let mut pdf = 1.0;
         while !node.is_leaf() {
             let (c, inner) = child_at(p);
-            let child = &self.nodes[node.children[c] as usize];
-            pdf *= 4.0 * child.sum / node.sum;
+            pdf *= 4.0 * node.fractions[c];
             if pdf == 0.0 {
                 return 0.0;
             }
-            node = child;
+            node = &self.nodes[node.children[c] as usize];
             p = inner;
         }
         pdf
@@ -168,13 +173,16 @@ impl DirTree {
         self.nodes[leaf as usize].sum += value;
     }
 
-    /// Sums the leaves' values into the inner nodes.
+    /// Sums the leaves' values into the inner nodes, and stores each child's fraction of
+    /// its parent's sum.
     pub fn build(&mut self) {
         for i in (0..self.nodes.len()).rev() {
             let node = self.nodes[i];
             if !node.is_leaf() {
                 let s = node.children.map(|c| self.nodes[c as usize].sum);
-                self.nodes[i].sum = (s[0] + s[1]) + (s[2] + s[3]);
+                let sum = (s[0] + s[1]) + (s[2] + s[3]);
+                self.nodes[i].sum = sum;
+                self.nodes[i].fractions = if sum > 0.0 { s.map(|c| c / sum) } else { [0.0; 4] };
             }
         }
     }
@@ -187,7 +195,7 @@ impl DirTree {
         let total = self.total();
         let mut out = DirTree::default();
         if total <= 0.0 {
-            out.nodes = self.nodes.iter().map(|n| QuadNode { sum: 0.0, ..*n }).collect();
+            out.nodes = self.nodes.iter().map(|n| QuadNode { sum: 0.0, fractions: [0.0; 4], ..*n }).collect();
             return out;
         }
         // (node of `out`, node of `self` covering the same square, its sum, depth)
@@ -217,7 +225,10 @@ impl DirTree {
     /// children (children after their parents) or is `None` for a leaf.
     #[cfg(test)]
     pub fn from_nodes(nodes: &[(f64, Option<[u32; 4]>)]) -> DirTree {
-        let nodes = nodes.iter().map(|&(sum, c)| QuadNode { sum, children: c.unwrap_or([0; 4]) }).collect();
+        let nodes = nodes
+            .iter()
+            .map(|&(sum, c)| QuadNode { sum, children: c.unwrap_or([0; 4]), fractions: [0.0; 4] })
+            .collect();
         let mut t = DirTree { nodes };
         t.build();
         t
@@ -305,14 +316,25 @@ impl SdTree {
     /// The quadtree to sample from at `p`, where it has recorded anything.
     #[inline]
     pub fn guide_at(&self, p: Vec3) -> Option<&DirTree> {
-        let t = &self.leaves[self.leaf_at(p) as usize].sampling;
+        self.guide_in(self.leaf_at(p))
+    }
+
+    /// The quadtree to sample from in the leaf `leaf`, where it has recorded anything.
+    #[inline]
+    pub fn guide_in(&self, leaf: u32) -> Option<&DirTree> {
+        let t = &self.leaves[leaf as usize].sampling;
         (t.total() > 0.0).then_some(t)
     }
 
     /// The record of `value` at `p` for the direction `d` (world).
     #[inline]
     pub fn record_for(&self, p: Vec3, d: Vec3, value: f32) -> Record {
-        let leaf = self.leaf_at(p);
+        self.record_in(self.leaf_at(p), d, value)
+    }
+
+    /// The record of `value` in the spatial leaf `leaf` for the direction `d` (world).
+    #[inline]
+    pub fn record_in(&self, leaf: u32, d: Vec3, value: f32) -> Record {
         let node = self.leaves[leaf as usize].building.leaf_at(to_square(d));
         Record { leaf, node, value }
     }
@@ -450,7 +472,7 @@ mod tests {
         let tree = trained();
         let mut leaf_rng = Sampler::new(&[11]);
         let r = Chi2Test::new(SphereDomain::default())
-            .run(|u| from_square(tree.sample(u, leaf_rng.next_2d())), |d| sphere_pdf(tree.pdf(to_square(d))));
+            .run(|u| from_square(tree.sample(u, leaf_rng.next_2d()).0), |d| sphere_pdf(tree.pdf(to_square(d))));
         r.assert_pass();
         assert!((r.pdf_integral - 1.0).abs() < 2e-3, "∫ pdf over the sphere = {}", r.pdf_integral);
     }
@@ -462,7 +484,7 @@ mod tests {
         let tree = trained();
         let mut leaf_rng = Sampler::new(&[11]);
         let r = Chi2Test::new(SphereDomain::default()).run(
-            |u| from_square(tree.sample(u, leaf_rng.next_2d())),
+            |u| from_square(tree.sample(u, leaf_rng.next_2d()).0),
             |d| {
                 let p = to_square(d);
                 sphere_pdf(tree.pdf(Vec2::new(p.x, 1.0f32.next_down() - p.y)))
