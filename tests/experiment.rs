@@ -321,6 +321,8 @@ fn the_command_line_selects_scenes_methods_seeds_and_time() {
     assert!(!out.join("seed-1").exists());
     let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(summary.contains("summary over 2 seeds (7, 9)"), "{summary}");
+    // The tables say which budget ran, whatever the file's name says.
+    assert!(summary.contains("run at 0.1 s per render"), "{summary}");
     // The library takes the same selection: a time budget instead of the file's 2 spp.
     let selection =
         experiment::Selection { scenes: vec!["a".into()], methods: vec!["path".into()], seeds: None, time: Some(0.1) };

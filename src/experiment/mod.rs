@@ -192,6 +192,9 @@ impl ExperimentFile {
         if let Some(t) = selection.time {
             self.time = Some(t);
             self.spp = None;
+            // The file's name may state its own budget: the tables say which one ran.
+            let name = self.name.take().unwrap_or_else(|| "experiment".to_string());
+            self.name = Some(format!("{name}, run at {t} s per render"));
         }
         if let Some(b) = &self.baseline
             && !self.method.iter().any(|m| &m.name == b)

@@ -210,6 +210,29 @@ impl IntegratorStats for GuidedStats {
     }
 }
 
+/// The tree that a render of `scene` with seed `seed` trains in passes of `passes` samples
+/// per pixel (on the current thread pool), for measurements of what the guiding learns.
+pub fn train_tree(scene: &Scene, options: &GuidedOptions, passes: &[u32], seed: u64) -> Result<SdTree, Error> {
+    options.check()?;
+    let pt = PathTracer { sampler: scene.sampler.kind, ..PathTracer::new(&scene.integrator) };
+    let tile_list = tiles(scene.film.width, scene.film.height, 32);
+    let t = Training {
+        pt: &pt,
+        bsdf_fraction: options.bsdf_fraction,
+        refinement: options.refinement(),
+        tiles: &tile_list,
+        stop: None,
+        start: Instant::now(),
+    };
+    let ctx = Ctx { scene, seed, layers: false, planned_spp: None, start: 0 };
+    let mut tree = SdTree::new(scene.bounds.center, scene.bounds.radius);
+    match pt.sampler {
+        SamplerKind::Independent => train::<Sampler>(&ctx, &t, &mut tree, passes, None),
+        SamplerKind::Sobol => train::<SobolSampler>(&ctx, &t, &mut tree, passes, None),
+    };
+    Ok(tree)
+}
+
 /// The final pass's iterations within `range` of a render whose first `t` iterations train.
 fn final_iterations(range: &Range<u32>, t: u32) -> Range<u32> {
     range.start.max(t) - t..range.end.max(t) - t
