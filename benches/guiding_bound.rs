@@ -11,20 +11,22 @@
 //! and the integrand `ĝ = f(ω) |cos θ| L̂(ω)`. From these, for a sampling density `q`, the
 //! relative variance of the one-sample estimate `ĝ / q`:
 //! - `bsdf`: `q` the BSDF's (the path tracer);
-//! - `mixture`: the guided path tracer's, half BSDF, half the trained tree;
-//! - `ideal`: `q ∝ ḡ`, where `ḡ = f |cos θ| L̄` and `L̄` is the mean of `L̂` over each of
-//!   32 × 32 cells of directions: the best a density over directions can do at this
-//!   resolution (its variance is all in `L̂`);
-//! - `ideal mixture`: half BSDF, half `ideal`, the best the guided path tracer's mixture
-//!   can do.
+//! - `mixture`: the guided path tracer's, the trained tree's with the BSDF fraction its leaf
+//!   learnt;
+//! - `radiance mixture`: half BSDF, half a density proportional to `L̄`, the mean of `L̂`
+//!   over each of `--cells` × `--cells` cells of directions at this very point: the best a
+//!   guide of incident radiance (what the tree learns) can do in a half-BSDF mixture;
+//! - `product mixture`: half BSDF, half a density proportional to `f |cos θ| L̄`.
 //!
-//! It prints, per depth, the medians over the vertices of these relative variances and of
-//! the gain `bsdf / ideal`, and the median share of the variance the direction makes,
-//! `1 - ideal / bsdf`.
+//! The cells' means come from half of the directions and the variances from the other half,
+//! so that the ideal densities are not fitted to the samples they are judged on. It prints,
+//! per depth, the medians over the vertices of these relative variances and of the gains
+//! (the BSDF's variance over each density's).
 //!
 //! ```sh
 //! cargo bench --profile release --bench guiding_bound -- \
-//!     [--resolution WxH] [--passes 1,2,4,...] [--vertices N] [--directions N] [--depths 1,2,3] [SCENE.xml ...]
+//!     [--resolution WxH] [--passes 1,2,4,...] [--vertices N] [--directions N] [--depths 1,2,3] \
+//!     [--cells N] [--spatial-threshold C] [SCENE.xml ...]
 //! ```
 //! Without scenes: `veach-ajar` and `sunlit-room`, at 320×180.
 
@@ -141,6 +143,9 @@ fn variances(
 ) -> Option<[f64; 4]> {
     let bsdf = scene.bsdf(si);
     let guide = tree.guide_at(si.p);
+    // The fraction the leaf learnt (the default options learn one), else the default's.
+    let a =
+        tree.leaves[tree.leaf_at(si.p) as usize].bsdf_fraction.unwrap_or(GuidedOptions::default().bsdf_fraction) as f64;
     let mut rng = Sampler::new(&[seed, 0x6775_6964]);
     let mut counters = Counters::default();
     let u = 1.0 / (4.0 * PI);
@@ -185,7 +190,7 @@ fn variances(
         }
         let ideal = fc * mean_l[cell] / ideal_norm;
         let radiance = mean_l[cell] / radiance_norm;
-        let q = [p_bsdf, 0.5 * p_bsdf + 0.5 * p_tree, 0.5 * p_bsdf + 0.5 * radiance, 0.5 * p_bsdf + 0.5 * ideal];
+        let q = [p_bsdf, a * p_bsdf + (1.0 - a) * p_tree, 0.5 * p_bsdf + 0.5 * radiance, 0.5 * p_bsdf + 0.5 * ideal];
         for (m, q) in m.iter_mut().zip(q) {
             *m += if q > 0.0 { g * g / (q * u) } else { f64::INFINITY };
         }

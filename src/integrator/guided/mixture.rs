@@ -3,7 +3,8 @@
 //!
 //! At a vertex whose BSDF has a non-Dirac lobe and whose spatial leaf has a trained
 //! quadtree, the next direction comes from the BSDF with probability `α` (the BSDF
-//! fraction) and from the quadtree otherwise; its density is the mixture's,
+//! fraction: the leaf's own where it learnt one, else the option's) and from the quadtree
+//! otherwise; its density is the mixture's,
 //! `α p_bsdf + (1 - α) p_tree`, and next-event estimation is weighed against that density.
 //! A Dirac lobe the BSDF sample picks keeps its own weight divided by `α` (only the BSDF
 //! branch reaches it). A purely Dirac BSDF, or a leaf that has recorded nothing, samples
@@ -17,10 +18,13 @@
 //! their MIS weights: the tree learns the light a direction brings to the image, so that
 //! emission next-event estimation finds well draws few guided samples. When the path ends,
 //! each vertex becomes a record of `mean(L_i) / p(ω_i)` for its quadtree leaf
-//! ([`Guided::take_records`]), `p` the mixture's density.
+//! ([`Guided::take_records`]), `p` the mixture's density; a vertex a tree guided also
+//! becomes a record, for its spatial leaf, of `f |cos θ| L_i` with the density it was
+//! sampled with and the BSDF's and the tree's densities of its direction, from which the
+//! leaf learns its fraction ([`SdTree::add_fraction_records`]).
 
 use crate::bsdf::{Bsdf, BsdfSample, TransportMode};
-use crate::integrator::guided::sdtree::{DirTree, Record, SdTree, from_square, sphere_pdf, to_square};
+use crate::integrator::guided::sdtree::{DirTree, FractionRecord, Record, SdTree, from_square, sphere_pdf, to_square};
 use crate::integrator::path::{BsdfSampling, Continuation};
 use crate::math::Rgb;
 use crate::sampling::{ONE_BELOW, Random};
@@ -29,7 +33,9 @@ use glam::Vec3;
 use std::cell::Cell;
 
 /// A vertex of a training path: where it is, the direction it sampled (world) and that
-/// direction's density, the throughput after it, and the radiance it received so far.
+/// direction's density, the throughput after it, and the radiance it received so far; its
+/// BSDF value times the cosine, and the BSDF's and the tree's densities of the direction
+/// where a tree guided it.
 #[derive(Clone, Copy, Debug)]
 struct PathVertex {
     /// The spatial leaf of the vertex.
@@ -38,12 +44,15 @@ struct PathVertex {
     pdf: f32,
     beta: Rgb,
     radiance: Rgb,
+    f_cos: Rgb,
+    densities: Option<(f32, f32)>,
 }
 
 /// The guided continuation over a tree.
 pub(crate) struct Guided<'a> {
     pub tree: &'a SdTree,
-    /// `α`: the probability of sampling the BSDF at a guided vertex.
+    /// `α`: the probability of sampling the BSDF at a guided vertex whose leaf has not
+    /// learnt its own.
     pub bsdf_fraction: f32,
     /// Whether the path's vertices are kept for records (a training pass).
     pub recording: bool,
@@ -51,11 +60,13 @@ pub(crate) struct Guided<'a> {
     /// The position last looked up and its spatial leaf: next-event estimation, the
     /// sampling and the record of one vertex share one lookup.
     last: Cell<(Vec3, u32)>,
+    /// The BSDF's and the tree's densities of the last guided sample's direction.
+    sampled: Option<(f32, f32)>,
 }
 
 impl<'a> Guided<'a> {
     pub fn new(tree: &'a SdTree, bsdf_fraction: f32, recording: bool) -> Guided<'a> {
-        Guided { tree, bsdf_fraction, recording, vertices: Vec::new(), last: Cell::new((Vec3::NAN, 0)) }
+        Guided { tree, bsdf_fraction, recording, vertices: Vec::new(), last: Cell::new((Vec3::NAN, 0)), sampled: None }
     }
 
     /// The spatial leaf holding `p`.
@@ -70,33 +81,47 @@ impl<'a> Guided<'a> {
         leaf
     }
 
-    /// The quadtree that guides the vertex `si` with BSDF `bsdf`, if any.
+    /// The quadtree that guides the vertex `si` with BSDF `bsdf`, if any, and the BSDF
+    /// fraction there.
     #[inline]
-    fn guide(&self, si: &SurfaceInteraction, bsdf: &Bsdf) -> Option<&'a DirTree> {
-        if bsdf.is_delta() { None } else { self.tree.guide_in(self.leaf(si.p)) }
+    fn guide(&self, si: &SurfaceInteraction, bsdf: &Bsdf) -> Option<(&'a DirTree, f32)> {
+        if bsdf.is_delta() {
+            return None;
+        }
+        let leaf = self.leaf(si.p);
+        let tree = self.tree.guide_in(leaf)?;
+        Some((tree, self.tree.leaves[leaf as usize].bsdf_fraction.unwrap_or(self.bsdf_fraction)))
     }
 
-    /// The mixture's density of the non-Dirac direction `wi` (shading frame) at `si`.
+    /// The mixture's density of the non-Dirac direction `wi` (shading frame) at `si`, with
+    /// BSDF fraction `a`.
     #[inline]
-    fn mixture_pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, guide: &DirTree, wo: Vec3, wi: Vec3) -> f32 {
+    fn mixture_pdf(
+        &self,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        (guide, a): (&DirTree, f32),
+        wo: Vec3,
+        wi: Vec3,
+    ) -> f32 {
         let p_tree = sphere_pdf(guide.pdf(to_square(si.shading.to_world(wi))));
-        self.mixture(si, bsdf, wo, wi, p_tree)
-    }
-
-    /// The mixture's density of `wi` given the tree's density `p_tree` of it.
-    #[inline]
-    fn mixture(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3, p_tree: f32) -> f32 {
-        let a = self.bsdf_fraction;
         let p_bsdf = bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance);
         a * p_bsdf + (1.0 - a) * p_tree
     }
 
-    /// Ends the path: its kept vertices as records, added to `out`.
-    pub fn take_records(&mut self, out: &mut Vec<Record>) {
+    /// Ends the path: its kept vertices as records, added to `out`, and what the guided ones
+    /// tell their leaves about the BSDF fraction, added to `fractions`.
+    pub fn take_records(&mut self, out: &mut Vec<Record>, fractions: &mut Vec<FractionRecord>) {
         for v in self.vertices.drain(..) {
             let value = (v.radiance.x + v.radiance.y + v.radiance.z) / 3.0 / v.pdf;
             let value = if value.is_finite() && value > 0.0 { value } else { 0.0 };
             out.push(self.tree.record_in(v.leaf, v.wi, value));
+            if let Some((pdf_bsdf, pdf_tree)) = v.densities {
+                let g = v.radiance * v.f_cos;
+                let value = (g.x + g.y + g.z) / 3.0;
+                let value = if value.is_finite() && value > 0.0 { value } else { 0.0 };
+                fractions.push(FractionRecord { leaf: v.leaf, value, pdf: v.pdf, pdf_bsdf, pdf_tree });
+            }
         }
     }
 }
@@ -109,33 +134,41 @@ impl Continuation for Guided<'_> {
         wo: Vec3,
         sampler: &mut R,
     ) -> Option<BsdfSample> {
-        let Some(guide) = self.guide(si, bsdf) else {
+        self.sampled = None;
+        let Some((guide, a)) = self.guide(si, bsdf) else {
             return BsdfSampling.sample(si, bsdf, wo, sampler);
         };
-        let a = self.bsdf_fraction;
+        if a >= 1.0 && !self.recording {
+            // The BSDF alone, as the mixture would sample it with the same numbers: only a
+            // training pass needs the tree's density of the direction.
+            return BsdfSampling.sample(si, bsdf, wo, sampler);
+        }
         let u = sampler.next_1d();
-        let (wi, pdf) = if u < a {
+        let (wi, p_tree) = if u < a {
             let bs = bsdf.sample(wo, si.at(), (u / a).min(ONE_BELOW), sampler.next_2d(), TransportMode::Radiance)?;
             if bs.delta {
                 return Some(BsdfSample { pdf: bs.pdf * a, weight: bs.weight / a, ..bs });
             }
-            (bs.wi, self.mixture_pdf(si, bsdf, guide, wo, bs.wi))
+            (bs.wi, sphere_pdf(guide.pdf(to_square(si.shading.to_world(bs.wi)))))
         } else {
             let u_tree = sampler.next_2d();
             let u_leaf = sampler.next_2d();
             let (square, p_square) = guide.sample(u_tree, u_leaf);
-            let wi = si.shading.to_local(from_square(square));
-            (wi, self.mixture(si, bsdf, wo, wi, sphere_pdf(p_square)))
+            (si.shading.to_local(from_square(square)), sphere_pdf(p_square))
         };
+        let p_bsdf = bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance);
+        let pdf = a * p_bsdf + (1.0 - a) * p_tree;
         let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance);
         if !(pdf > 0.0 && pdf.is_finite()) || f == Rgb::ZERO {
             return None;
         }
+        self.sampled = Some((p_bsdf, p_tree));
         Some(BsdfSample { wi, f, pdf, weight: f * (wi.z.abs() / pdf), delta: false })
     }
 
     fn pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {
         match self.guide(si, bsdf) {
+            Some((_, a)) if a >= 1.0 => BsdfSampling.pdf(si, bsdf, wo, wi),
             Some(guide) => self.mixture_pdf(si, bsdf, guide, wo, wi),
             None => BsdfSampling.pdf(si, bsdf, wo, wi),
         }
@@ -145,7 +178,15 @@ impl Continuation for Guided<'_> {
     fn continued(&mut self, si: &SurfaceInteraction, wi: Vec3, sample: &BsdfSample, beta: Rgb) {
         if self.recording && !sample.delta {
             let leaf = self.leaf(si.p);
-            self.vertices.push(PathVertex { leaf, wi, pdf: sample.pdf, beta, radiance: Rgb::ZERO });
+            self.vertices.push(PathVertex {
+                leaf,
+                wi,
+                pdf: sample.pdf,
+                beta,
+                radiance: Rgb::ZERO,
+                f_cos: sample.f * sample.wi.z.abs(),
+                densities: self.sampled.take(),
+            });
         }
     }
 
@@ -188,8 +229,9 @@ mod tests {
         g.continued(&si, -Vec3::Z, &sample(0.2, false), Rgb::splat(4.0));
         g.gathered(Rgb::splat(8.0));
         g.gathered(Rgb::new(0.0, 12.0, 0.0));
-        let mut records = Vec::new();
-        g.take_records(&mut records);
+        let (mut records, mut fractions) = (Vec::new(), Vec::new());
+        g.take_records(&mut records, &mut fractions);
+        assert!(fractions.is_empty(), "no vertex was guided by a tree");
         let values: Vec<f32> = records.iter().map(|r| r.value).collect();
         assert_eq!(values, vec![6.0 / 0.5, 3.0 / 0.2]);
         assert!(g.vertices.is_empty(), "the next path starts afresh");

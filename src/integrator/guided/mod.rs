@@ -42,7 +42,8 @@ use std::time::Instant;
 #[derive(Clone, Debug, Serialize, clap::Args)]
 pub struct GuidedOptions {
     /// Probability of sampling the BSDF rather than the guiding tree at a guided vertex,
-    /// in (0, 1].
+    /// in (0, 1]: at every vertex, or (with `--guided-learn-fraction true`) where a leaf has
+    /// not learnt its own.
     #[arg(long = "guided-bsdf-fraction", default_value_t = GuidedOptions::default().bsdf_fraction)]
     pub bsdf_fraction: f32,
     /// c: a spatial leaf is split when a training pass of s samples per pixel records more
@@ -56,11 +57,22 @@ pub struct GuidedOptions {
     /// Deepest level of the directional quadtrees (1 to 30).
     #[arg(long = "guided-max-depth", default_value_t = GuidedOptions::default().max_tree_depth)]
     pub max_tree_depth: u32,
+    /// Each spatial leaf learns its BSDF fraction from the training passes (the candidate
+    /// 0.1, 0.2, …, 1 with the least estimated second moment of its vertices' reflected
+    /// light); `false` keeps `--guided-bsdf-fraction` everywhere.
+    #[arg(long = "guided-learn-fraction", default_value_t = GuidedOptions::default().learn_fraction, action = clap::ArgAction::Set)]
+    pub learn_fraction: bool,
 }
 
 impl Default for GuidedOptions {
     fn default() -> GuidedOptions {
-        GuidedOptions { bsdf_fraction: 0.5, spatial_threshold: 12000.0, flux_fraction: 0.01, max_tree_depth: 20 }
+        GuidedOptions {
+            bsdf_fraction: 0.5,
+            spatial_threshold: 12000.0,
+            flux_fraction: 0.01,
+            max_tree_depth: 20,
+            learn_fraction: true,
+        }
     }
 }
 
@@ -96,6 +108,7 @@ impl GuidedOptions {
             spatial_threshold: self.spatial_threshold,
             flux_fraction: self.flux_fraction,
             max_depth: self.max_tree_depth,
+            learn_fraction: self.learn_fraction,
         }
     }
 }
@@ -175,6 +188,8 @@ impl Iterative for GuidedRender {
     fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 
     fn details(&self) -> Details {
+        let mut learnt: Vec<f32> = self.tree.leaves.iter().filter_map(|l| l.bsdf_fraction).collect();
+        learnt.sort_by(f32::total_cmp);
         Details::of(GuidedStats {
             training_passes: self.trained.passes,
             training_spp: self.trained.spp,
@@ -182,6 +197,9 @@ impl Iterative for GuidedRender {
             training: self.trained.counters,
             spatial_leaves: self.tree.leaves.len(),
             quadtree_nodes: self.tree.sampling_nodes(),
+            learnt_fractions: learnt.len(),
+            fraction_range: (!learnt.is_empty())
+                .then(|| [learnt[0], learnt[learnt.len() / 2], learnt[learnt.len() - 1]]),
         })
     }
 }
@@ -199,14 +217,25 @@ pub struct GuidedStats {
     pub spatial_leaves: usize,
     /// Nodes of the quadtrees the final pass sampled from, over all leaves.
     pub quadtree_nodes: usize,
+    /// The leaves that learnt a BSDF fraction (`--guided-learn-fraction`), and the least,
+    /// median and greatest fraction learnt.
+    pub learnt_fractions: usize,
+    pub fraction_range: Option<[f32; 3]>,
 }
 
 impl IntegratorStats for GuidedStats {
     fn lines(&self, _: &RenderStats) -> Vec<String> {
-        vec![format!(
+        let mut line = format!(
             "  guiding: {} training passes ({} spp, {:.2} s), {} spatial leaves, {} quadtree nodes",
             self.training_passes, self.training_spp, self.training_seconds, self.spatial_leaves, self.quadtree_nodes
-        )]
+        );
+        if let Some([least, median, greatest]) = self.fraction_range {
+            line += &format!(
+                "; {} leaves learnt BSDF fractions {least}–{greatest} (median {median})",
+                self.learnt_fractions
+            );
+        }
+        vec![line]
     }
 }
 

@@ -19,6 +19,11 @@
 //! quadtree to be built next is the sampled one refined by flux: a node holding more than a
 //! fraction `ρ` of its tree's sum is subdivided (a leaf's sum shared evenly among its new
 //! children), down to a maximum depth, and a node holding less is a leaf.
+//!
+//! With a learnt BSDF fraction, each leaf also sums, over the pass's guided vertices in it,
+//! an estimate of the second moment `∫ g² / p_α` of their reflected light `g` under the
+//! mixture of each candidate fraction `α` (importance-weighted by the density each
+//! direction was sampled with), and takes the candidate with the least for the next pass.
 
 use glam::{DVec2, Vec2, Vec3};
 use std::f32::consts::PI;
@@ -243,13 +248,37 @@ enum SpatialNode {
     Inner { axis: u8, first: u32 },
 }
 
-/// A spatial leaf: the quadtree sampled from, the one being built, and the records it took.
+/// A spatial leaf: the quadtree sampled from, the one being built, the records it took, and
+/// (with a learnt BSDF fraction) the fraction its vertices sample the BSDF with and the
+/// pass's estimates of the second moment under each candidate fraction.
 #[derive(Clone, Debug, Default)]
 pub struct SpatialLeaf {
     pub sampling: DirTree,
     pub building: DirTree,
     pub records: u64,
+    pub bsdf_fraction: Option<f32>,
+    moments: [f64; FRACTIONS.len()],
+    fraction_records: u64,
     depth: u32,
+}
+
+/// The BSDF fractions a leaf learns among.
+pub const FRACTIONS: [f32; 10] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0];
+
+/// The fewest records of a pass from which a leaf learns its BSDF fraction.
+const MIN_FRACTION_RECORDS: u64 = 64;
+
+/// What a vertex of a training path tells its leaf about the BSDF fraction: its estimate
+/// `value` of the reflected light along the direction it sampled (`f |cos θ| L`, before
+/// dividing by any density), the density it was sampled with, and the BSDF's and the
+/// tree's densities of the direction.
+#[derive(Clone, Copy, Debug)]
+pub struct FractionRecord {
+    pub leaf: u32,
+    pub value: f32,
+    pub pdf: f32,
+    pub pdf_bsdf: f32,
+    pub pdf_tree: f32,
 }
 
 /// The deepest a spatial leaf is split.
@@ -263,6 +292,8 @@ pub struct Refinement {
     /// `ρ`: a quadtree node is subdivided when it holds more than this fraction of the sum.
     pub flux_fraction: f64,
     pub max_depth: u32,
+    /// Whether each leaf learns its BSDF fraction.
+    pub learn_fraction: bool,
 }
 
 /// The spatio-directional tree.
@@ -348,13 +379,40 @@ impl SdTree {
         }
     }
 
+    /// Adds the estimates of the second moment under each candidate BSDF fraction, in order:
+    /// a record sampled with density `p` adds `value² / (p · p_α)`, `p_α` the mixture's
+    /// density with fraction `α`, an estimate of `∫ value² / p_α`.
+    pub fn add_fraction_records(&mut self, records: &[FractionRecord]) {
+        for r in records {
+            let leaf = &mut self.leaves[r.leaf as usize];
+            leaf.fraction_records += 1;
+            let v = r.value as f64;
+            if !(v > 0.0 && v.is_finite() && r.pdf > 0.0) {
+                continue;
+            }
+            for (m, &a) in leaf.moments.iter_mut().zip(&FRACTIONS) {
+                let p_a = a as f64 * r.pdf_bsdf as f64 + (1.0 - a as f64) * r.pdf_tree as f64;
+                *m += if p_a > 0.0 { v * v / (r.pdf as f64 * p_a) } else { f64::INFINITY };
+            }
+        }
+    }
+
     /// After a training pass of `spp` samples per pixel: the built trees become the ones
-    /// sampled from, crowded spatial leaves are split, and the next trees to build are
-    /// refined by flux and empty.
+    /// sampled from, each leaf that took enough records takes the candidate BSDF fraction
+    /// with the least second moment (when learning), crowded spatial leaves are split, and
+    /// the next trees to build are refined by flux and empty.
     pub fn finish_pass(&mut self, spp: u32, r: &Refinement) {
         for leaf in &mut self.leaves {
             leaf.building.build();
             leaf.sampling = leaf.building.clone();
+            if r.learn_fraction && leaf.fraction_records >= MIN_FRACTION_RECORDS {
+                let best = (0..FRACTIONS.len()).min_by(|&i, &j| leaf.moments[i].total_cmp(&leaf.moments[j]));
+                if let Some(i) = best.filter(|&i| leaf.moments[i].is_finite()) {
+                    leaf.bsdf_fraction = Some(FRACTIONS[i]);
+                }
+            }
+            leaf.moments = [0.0; FRACTIONS.len()];
+            leaf.fraction_records = 0;
         }
         self.split_leaves(r.spatial_threshold * (spp as f64).sqrt());
         for leaf in &mut self.leaves {
@@ -513,6 +571,47 @@ mod tests {
         assert_eq!(empty.refined(0.01, 20).node_count(), 1);
     }
 
+    /// A leaf learns the candidate fraction whose mixture best matches its vertices'
+    /// integrand: the BSDF's fraction 1 where the BSDF's density is proportional to the
+    /// light reflected and the tree's is not, the least fraction where the tree's is; and
+    /// nothing without learning or with too few records.
+    #[test]
+    fn leaves_learn_the_bsdf_fraction_whose_mixture_fits_best() {
+        let mut rng = Sampler::new(&[5]);
+        // Directions sampled uniformly (density 1 on a domain of measure 1); the integrand
+        // is 3x² in x ∈ [0, 1); one density follows it, the other is constant.
+        let records = |leaf: u32, bsdf_fits: bool, rng: &mut Sampler| -> Vec<FractionRecord> {
+            (0..1000)
+                .map(|_| {
+                    let x = rng.next_1d();
+                    let (fit, flat) = (3.0 * x * x, 1.0);
+                    let (pdf_bsdf, pdf_tree) = if bsdf_fits { (fit, flat) } else { (flat, fit) };
+                    FractionRecord { leaf, value: 3.0 * x * x, pdf: 1.0, pdf_bsdf, pdf_tree }
+                })
+                .collect()
+        };
+        let mut t = SdTree::new(Vec3::ZERO, 1.0);
+        t.add(&[t.record_for(Vec3::splat(-0.5), Vec3::Z, 1.0), t.record_for(Vec3::splat(0.5), Vec3::Z, 1.0)]);
+        let r = Refinement { spatial_threshold: 1.0, flux_fraction: 0.01, max_depth: 20, learn_fraction: true };
+        t.finish_pass(1, &r);
+        let (a, b) = (t.leaf_at(Vec3::splat(-0.5)), t.leaf_at(Vec3::splat(0.5)));
+        assert_ne!(a, b);
+        t.add_fraction_records(&records(a, true, &mut rng));
+        t.add_fraction_records(&records(b, false, &mut rng));
+        let fixed = Refinement { learn_fraction: false, ..r };
+        let mut unlearnt = t.clone();
+        unlearnt.finish_pass(1, &fixed);
+        assert!(unlearnt.leaves.iter().all(|l| l.bsdf_fraction.is_none()), "learnt without learning");
+        t.finish_pass(1, &r);
+        assert_eq!(t.leaves[t.leaf_at(Vec3::splat(-0.5)) as usize].bsdf_fraction, Some(1.0));
+        assert_eq!(t.leaves[t.leaf_at(Vec3::splat(0.5)) as usize].bsdf_fraction, Some(FRACTIONS[0]));
+        // Too few records: the leaf keeps what it had.
+        let c = t.leaf_at(Vec3::splat(0.5));
+        t.add_fraction_records(&records(c, true, &mut rng)[..(MIN_FRACTION_RECORDS - 1) as usize]);
+        t.finish_pass(1, &r);
+        assert_eq!(t.leaves[t.leaf_at(Vec3::splat(0.5)) as usize].bsdf_fraction, Some(FRACTIONS[0]));
+    }
+
     #[test]
     fn crowded_spatial_leaves_split_along_alternating_axes() {
         let mut t = SdTree::new(Vec3::ZERO, 1.0);
@@ -521,7 +620,7 @@ mod tests {
         // wherever they fell.
         let records = vec![t.record_for(Vec3::splat(-0.9), d, 1.0); 1010];
         t.add(&records);
-        let r = Refinement { spatial_threshold: 100.0, flux_fraction: 0.01, max_depth: 20 };
+        let r = Refinement { spatial_threshold: 100.0, flux_fraction: 0.01, max_depth: 20, learn_fraction: false };
         t.finish_pass(1, &r);
         // 1010 > 100 → two halves of 505 → … until ≤ 100: four levels (63 each).
         let corner = t.leaf_at(Vec3::splat(-0.9));

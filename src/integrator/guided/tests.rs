@@ -18,14 +18,15 @@ fn cornell() -> Scene {
 /// A tree trained on `scene` in passes of 1, 2 and 4 samples per pixel, its spatial
 /// threshold low enough that it splits.
 fn trained(scene: &Scene) -> SdTree {
-    trained_in_tiles(scene, 8)
+    trained_in_tiles(scene, 8, false)
 }
 
-/// [`trained`] with tiles of `tile_size` pixels.
-fn trained_in_tiles(scene: &Scene, tile_size: u32) -> SdTree {
+/// [`trained`] with tiles of `tile_size` pixels, its leaves learning their BSDF fractions
+/// or not.
+fn trained_in_tiles(scene: &Scene, tile_size: u32, learn_fraction: bool) -> SdTree {
     let pt = PathTracer::new(&scene.integrator);
     let tile_list = tiles(scene.film.width, scene.film.height, tile_size);
-    let options = GuidedOptions { spatial_threshold: 100.0, ..GuidedOptions::default() };
+    let options = GuidedOptions { spatial_threshold: 100.0, learn_fraction, ..GuidedOptions::default() };
     let t = Training {
         pt: &pt,
         bsdf_fraction: 0.5,
@@ -63,14 +64,28 @@ fn vertices(scene: &Scene) -> Vec<(SurfaceInteraction, Vec3)> {
 #[test]
 fn the_mixture_samples_what_its_density_says() {
     let scene = cornell();
-    let tree = trained(&scene);
-    let all = vertices(&scene);
+    mixture_chi2(&scene, &trained(&scene));
+}
+
+/// With fractions learnt per leaf, the mixture at each vertex takes its leaf's.
+#[test]
+fn the_mixture_with_learnt_fractions_samples_what_its_density_says() {
+    let scene = cornell();
+    let tree = trained_in_tiles(&scene, 8, true);
+    let learnt: Vec<f32> = tree.leaves.iter().filter_map(|l| l.bsdf_fraction).collect();
+    assert!(learnt.iter().any(|&a| a != 0.5), "no leaf learnt a fraction of its own: {learnt:?}");
+    mixture_chi2(&scene, &tree);
+}
+
+/// χ² of the mixture's samples against its density at two vertices.
+fn mixture_chi2(scene: &Scene, tree: &SdTree) {
+    let all = vertices(scene);
     // A point on the back wall and one on the floor, each guided by a trained quadtree.
     let picked: Vec<_> = all.iter().step_by(all.len() / 3).take(2).collect();
     for (si, wo) in picked {
         let bsdf = scene.bsdf(si);
         assert!(tree.guide_at(si.p).is_some());
-        let mut guided = Guided::new(&tree, 0.5, false);
+        let mut guided = Guided::new(tree, 0.5, false);
         let mut rng = Sampler::new(&[9]);
         let mut t = Chi2Test::new(SphereDomain::default());
         t.samples = 200_000;
@@ -80,7 +95,7 @@ fn the_mixture_samples_what_its_density_says() {
             |d| {
                 let wi = si.shading.to_local(d);
                 let f = bsdf.eval(*wo, wi, si.at(), crate::bsdf::TransportMode::Radiance);
-                if f == Vec3::ZERO { 0.0 } else { Guided::new(&tree, 0.5, false).pdf(si, bsdf, *wo, wi) }
+                if f == Vec3::ZERO { 0.0 } else { Guided::new(tree, 0.5, false).pdf(si, bsdf, *wo, wi) }
             },
         );
         r.assert_pass();
@@ -96,13 +111,17 @@ fn the_mixture_samples_what_its_density_says() {
 #[test]
 fn nee_and_the_mixtures_hits_weigh_each_path_to_one() {
     let scene = cornell();
-    let tree = trained(&scene);
+    weights_sum_to_one(&scene, &trained(&scene));
+    weights_sum_to_one(&scene, &trained_in_tiles(&scene, 8, true));
+}
+
+fn weights_sum_to_one(scene: &Scene, tree: &SdTree) {
     let pt = PathTracer::new(&scene.integrator);
     let mut rng = Sampler::new(&[13]);
     let (mut paths, mut off) = (0, 0);
-    for (si, wo) in vertices(&scene) {
+    for (si, wo) in vertices(scene) {
         let bsdf = scene.bsdf(&si);
-        let mut guided = Guided::new(&tree, 0.5, false);
+        let mut guided = Guided::new(tree, 0.5, false);
         for _ in 0..2000 {
             let Some(bs) = guided.sample(&si, bsdf, wo, &mut rng) else { continue };
             let Some(hit) = scene.intersect(&si.spawn_ray(si.shading.to_world(bs.wi))) else { continue };
@@ -136,7 +155,7 @@ fn training_gives_the_same_tree_whatever_the_threads_and_tiles() {
     let scene = cornell();
     let one = crate::workers::render_pool(1).unwrap().install(|| trained(&scene));
     let two = crate::workers::render_pool(2).unwrap().install(|| trained(&scene));
-    let tiled = crate::workers::render_pool(2).unwrap().install(|| trained_in_tiles(&scene, 5));
+    let tiled = crate::workers::render_pool(2).unwrap().install(|| trained_in_tiles(&scene, 5, false));
     let mut rng = Sampler::new(&[21]);
     for other in [&two, &tiled] {
         assert_eq!(one.leaves.len(), other.leaves.len());
@@ -147,6 +166,11 @@ fn training_gives_the_same_tree_whatever_the_threads_and_tiles() {
             assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
         }
     }
+    // The learnt fractions too.
+    let fractions = |t: &SdTree| t.leaves.iter().map(|l| l.bsdf_fraction).collect::<Vec<_>>();
+    let one = crate::workers::render_pool(1).unwrap().install(|| trained_in_tiles(&scene, 8, true));
+    let two = crate::workers::render_pool(2).unwrap().install(|| trained_in_tiles(&scene, 5, true));
+    assert_eq!(fractions(&one), fractions(&two));
 }
 
 #[test]

@@ -18,7 +18,7 @@
 
 use crate::film::Tile;
 use crate::integrator::guided::mixture::Guided;
-use crate::integrator::guided::sdtree::{Record, Refinement, SdTree};
+use crate::integrator::guided::sdtree::{FractionRecord, Record, Refinement, SdTree};
 use crate::integrator::path::PathTracer;
 use crate::integrator::render_loop::{Ctx, sample_tile_with};
 use crate::integrator::stats::Counters;
@@ -104,8 +104,9 @@ pub(crate) fn train<S: PixelSampler>(
                 return Trained { seconds: begun.elapsed().as_secs_f64(), ..done };
             }
             let count = part.min(end - first);
-            let (records, counters) = pass_part::<S>(&ctx, t, tree, first, count);
+            let (records, fractions, counters) = pass_part::<S>(&ctx, t, tree, first, count);
             tree.add(&records);
+            tree.add_fraction_records(&fractions);
             done.counters += counters;
             first += count;
         }
@@ -124,44 +125,50 @@ pub(crate) fn train<S: PixelSampler>(
     done
 }
 
-/// Training iterations `first..first + count` of every tile: the records, in pixel order,
-/// and the counters summed in tile order.
+/// What the tiles of a part of a pass recorded: each record with its pixel.
+type TileRecords = (Vec<(u32, Record)>, Vec<(u32, FractionRecord)>, Counters);
+
+/// Training iterations `first..first + count` of every tile: the records and the fraction
+/// records, each in pixel order, and the counters summed in tile order.
 fn pass_part<S: PixelSampler>(
     ctx: &Ctx,
     t: &Training,
     tree: &SdTree,
     first: u32,
     count: u32,
-) -> (Vec<Record>, Counters) {
+) -> (Vec<Record>, Vec<FractionRecord>, Counters) {
     let width = ctx.scene.film.width;
-    let parts: Vec<(Vec<(u32, Record)>, Counters)> = t
+    let parts: Vec<TileRecords> = t
         .tiles
         .par_iter()
         .with_max_len(1)
         .map(|&tile| {
-            let mut records = Vec::new();
-            let mut path_records = Vec::new();
+            let (mut records, mut fractions) = (Vec::new(), Vec::new());
+            let (mut path_records, mut path_fractions) = (Vec::new(), Vec::new());
             let mut cont = Guided::new(tree, t.bsdf_fraction, true);
             let r = sample_tile_with::<S>(ctx, tile, (first, count), None, |pos, sampler, sink, counters| {
                 let ray = ctx.scene.camera.generate_ray(pos);
                 sink.l = counters.camera_path(|c| t.pt.li_with(ctx.scene, ray, sampler, c, &mut cont));
-                cont.take_records(&mut path_records);
+                cont.take_records(&mut path_records, &mut path_fractions);
                 let pixel = pos.y as u32 * width + pos.x as u32;
                 records.extend(path_records.drain(..).map(|r| (pixel, r)));
+                fractions.extend(path_fractions.drain(..).map(|r| (pixel, r)));
                 true
             });
-            (records, r.counters)
+            (records, fractions, r.counters)
         })
         .collect();
     let mut counters = Counters::default();
-    let mut records = Vec::new();
-    for (r, c) in parts {
+    let (mut records, mut fractions) = (Vec::new(), Vec::new());
+    for (r, f, c) in parts {
         counters += c;
         records.extend(r);
+        fractions.extend(f);
     }
-    // A stable sort: each pixel's records stay in the order its samples made them.
+    // Stable sorts: each pixel's records stay in the order its samples made them.
     records.sort_by_key(|&(pixel, _)| pixel);
-    (records.into_iter().map(|(_, r)| r).collect(), counters)
+    fractions.sort_by_key(|&(pixel, _)| pixel);
+    (records.into_iter().map(|(_, r)| r).collect(), fractions.into_iter().map(|(_, r)| r).collect(), counters)
 }
 
 #[cfg(test)]
