@@ -103,6 +103,17 @@ impl GuidedOptions {
         Ok(())
     }
 
+    /// What [`train`] needs for a training of the path tracer `pt` over `tiles`.
+    fn training<'a>(
+        &self,
+        pt: &'a PathTracer,
+        tiles: &'a [Tile],
+        stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+        start: Instant,
+    ) -> Training<'a> {
+        Training { pt, bsdf_fraction: self.bsdf_fraction, refinement: self.refinement(), tiles, stop, start }
+    }
+
     fn refinement(&self) -> Refinement {
         Refinement {
             spatial_threshold: self.spatial_threshold,
@@ -144,21 +155,15 @@ impl GuidedRender {
         })
     }
 
-    fn train_with<S: PixelSampler>(&mut self, ctx: &Ctx) {
+    fn train(&mut self, ctx: &Ctx) {
         let film = &ctx.scene.film;
         let tile_list = tiles(film.width, film.height, self.run.tile_size.max(1));
-        let t = Training {
-            pt: &self.pt,
-            bsdf_fraction: self.options.bsdf_fraction,
-            refinement: self.options.refinement(),
-            tiles: &tile_list,
-            stop: self.run.stop.clone(),
-            start: self.start,
+        let t = self.options.training(&self.pt, &tile_list, self.run.stop.clone(), self.start);
+        let (passes, seconds) = match &self.schedule {
+            Schedule::Passes(p) => (&p[..], None),
+            Schedule::Seconds(s) => (&[][..], Some(*s)),
         };
-        self.trained = match &self.schedule {
-            Schedule::Passes(p) => train::<S>(ctx, &t, &mut self.tree, p, None),
-            Schedule::Seconds(s) => train::<S>(ctx, &t, &mut self.tree, &[], Some(*s)),
-        };
+        self.trained = train(ctx, &t, &mut self.tree, passes, seconds);
     }
 }
 
@@ -167,10 +172,7 @@ impl Iterative for GuidedRender {
     type TileData = ();
 
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
-        match self.pt.sampler {
-            SamplerKind::Independent => self.train_with::<Sampler>(ctx),
-            SamplerKind::Sobol => self.train_with::<SobolSampler>(ctx),
-        }
+        self.train(ctx);
         Ok(())
     }
 
@@ -245,20 +247,10 @@ pub fn train_tree(scene: &Scene, options: &GuidedOptions, passes: &[u32], seed: 
     options.check()?;
     let pt = PathTracer { sampler: scene.sampler.kind, ..PathTracer::new(&scene.integrator) };
     let tile_list = tiles(scene.film.width, scene.film.height, 32);
-    let t = Training {
-        pt: &pt,
-        bsdf_fraction: options.bsdf_fraction,
-        refinement: options.refinement(),
-        tiles: &tile_list,
-        stop: None,
-        start: Instant::now(),
-    };
+    let t = options.training(&pt, &tile_list, None, Instant::now());
     let ctx = Ctx { scene, seed, layers: false, planned_spp: None, start: 0 };
     let mut tree = SdTree::new(scene.bounds.center, scene.bounds.radius);
-    match pt.sampler {
-        SamplerKind::Independent => train::<Sampler>(&ctx, &t, &mut tree, passes, None),
-        SamplerKind::Sobol => train::<SobolSampler>(&ctx, &t, &mut tree, passes, None),
-    };
+    train(&ctx, &t, &mut tree, passes, None);
     Ok(tree)
 }
 

@@ -27,17 +27,10 @@ fn trained_in_tiles(scene: &Scene, tile_size: u32, learn_fraction: bool) -> SdTr
     let pt = PathTracer::new(&scene.integrator);
     let tile_list = tiles(scene.film.width, scene.film.height, tile_size);
     let options = GuidedOptions { spatial_threshold: 100.0, learn_fraction, ..GuidedOptions::default() };
-    let t = Training {
-        pt: &pt,
-        bsdf_fraction: 0.5,
-        refinement: options.refinement(),
-        tiles: &tile_list,
-        stop: None,
-        start: Instant::now(),
-    };
+    let t = options.training(&pt, &tile_list, None, Instant::now());
     let ctx = Ctx { scene, seed: 5, layers: false, planned_spp: None, start: 0 };
     let mut tree = SdTree::new(scene.bounds.center, scene.bounds.radius);
-    let done = train::<Sampler>(&ctx, &t, &mut tree, &[1, 2, 4], None);
+    let done = train(&ctx, &t, &mut tree, &[1, 2, 4], None);
     assert_eq!((done.passes, done.spp), (3, 7));
     assert!(tree.leaves.len() > 4, "the tree did not split: {} leaves", tree.leaves.len());
     tree

@@ -22,7 +22,8 @@ use crate::integrator::guided::sdtree::{FractionRecord, Record, Refinement, SdTr
 use crate::integrator::path::PathTracer;
 use crate::integrator::render_loop::{Ctx, sample_tile_with};
 use crate::integrator::stats::Counters;
-use crate::sampling::PixelSampler;
+use crate::sampling::sobol::SobolSampler;
+use crate::sampling::{PixelSampler, Sampler, SamplerKind};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -72,9 +73,17 @@ pub struct Trained {
 }
 
 /// Trains `tree` over the whole image in passes of `passes` samples per pixel (or, with
-/// `seconds`, doubling passes while time remains), with random numbers from `S`; stops
-/// early when the stop flag is set.
-pub(crate) fn train<S: PixelSampler>(
+/// `seconds`, doubling passes while time remains), with random numbers from the path
+/// tracer's sampler; stops early when the stop flag is set.
+pub(crate) fn train(ctx: &Ctx, t: &Training, tree: &mut SdTree, passes: &[u32], seconds: Option<f64>) -> Trained {
+    match t.pt.sampler {
+        SamplerKind::Independent => train_with::<Sampler>(ctx, t, tree, passes, seconds),
+        SamplerKind::Sobol => train_with::<SobolSampler>(ctx, t, tree, passes, seconds),
+    }
+}
+
+/// [`train`] with random numbers from `S`.
+fn train_with<S: PixelSampler>(
     ctx: &Ctx,
     t: &Training,
     tree: &mut SdTree,
@@ -165,10 +174,14 @@ fn pass_part<S: PixelSampler>(
         records.extend(r);
         fractions.extend(f);
     }
-    // Stable sorts: each pixel's records stay in the order its samples made them.
+    (in_pixel_order(records), in_pixel_order(fractions), counters)
+}
+
+/// Records without their pixels, in pixel order; a stable sort keeps each pixel's records in
+/// the order its samples made them.
+fn in_pixel_order<T>(mut records: Vec<(u32, T)>) -> Vec<T> {
     records.sort_by_key(|&(pixel, _)| pixel);
-    fractions.sort_by_key(|&(pixel, _)| pixel);
-    (records.into_iter().map(|(_, r)| r).collect(), fractions.into_iter().map(|(_, r)| r).collect(), counters)
+    records.into_iter().map(|(_, r)| r).collect()
 }
 
 #[cfg(test)]
