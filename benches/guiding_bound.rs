@@ -73,6 +73,14 @@ fn list(name: &str, v: &str) -> Vec<u32> {
         .collect()
 }
 
+/// The one positive number `v` gives.
+fn one(name: &str, v: &str) -> u32 {
+    match list(name, v)[..] {
+        [n] => n,
+        _ => usage(&format!("{name} takes one number, not {v:?}")),
+    }
+}
+
 fn parse_args() -> Args {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut args = Args {
@@ -95,11 +103,11 @@ fn parse_args() -> Args {
             }
             "--passes" => args.passes = list("--passes", &value("--passes")),
             "--depths" => args.depths = list("--depths", &value("--depths")),
-            "--vertices" => args.vertices = list("--vertices", &value("--vertices"))[0] as usize,
-            "--directions" => args.directions = list("--directions", &value("--directions"))[0] as usize,
-            "--cells" => args.cells = list("--cells", &value("--cells"))[0] as usize,
+            "--vertices" => args.vertices = one("--vertices", &value("--vertices")) as usize,
+            "--directions" => args.directions = one("--directions", &value("--directions")) as usize,
+            "--cells" => args.cells = one("--cells", &value("--cells")) as usize,
             "--spatial-threshold" => {
-                args.spatial_threshold = list("--spatial-threshold", &value("--spatial-threshold"))[0] as f64
+                args.spatial_threshold = one("--spatial-threshold", &value("--spatial-threshold")) as f64
             }
             s if s.starts_with("--") => usage(&format!("unknown option {s}")),
             s => args.scenes.push(PathBuf::from(s)),
@@ -142,21 +150,20 @@ fn variances(
     seed: u64,
 ) -> Option<[f64; 4]> {
     let bsdf = scene.bsdf(si);
-    let guide = tree.guide_at(si.p);
+    let leaf = tree.leaf_at(si.p);
+    let guide = tree.guide_in(leaf);
     // The fraction the leaf learnt (the default options learn one), else the default's.
-    let a =
-        tree.leaves[tree.leaf_at(si.p) as usize].bsdf_fraction.unwrap_or(GuidedOptions::default().bsdf_fraction) as f64;
+    let a = tree.bsdf_fraction_in(leaf, GuidedOptions::default().bsdf_fraction) as f64;
     let mut rng = Sampler::new(&[seed, 0x6775_6964]);
     let mut counters = Counters::default();
     let u = 1.0 / (4.0 * PI);
     // (cell, ĝ, f |cos θ|, BSDF density, tree density) of each direction.
     let mut samples = Vec::with_capacity(directions);
-    let mut cells = vec![(0.0f64, 0u32); cells_per_side * cells_per_side];
+    let side = cells_per_side as f32;
     for _ in 0..directions {
         let square = rng.next_2d();
         let d = from_square(square);
         let wi = si.shading.to_local(d);
-        let side = cells_per_side as f32;
         let cell = (square.x * side) as usize + cells_per_side * (square.y * side) as usize;
         let fc = bsdf.eval(*wo, wi, si.at(), TransportMode::Radiance) * wi.z.abs();
         let fc = ((fc.x + fc.y + fc.z) / 3.0) as f64;
@@ -168,6 +175,7 @@ fn variances(
     }
     // The cells' means from the even directions; the variances from the odd ones, so that
     // the ideal density is not fitted to the samples it is judged on.
+    let mut cells = vec![(0.0f64, 0u32); cells_per_side * cells_per_side];
     for (i, &(cell, g, fc, _, _)) in samples.iter().enumerate() {
         if i % 2 == 0 && fc > 0.0 {
             cells[cell].0 += g / fc;
@@ -226,11 +234,17 @@ fn main() {
         );
         for &depth in &args.depths {
             let mut rng = Sampler::new(&[depth as u64, 17]);
-            let mut picked = Vec::new();
-            while picked.len() < args.vertices {
-                if let Some(v) = vertex(&scene, depth, &mut rng) {
-                    picked.push(v);
-                }
+            // At most a thousand tries per vertex wanted: a scene whose paths rarely reach
+            // this depth on a surface that could be guided is said so, not waited on.
+            let tries = 1000 * args.vertices;
+            let picked: Vec<_> =
+                (0..tries).filter_map(|_| vertex(&scene, depth, &mut rng)).take(args.vertices).collect();
+            if picked.len() < args.vertices {
+                usage(&format!(
+                    "{}: only {} of {tries} camera paths reach a non-Dirac surface at depth {depth}",
+                    path.display(),
+                    picked.len()
+                ));
             }
             let results: Vec<[f64; 4]> = picked
                 .par_iter()

@@ -89,8 +89,7 @@ impl<'a> Guided<'a> {
             return None;
         }
         let leaf = self.leaf(si.p);
-        let tree = self.tree.guide_in(leaf)?;
-        Some((tree, self.tree.leaves[leaf as usize].bsdf_fraction.unwrap_or(self.bsdf_fraction)))
+        Some((self.tree.guide_in(leaf)?, self.tree.bsdf_fraction_in(leaf, self.bsdf_fraction)))
     }
 
     /// The mixture's density of the non-Dirac direction `wi` (shading frame) at `si`, with
@@ -105,8 +104,7 @@ impl<'a> Guided<'a> {
         wi: Vec3,
     ) -> f32 {
         let p_tree = sphere_pdf(guide.pdf(to_square(si.shading.to_world(wi))));
-        let p_bsdf = bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance);
-        a * p_bsdf + (1.0 - a) * p_tree
+        mixture(a, bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance), p_tree)
     }
 
     /// Ends the path: its kept vertices as records, added to `out`, and what the guided ones
@@ -126,6 +124,13 @@ impl<'a> Guided<'a> {
     }
 }
 
+/// The density of the one-sample mixture that samples the BSDF (density `p_bsdf`) with
+/// probability `a` and the tree (density `p_tree`) otherwise.
+#[inline]
+fn mixture(a: f32, p_bsdf: f32, p_tree: f32) -> f32 {
+    a * p_bsdf + (1.0 - a) * p_tree
+}
+
 impl Continuation for Guided<'_> {
     fn sample<R: Random>(
         &mut self,
@@ -135,14 +140,11 @@ impl Continuation for Guided<'_> {
         sampler: &mut R,
     ) -> Option<BsdfSample> {
         self.sampled = None;
-        let Some((guide, a)) = self.guide(si, bsdf) else {
+        // Without a tree, the BSDF alone; with the fraction 1 too, as the mixture would sample
+        // it with the same numbers, unless a training pass records the tree's density.
+        let Some((guide, a)) = self.guide(si, bsdf).filter(|&(_, a)| a < 1.0 || self.recording) else {
             return BsdfSampling.sample(si, bsdf, wo, sampler);
         };
-        if a >= 1.0 && !self.recording {
-            // The BSDF alone, as the mixture would sample it with the same numbers: only a
-            // training pass needs the tree's density of the direction.
-            return BsdfSampling.sample(si, bsdf, wo, sampler);
-        }
         let u = sampler.next_1d();
         let (wi, p_tree) = if u < a {
             let bs = bsdf.sample(wo, si.at(), (u / a).min(ONE_BELOW), sampler.next_2d(), TransportMode::Radiance)?;
@@ -157,7 +159,7 @@ impl Continuation for Guided<'_> {
             (si.shading.to_local(from_square(square)), sphere_pdf(p_square))
         };
         let p_bsdf = bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance);
-        let pdf = a * p_bsdf + (1.0 - a) * p_tree;
+        let pdf = mixture(a, p_bsdf, p_tree);
         let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance);
         if !(pdf > 0.0 && pdf.is_finite()) || f == Rgb::ZERO {
             return None;
@@ -168,9 +170,8 @@ impl Continuation for Guided<'_> {
 
     fn pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {
         match self.guide(si, bsdf) {
-            Some((_, a)) if a >= 1.0 => BsdfSampling.pdf(si, bsdf, wo, wi),
-            Some(guide) => self.mixture_pdf(si, bsdf, guide, wo, wi),
-            None => BsdfSampling.pdf(si, bsdf, wo, wi),
+            Some(guide) if guide.1 < 1.0 => self.mixture_pdf(si, bsdf, guide, wo, wi),
+            _ => BsdfSampling.pdf(si, bsdf, wo, wi),
         }
     }
 

@@ -357,6 +357,12 @@ impl SdTree {
         (t.total() > 0.0).then_some(t)
     }
 
+    /// The BSDF fraction of the leaf `leaf`: the one it learnt, else `otherwise`.
+    #[inline]
+    pub fn bsdf_fraction_in(&self, leaf: u32, otherwise: f32) -> f32 {
+        self.leaves[leaf as usize].bsdf_fraction.unwrap_or(otherwise)
+    }
+
     /// The record of `value` at `p` for the direction `d` (world).
     #[inline]
     pub fn record_for(&self, p: Vec3, d: Vec3, value: f32) -> Record {
