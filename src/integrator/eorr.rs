@@ -151,7 +151,8 @@ impl Iterative for Eorr {
     fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult<u64> {
         let (width, height) = (ctx.scene.film.width, ctx.scene.film.height);
         let policy = Roulette { tau: self.tau.as_deref(), width, height, skipped: Cell::new(0) };
-        let conn = Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &Counts::Bdpt, policy };
+        let conn =
+            Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &Counts::Bdpt, policy, guide: None };
         let mut scratch = Scratch::default();
         let result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
             self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);

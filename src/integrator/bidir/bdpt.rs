@@ -5,6 +5,7 @@
 
 use crate::bsdf::TransportMode;
 use crate::film::Tile;
+use crate::integrator::bidir::guide::Guide;
 use crate::integrator::bidir::mis::{Counts, Heuristic, StrategyCounts, mis_weight_with};
 use crate::integrator::bidir::walk::{WalkLimits, camera_subpath, light_subpath, transmittance};
 use crate::integrator::bidir::{Connection, Delivery, End, Sink, Vertex, VertexKind, light_origin_pdf};
@@ -55,12 +56,25 @@ pub struct Connector<'a, C, P = Always> {
     pub heuristic: Heuristic,
     pub counts: &'a C,
     pub policy: P,
+    /// The guide the camera walks follow ([`crate::integrator::bidir::guide`]): the camera
+    /// side's densities at the ends of connections are its.
+    pub guide: Option<&'a dyn Guide>,
 }
 
 impl<'a, C: StrategyCounts> Connector<'a, C> {
-    /// Strategies weighed with `counts`, every connection traced.
+    /// Strategies weighed with `counts`, every connection traced, no guide.
     pub fn new(scene: &'a Scene, heuristic: Heuristic, counts: &'a C) -> Connector<'a, C> {
-        Connector { scene, heuristic, counts, policy: Always }
+        Connector { scene, heuristic, counts, policy: Always, guide: None }
+    }
+
+    /// The strategies of walks made with `limits` (their guide's densities at the ends).
+    pub fn for_walks(
+        scene: &'a Scene,
+        heuristic: Heuristic,
+        counts: &'a C,
+        limits: &'a WalkLimits,
+    ) -> Connector<'a, C> {
+        Connector { guide: limits.guide(), ..Connector::new(scene, heuristic, counts) }
     }
 }
 
@@ -120,7 +134,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
         }
         let Some((l, pmf, _)) = scene.light_sampler.sample(u) else { return };
         let Some(ls) = scene.lights[l].sample_li(&scene.shapes, &scene.bounds, pt.p, u1, u2) else { return };
-        let camera_end = pt.end(scene, ls.wi, TransportMode::Radiance);
+        let camera_end = pt.end_with(scene, ls.wi, TransportMode::Radiance, self.guide);
         if camera_end.f == Rgb::ZERO {
             return;
         }
@@ -154,7 +168,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
             return;
         }
         let Some(k) = scene.camera.connect(qs.p) else { return };
-        let light_end = qs.end(scene, k.wi, TransportMode::Importance);
+        let light_end = qs.end_with(scene, k.wi, TransportMode::Importance, self.guide);
         if light_end.f == Rgb::ZERO {
             return;
         }
@@ -195,7 +209,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
         if !qs.is_connectible() || !pt.is_connectible() {
             return false;
         }
-        let Some(conn) = Connection::carrying(scene, qs, pt) else { return false };
+        let Some(conn) = Connection::carrying(scene, qs, pt, self.guide) else { return false };
         let f = conn.light_end.f * conn.camera_end.f;
         if f == Rgb::ZERO {
             return false;

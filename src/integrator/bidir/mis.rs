@@ -8,6 +8,7 @@
 //! `n(s',t')` times per camera sample (the strategy count, 1 in BDPT); the weight of
 //! strategy `s` is `(n_s p_s)^β / Σ_{s'} (n_{s'} p_{s'})^β`, β = 1 (balance) or 2 (power).
 
+use crate::integrator::bidir::guide::Guide;
 use crate::integrator::bidir::{Connection, Vertex, VertexKind, nee_ratio};
 use crate::scene::Scene;
 
@@ -407,6 +408,18 @@ pub fn brute_force_weights(
     heuristic: Heuristic,
     counts: &impl StrategyCounts,
 ) -> Vec<f64> {
+    brute_force_weights_with(scene, path, heuristic, counts, None)
+}
+
+/// [`brute_force_weights`] of a path whose camera walks follow `guide` (the camera side's
+/// densities at surface vertices are the guide's, [`Vertex::pdf_with`]).
+pub fn brute_force_weights_with(
+    scene: &Scene,
+    path: &[Vertex],
+    heuristic: Heuristic,
+    counts: &impl StrategyCounts,
+    guide: Option<&dyn Guide>,
+) -> Vec<f64> {
     let n = path.len();
     let pl: Vec<f64> = (0..n)
         .map(|i| match i {
@@ -422,7 +435,7 @@ pub fn brute_force_weights(
             } else if i == n - 2 {
                 path[n - 1].pdf(scene, None, &path[i]) as f64
             } else {
-                path[i + 1].pdf(scene, Some(&path[i + 2]), &path[i]) as f64
+                path[i + 1].pdf_with(scene, Some(&path[i + 2]), &path[i], guide) as f64
             }
         })
         .collect();

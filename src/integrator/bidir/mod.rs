@@ -9,11 +9,13 @@
 //! by its own walk, `pdf_rev` the density had it been generated from the other end.
 
 pub mod bdpt;
+pub mod guide;
 pub mod mis;
 pub mod pool;
 pub mod walk;
 
 use crate::bsdf::TransportMode;
+use crate::integrator::bidir::guide::Guide;
 use crate::integrator::render_loop::PixelSink;
 use crate::math::{Frame, Rgb};
 use crate::scene::Scene;
@@ -91,6 +93,9 @@ pub struct Vertex {
     /// that the integrator's strategy counts read instead of recomputing it; `None` where
     /// none was written.
     pub label: Option<[u16; 4]>,
+    /// The cell of the walk's [`guide::Guide`] holding a surface vertex (`u32::MAX` where
+    /// the walk had no guide).
+    pub cell: u32,
 }
 
 impl Vertex {
@@ -115,6 +120,7 @@ impl Vertex {
             flat: true,
             infinite: false,
             label: None,
+            cell: u32::MAX,
         }
     }
 
@@ -139,6 +145,7 @@ impl Vertex {
             flat: true,
             infinite: false,
             label: None,
+            cell: u32::MAX,
         }
     }
 
@@ -199,6 +206,7 @@ impl Vertex {
             flat: si.shading.n == si.ng,
             infinite: false,
             label: None,
+            cell: u32::MAX,
         }
     }
 
@@ -281,15 +289,29 @@ impl Vertex {
     /// three.
     #[inline(always)]
     pub fn end(&self, scene: &Scene, w: Vec3, mode: TransportMode) -> End {
+        self.end_with(scene, w, mode, None)
+    }
+
+    /// [`Vertex::end`] where camera walks follow `guide`: the camera side's density at a
+    /// surface vertex (generating the other end from a camera end, the predecessor from a
+    /// light end) is the guide's.
+    #[inline(always)]
+    pub fn end_with(&self, scene: &Scene, w: Vec3, mode: TransportMode, guide: Option<&dyn Guide>) -> End {
         match self.kind {
             VertexKind::Surface => {
                 let bsdf = self.bsdf(scene);
                 let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
-                let (f, pdf_fwd, pdf_rev) = bsdf.eval_pdfs(lo, li, self.at(), mode);
+                let (f, mut pdf_fwd, mut pdf_rev) = bsdf.eval_pdfs(lo, li, self.at(), mode);
                 let mut f = f * li.z.abs();
                 if mode == TransportMode::Importance && !self.flat && f != Rgb::ZERO {
                     // `lo.z` and `li.z` are the cosines with the shading normal.
                     f *= shading_correction_cos(lo.z, w.dot(self.ng), self.wo.dot(self.ng), li.z);
+                }
+                if let Some(g) = guide {
+                    match mode {
+                        TransportMode::Radiance => pdf_fwd = g.pdf(self, bsdf, w, pdf_fwd),
+                        TransportMode::Importance => pdf_rev = g.pdf(self, bsdf, self.wo, pdf_rev),
+                    }
                 }
                 End { f, pdf_fwd, pdf_rev }
             }
@@ -345,6 +367,12 @@ impl Vertex {
     /// Area density at `next` of this vertex generating it, given the vertex `prev` before
     /// this one (surfaces need it for their BSDF; endpoints ignore it).
     pub fn pdf(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+        self.pdf_with(scene, prev, next, None)
+    }
+
+    /// [`Vertex::pdf`] of the camera side when camera walks follow `guide` (at a surface
+    /// vertex, the guide's density).
+    pub fn pdf_with(&self, scene: &Scene, prev: Option<&Vertex>, next: &Vertex, guide: Option<&dyn Guide>) -> f32 {
         if self.at_infinity() {
             return self.pdf_light(scene, next);
         }
@@ -366,7 +394,8 @@ impl Vertex {
                         * if next.at_infinity() { 1.0 } else { next.cos_area(-w) / dist2 };
                 }
                 let bsdf = self.bsdf(scene);
-                bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.at(), TransportMode::Radiance)
+                let p = bsdf.pdf(self.frame.to_local(wo), self.frame.to_local(w), self.at(), TransportMode::Radiance);
+                guide.map_or(p, |g| g.pdf(self, bsdf, w, p))
             }
         };
         if next.at_infinity() { solid } else { solid * next.cos_area(-w) / dist2 }
@@ -378,6 +407,21 @@ impl Vertex {
     /// predecessor). One BSDF lookup for both; the values of two calls of [`Vertex::pdf`].
     #[inline(always)]
     pub fn densities(&self, scene: &Scene, next: &Vertex, w: Vec3, dist: f32) -> (f32, f32) {
+        self.densities_with(scene, next, w, dist, None)
+    }
+
+    /// [`Vertex::densities`] in a walk whose camera side follows a guide: `Some((guide,
+    /// mode))`, the walk's transport mode saying which of the two densities is the camera
+    /// side's (the forward one in a camera walk, the reverse one in a light walk).
+    #[inline(always)]
+    pub fn densities_with(
+        &self,
+        scene: &Scene,
+        next: &Vertex,
+        w: Vec3,
+        dist: f32,
+        guide: Option<(&dyn Guide, TransportMode)>,
+    ) -> (f32, f32) {
         let to_next = if next.infinite { 1.0 } else { next.cos_area(-w) / (dist * dist) };
         match self.kind {
             VertexKind::Camera => (scene.camera.pdf_direction(w) * to_next, 0.0),
@@ -391,7 +435,12 @@ impl Vertex {
             VertexKind::Surface => {
                 let bsdf = self.bsdf(scene);
                 let (lo, li) = bsdf.to_local(&self.frame, self.wo, w);
-                let (fwd, rev) = bsdf.pdf_pair(lo, li, self.at(), TransportMode::Radiance);
+                let (mut fwd, mut rev) = bsdf.pdf_pair(lo, li, self.at(), TransportMode::Radiance);
+                match guide {
+                    Some((g, TransportMode::Radiance)) => fwd = g.pdf(self, bsdf, w, fwd),
+                    Some((g, TransportMode::Importance)) => rev = g.pdf(self, bsdf, self.wo, rev),
+                    None => {}
+                }
                 (fwd * to_next, rev * self.to_prev)
             }
         }
@@ -453,19 +502,26 @@ impl Connection {
     /// Evaluates the connection of two vertices (`None` when they coincide).
     #[inline]
     pub fn new(scene: &Scene, qs: &Vertex, pt: &Vertex) -> Option<Connection> {
-        Connection::evaluate(scene, qs, pt, false)
+        Connection::evaluate(scene, qs, pt, false, None)
     }
 
     /// [`Connection::new`] for a connection that is only wanted if it carries light: `None`
     /// also when an end's BSDF (or emission) value is zero, found before the other end is
-    /// evaluated.
+    /// evaluated. Where camera walks follow `guide`, the ends' camera-side densities are its
+    /// ([`Vertex::end_with`]).
     #[inline]
-    pub fn carrying(scene: &Scene, qs: &Vertex, pt: &Vertex) -> Option<Connection> {
-        Connection::evaluate(scene, qs, pt, true)
+    pub fn carrying(scene: &Scene, qs: &Vertex, pt: &Vertex, guide: Option<&dyn Guide>) -> Option<Connection> {
+        Connection::evaluate(scene, qs, pt, true, guide)
     }
 
     #[inline(always)]
-    fn evaluate(scene: &Scene, qs: &Vertex, pt: &Vertex, nonzero: bool) -> Option<Connection> {
+    fn evaluate(
+        scene: &Scene,
+        qs: &Vertex,
+        pt: &Vertex,
+        nonzero: bool,
+        guide: Option<&dyn Guide>,
+    ) -> Option<Connection> {
         if qs.infinite {
             // From a light at infinity, along its direction, with no distance term: the
             // density of `pt` is that of a point on the disk facing the light.
@@ -474,7 +530,7 @@ impl Connection {
             if nonzero && light_end.f == Rgb::ZERO {
                 return None;
             }
-            let camera_end = pt.end(scene, -w, TransportMode::Radiance);
+            let camera_end = pt.end_with(scene, -w, TransportMode::Radiance, guide);
             return Some(Connection { w, dist2: 1.0, inv_dist2: 1.0, light_end, camera_end });
         }
         let d = pt.p - qs.p;
@@ -483,11 +539,11 @@ impl Connection {
             return None;
         }
         let w = d / dist2.sqrt();
-        let light_end = qs.end(scene, w, TransportMode::Importance);
+        let light_end = qs.end_with(scene, w, TransportMode::Importance, guide);
         if nonzero && light_end.f == Rgb::ZERO {
             return None;
         }
-        let camera_end = pt.end(scene, -w, TransportMode::Radiance);
+        let camera_end = pt.end_with(scene, -w, TransportMode::Radiance, guide);
         Some(Connection { w, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
     }
 }

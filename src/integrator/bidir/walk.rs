@@ -5,15 +5,18 @@
 
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
+use crate::integrator::bidir::guide::Guide;
 use crate::integrator::bidir::{MAX_VERTICES, Vertex, disk_pdf, shading_correction};
 use crate::integrator::stats::Counters;
 use crate::math::{Rgb, max_component, offset_origin};
 use crate::sampling::Random;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
+use std::sync::Arc;
 
-/// How long walks may be and when Russian roulette starts.
-#[derive(Clone, Copy, Debug)]
+/// How walks are made: how long they may be, when Russian roulette starts, and the guide
+/// that camera walks follow, if any.
+#[derive(Clone)]
 pub struct WalkLimits {
     /// Most vertices of a camera subpath (camera included).
     pub camera_vertices: usize,
@@ -21,6 +24,20 @@ pub struct WalkLimits {
     pub light_vertices: usize,
     /// Bounces after which Russian roulette may end a walk.
     pub rr_depth: u32,
+    /// Where camera walks sample their directions ([`Guide`]; `None`: the BSDFs). Both
+    /// walks write the camera side's densities as the guide's.
+    pub guide: Option<Arc<dyn Guide>>,
+}
+
+impl std::fmt::Debug for WalkLimits {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WalkLimits")
+            .field("camera_vertices", &self.camera_vertices)
+            .field("light_vertices", &self.light_vertices)
+            .field("rr_depth", &self.rr_depth)
+            .field("guided", &self.guide.is_some())
+            .finish()
+    }
 }
 
 impl WalkLimits {
@@ -28,7 +45,13 @@ impl WalkLimits {
     /// camera subpath has at most `max_depth + 1` vertices, a light subpath `max_depth`.
     pub fn new(max_depth: u32, rr_depth: u32) -> WalkLimits {
         let m = (max_depth as usize).min(MAX_VERTICES);
-        WalkLimits { camera_vertices: (m + 1).min(MAX_VERTICES), light_vertices: m, rr_depth }
+        WalkLimits { camera_vertices: (m + 1).min(MAX_VERTICES), light_vertices: m, rr_depth, guide: None }
+    }
+
+    /// The guide camera walks follow, if any.
+    #[inline]
+    pub fn guide(&self) -> Option<&dyn Guide> {
+        self.guide.as_deref()
     }
 }
 
@@ -41,18 +64,23 @@ impl WalkLimits {
 /// and the direction between the two points differ. Every strategy of a path must see the
 /// same densities of the same points for the MIS weights to sum to one; the connections and
 /// the other strategies evaluate them from positions.
+///
+/// With a guide in `limits`, every surface vertex keeps its cell, a camera walk samples
+/// from the guide where it guides, and the camera side's densities are the guide's.
 #[allow(clippy::too_many_arguments)]
 fn random_walk<R: Random>(
     scene: &Scene,
     mut ray: Ray,
     mut beta: Rgb,
     mode: TransportMode,
+    limits: &WalkLimits,
     max_vertices: usize,
-    rr_depth: u32,
     rng: &mut R,
     path: &mut Vec<Vertex>,
     counters: &mut Counters,
 ) {
+    let (rr_depth, guide) = (limits.rr_depth, limits.guide());
+    let guided = guide.map(|g| (g, mode));
     // Throughput of the scattering alone (what Russian roulette looks at).
     let mut rr_beta = Rgb::ONE;
     let mut bounces = 0u32;
@@ -73,7 +101,9 @@ fn random_walk<R: Random>(
             }
             if flight.scattered {
                 let p = ray.o + ray.d * (flight.t / len);
-                let Some(wi) = scatter_in_medium(scene, p, m, &ray, beta, max_vertices, rng, path) else { break };
+                let Some(wi) = scatter_in_medium(scene, p, m, &ray, beta, (max_vertices, guided), rng, path) else {
+                    break;
+                };
                 if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
                     break;
                 }
@@ -88,7 +118,7 @@ fn random_walk<R: Random>(
                 let prev = &path[n - 1];
                 let mut v = Vertex::sky(scene, prev.p, ray.d, beta);
                 if !prev.delta {
-                    let (fwd, rev) = prev.densities(scene, &v, ray.d, 1.0);
+                    let (fwd, rev) = prev.densities_with(scene, &v, ray.d, 1.0, guided);
                     v.pdf_fwd = fwd;
                     if n >= 2 {
                         path[n - 2].pdf_rev = rev;
@@ -130,11 +160,14 @@ fn random_walk<R: Random>(
         };
         let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
         v.medium = medium;
+        if let Some(g) = guide {
+            v.cell = g.cell(v.p);
+        }
         // After a light at infinity the density towards it stays a solid-angle density.
         v.to_prev = if n == 1 && prev.at_infinity() { 1.0 } else { prev.cos_area(si.wo) / (dist * dist) };
         // A vertex left through a delta lobe has no density (zero marks the delta).
         if !prev.delta {
-            let (fwd, rev) = prev.densities(scene, &v, -si.wo, dist);
+            let (fwd, rev) = prev.densities_with(scene, &v, -si.wo, dist, guided);
             v.pdf_fwd = fwd;
             if n >= 2 {
                 path[n - 2].pdf_rev = rev;
@@ -145,9 +178,19 @@ fn random_walk<R: Random>(
             break;
         }
         let wo = si.shading.to_local(si.wo);
-        let u1 = rng.next_1d();
-        let u2 = rng.next_2d();
-        let Some(bs) = bsdf.sample(wo, si.at(), u1, u2, mode) else { break };
+        let sample = match guide {
+            Some(g) if mode == TransportMode::Radiance && g.guides(&v, bsdf) => {
+                let u = rng.next_1d();
+                let (u2, u3) = (rng.next_2d(), rng.next_2d());
+                g.sample(&v, bsdf, wo, u, u2, u3)
+            }
+            _ => {
+                let u1 = rng.next_1d();
+                let u2 = rng.next_2d();
+                bsdf.sample(wo, si.at(), u1, u2, mode)
+            }
+        };
+        let Some(bs) = sample else { break };
         let wi = si.shading.to_world(bs.wi);
         let mut weight = bs.weight;
         if mode == TransportMode::Importance {
@@ -188,7 +231,8 @@ fn roulette<R: Random>(beta: &mut Rgb, rr_beta: &mut Rgb, bounces: &mut u32, rr_
 
 /// A walk's scattering event at `p` in medium `m` (the ray `ray` led there): pushes the
 /// medium vertex with its densities, as [`random_walk`] does for surfaces, and samples the
-/// direction the walk leaves along (`None` when the walk is full).
+/// direction the walk leaves along (`None` when the walk is full); `guided` as in
+/// [`Vertex::densities_with`].
 #[allow(clippy::too_many_arguments)]
 fn scatter_in_medium<R: Random>(
     scene: &Scene,
@@ -196,7 +240,7 @@ fn scatter_in_medium<R: Random>(
     m: u32,
     ray: &Ray,
     beta: Rgb,
-    max_vertices: usize,
+    (max_vertices, guided): (usize, Option<(&dyn Guide, TransportMode)>),
     rng: &mut R,
     path: &mut Vec<Vertex>,
 ) -> Option<Vec3> {
@@ -218,7 +262,7 @@ fn scatter_in_medium<R: Random>(
     let mut v = Vertex::in_medium(p, wo, m, beta);
     v.to_prev = if from_infinity { 1.0 } else { prev.cos_area(wo) / (dist * dist) };
     if !prev.delta {
-        let (fwd, rev) = prev.densities(scene, &v, -wo, dist);
+        let (fwd, rev) = prev.densities_with(scene, &v, -wo, dist, guided);
         v.pdf_fwd = fwd;
         if n >= 2 {
             path[n - 2].pdf_rev = rev;
@@ -249,17 +293,7 @@ pub fn camera_subpath<R: Random>(
     }
     // The walk's first ray is the camera ray.
     counters.camera_path(|c| {
-        random_walk(
-            scene,
-            ray,
-            Rgb::ONE,
-            TransportMode::Radiance,
-            limits.camera_vertices,
-            limits.rr_depth,
-            rng,
-            path,
-            c,
-        )
+        random_walk(scene, ray, Rgb::ONE, TransportMode::Radiance, limits, limits.camera_vertices, rng, path, c)
     });
 }
 
@@ -311,17 +345,7 @@ pub fn light_subpath<R: Random>(
     if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
         return;
     }
-    random_walk(
-        scene,
-        ray,
-        beta,
-        TransportMode::Importance,
-        limits.light_vertices,
-        limits.rr_depth,
-        rng,
-        path,
-        counters,
-    );
+    random_walk(scene, ray, beta, TransportMode::Importance, limits, limits.light_vertices, rng, path, counters);
 }
 
 /// The medium light leaving light `l` at its vertex `y0` in direction `d` travels in: the

@@ -23,13 +23,13 @@
 //! sampled with and the BSDF's and the tree's densities of its direction, from which the
 //! leaf learns its fraction ([`SdTree::add_fraction_records`]).
 
-use crate::bsdf::{Bsdf, BsdfSample, TransportMode};
+use crate::bsdf::{At, Bsdf, BsdfSample, TransportMode};
 use crate::integrator::guided::sdtree::{DirTree, FractionRecord, Record, SdTree, from_square, sphere_pdf, to_square};
 use crate::integrator::path::{BsdfSampling, Continuation};
-use crate::math::Rgb;
+use crate::math::{Frame, Rgb};
 use crate::sampling::{ONE_BELOW, Random};
 use crate::scene::shape::SurfaceInteraction;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use std::cell::Cell;
 
 /// A vertex of a training path: where it is, the direction it sampled (world) and that
@@ -127,8 +127,46 @@ impl<'a> Guided<'a> {
 /// The density of the one-sample mixture that samples the BSDF (density `p_bsdf`) with
 /// probability `a` and the tree (density `p_tree`) otherwise.
 #[inline]
-fn mixture(a: f32, p_bsdf: f32, p_tree: f32) -> f32 {
+pub(crate) fn mixture(a: f32, p_bsdf: f32, p_tree: f32) -> f32 {
     a * p_bsdf + (1.0 - a) * p_tree
+}
+
+/// A sample of the one-sample mixture of `bsdf` (probability `a`) and the quadtree `guide`
+/// at a vertex with shading frame `frame`, for light leaving towards `wo` (shading frame):
+/// `u` chooses, `next_2d` gives the BSDF's or the tree's numbers. Returns the sample (its
+/// density and weight the mixture's) and, unless it came from a Dirac lobe (whose weight
+/// is divided by `a`, only the BSDF branch reaching it), the BSDF's and the tree's
+/// densities of its direction.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sample_mixture(
+    (guide, a): (&DirTree, f32),
+    bsdf: &Bsdf,
+    frame: &Frame,
+    at: At,
+    wo: Vec3,
+    u: f32,
+    mut next_2d: impl FnMut() -> Vec2,
+) -> Option<(BsdfSample, Option<(f32, f32)>)> {
+    let (wi, p_tree) = if u < a {
+        let bs = bsdf.sample(wo, at, (u / a).min(ONE_BELOW), next_2d(), TransportMode::Radiance)?;
+        if bs.delta {
+            return Some((BsdfSample { pdf: bs.pdf * a, weight: bs.weight / a, ..bs }, None));
+        }
+        (bs.wi, sphere_pdf(guide.pdf(to_square(frame.to_world(bs.wi)))))
+    } else {
+        let u_tree = next_2d();
+        let u_leaf = next_2d();
+        let (square, p_square) = guide.sample(u_tree, u_leaf);
+        (frame.to_local(from_square(square)), sphere_pdf(p_square))
+    };
+    let p_bsdf = bsdf.pdf(wo, wi, at, TransportMode::Radiance);
+    let pdf = mixture(a, p_bsdf, p_tree);
+    let f = bsdf.eval(wo, wi, at, TransportMode::Radiance);
+    if !(pdf > 0.0 && pdf.is_finite()) || f == Rgb::ZERO {
+        return None;
+    }
+    Some((BsdfSample { wi, f, pdf, weight: f * (wi.z.abs() / pdf), delta: false }, Some((p_bsdf, p_tree))))
 }
 
 impl Continuation for Guided<'_> {
@@ -146,26 +184,9 @@ impl Continuation for Guided<'_> {
             return BsdfSampling.sample(si, bsdf, wo, sampler);
         };
         let u = sampler.next_1d();
-        let (wi, p_tree) = if u < a {
-            let bs = bsdf.sample(wo, si.at(), (u / a).min(ONE_BELOW), sampler.next_2d(), TransportMode::Radiance)?;
-            if bs.delta {
-                return Some(BsdfSample { pdf: bs.pdf * a, weight: bs.weight / a, ..bs });
-            }
-            (bs.wi, sphere_pdf(guide.pdf(to_square(si.shading.to_world(bs.wi)))))
-        } else {
-            let u_tree = sampler.next_2d();
-            let u_leaf = sampler.next_2d();
-            let (square, p_square) = guide.sample(u_tree, u_leaf);
-            (si.shading.to_local(from_square(square)), sphere_pdf(p_square))
-        };
-        let p_bsdf = bsdf.pdf(wo, wi, si.at(), TransportMode::Radiance);
-        let pdf = mixture(a, p_bsdf, p_tree);
-        let f = bsdf.eval(wo, wi, si.at(), TransportMode::Radiance);
-        if !(pdf > 0.0 && pdf.is_finite()) || f == Rgb::ZERO {
-            return None;
-        }
-        self.sampled = Some((p_bsdf, p_tree));
-        Some(BsdfSample { wi, f, pdf, weight: f * (wi.z.abs() / pdf), delta: false })
+        let (bs, densities) = sample_mixture((guide, a), bsdf, &si.shading, si.at(), wo, u, || sampler.next_2d())?;
+        self.sampled = densities;
+        Some(bs)
     }
 
     fn pdf(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {

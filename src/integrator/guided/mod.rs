@@ -17,12 +17,14 @@
 //! the final pass's iterations in its range. Participating media are not rendered (scenes
 //! with them are refused).
 
+pub mod camera_guide;
 pub mod mixture;
 pub mod sdtree;
 pub mod training;
 
 use crate::error::Error;
 use crate::film::{Tile, tiles};
+use crate::integrator::guided::camera_guide::TreeGuide;
 use crate::integrator::guided::mixture::Guided;
 use crate::integrator::guided::sdtree::{Refinement, SdTree};
 use crate::integrator::guided::training::{Trained, Training, doubling_passes, train};
@@ -244,14 +246,37 @@ impl IntegratorStats for GuidedStats {
 /// The tree that a render of `scene` with seed `seed` trains in passes of `passes` samples
 /// per pixel (on the current thread pool), for measurements of what the guiding learns.
 pub fn train_tree(scene: &Scene, options: &GuidedOptions, passes: &[u32], seed: u64) -> Result<SdTree, Error> {
+    let ctx = Ctx { scene, seed, layers: false, planned_spp: None, start: 0 };
+    let schedule = TrainingSchedule { passes: passes.to_vec(), seconds: None, stop: None, start: Instant::now() };
+    Ok(train_camera_guide(&ctx, options, &schedule)?.0.tree)
+}
+
+/// How long a guide's training lasts: doubling passes of these samples per pixel or, with
+/// `seconds`, doubling passes within that many seconds of `start`; stopped early by `stop`.
+#[derive(Clone, Debug)]
+pub struct TrainingSchedule {
+    pub passes: Vec<u32>,
+    pub seconds: Option<f64>,
+    pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    pub start: Instant,
+}
+
+/// The guide of the bidirectional core's camera walks: the tree that the guided path tracer
+/// trains over the whole image of `ctx.scene` (with `ctx.seed`, as the guided render's own
+/// training), by `schedule`; and what the training did.
+pub(crate) fn train_camera_guide(
+    ctx: &Ctx,
+    options: &GuidedOptions,
+    schedule: &TrainingSchedule,
+) -> Result<(TreeGuide, Trained), Error> {
     options.check()?;
+    let scene = ctx.scene;
     let pt = PathTracer { sampler: scene.sampler.kind, ..PathTracer::new(&scene.integrator) };
     let tile_list = tiles(scene.film.width, scene.film.height, 32);
-    let t = options.training(&pt, &tile_list, None, Instant::now());
-    let ctx = Ctx { scene, seed, layers: false, planned_spp: None, start: 0 };
+    let t = options.training(&pt, &tile_list, schedule.stop.clone(), schedule.start);
     let mut tree = SdTree::new(scene.bounds.center, scene.bounds.radius);
-    train(&ctx, &t, &mut tree, passes, None);
-    Ok(tree)
+    let trained = train(ctx, &t, &mut tree, &schedule.passes, schedule.seconds);
+    Ok((TreeGuide { tree, bsdf_fraction: options.bsdf_fraction }, trained))
 }
 
 /// The final pass's iterations within `range` of a render whose first `t` iterations train.

@@ -181,3 +181,52 @@ fn bad_options_are_refused_naming_the_option() {
     }
     assert!(GuidedOptions::default().check().is_ok());
 }
+
+/// The guide of the bidirectional core's camera walks ([`TreeGuide`]) samples what its
+/// density says at vertices a trained tree guides, its density is the guided path tracer's
+/// there, and the tree's density alone (the negative control) is rejected.
+#[test]
+fn the_camera_walks_guide_samples_what_its_density_says() {
+    use crate::integrator::bidir::Vertex;
+    use crate::integrator::bidir::guide::Guide;
+    let scene = cornell();
+    let guide = TreeGuide { tree: trained(&scene), bsdf_fraction: 0.5 };
+    let all = vertices(&scene);
+    for (si, wo) in all.iter().step_by(all.len() / 3).take(2) {
+        let bsdf = scene.bsdf(si);
+        let mut v = Vertex::surface(si, scene.bsdf_index(si) as u32, crate::math::Rgb::ONE, true);
+        v.cell = guide.cell(v.p);
+        assert!(guide.guides(&v, bsdf), "the vertex at {} is not guided", si.p);
+        let pdf = |d: Vec3| {
+            let wi = si.shading.to_local(d);
+            let f = bsdf.eval(*wo, wi, si.at(), crate::bsdf::TransportMode::Radiance);
+            let p_bsdf = bsdf.pdf(*wo, wi, si.at(), crate::bsdf::TransportMode::Radiance);
+            if f == Vec3::ZERO { 0.0 } else { guide.pdf(&v, bsdf, d, p_bsdf) }
+        };
+        let path_tracer = Guided::new(&guide.tree, 0.5, false);
+        let mut rng = Sampler::new(&[23]);
+        for _ in 0..100 {
+            let d = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+            let wi = si.shading.to_local(d);
+            let p_bsdf = bsdf.pdf(*wo, wi, si.at(), crate::bsdf::TransportMode::Radiance);
+            let (a, b) = (guide.pdf(&v, bsdf, d, p_bsdf), path_tracer.pdf(si, bsdf, *wo, wi));
+            assert!((a - b).abs() <= 1e-5 * b.max(1e-3), "densities {a} and {b} of {d}");
+        }
+        let chi2 = |density: &dyn Fn(Vec3) -> f32| {
+            let mut rng = Sampler::new(&[9]);
+            let mut t = Chi2Test::new(SphereDomain::default());
+            t.samples = 200_000;
+            t.tests = 2;
+            t.run(
+                |_| {
+                    let (u, u2, u3) = (rng.next_1d(), rng.next_2d(), rng.next_2d());
+                    guide.sample(&v, bsdf, *wo, u, u2, u3).map(|bs| si.shading.to_world(bs.wi))
+                },
+                density,
+            )
+        };
+        chi2(&pdf).assert_pass();
+        let tree_alone = |d: Vec3| sphere_pdf(guide.tree.guide_in(v.cell).unwrap().pdf(to_square(d)));
+        assert!(!chi2(&tree_alone).passed(), "the tree's density alone passed at {}", si.p);
+    }
+}

@@ -61,7 +61,8 @@ pub fn trace_records(
     seed: u64,
     iteration: u64,
 ) -> (Vec<Record>, Counters) {
-    let limits = WalkLimits { camera_vertices: limits.camera_vertices.min(opts.cache_depth as usize + 1), ..*limits };
+    let limits =
+        WalkLimits { camera_vertices: limits.camera_vertices.min(opts.cache_depth as usize + 1), ..limits.clone() };
     let tile_list = tiles(scene.film.width, scene.film.height, opts.stride);
     let parts: Vec<(Vec<Record>, Counters)> = tile_list
         .par_chunks(64)

@@ -32,6 +32,7 @@
 pub mod cache;
 pub mod correlation;
 pub mod fit;
+pub mod guiding;
 
 use crate::bsdf::TransportMode;
 use crate::error::Error;
@@ -45,7 +46,9 @@ use crate::integrator::bidir::pool::{
 use crate::integrator::budget::{
     Budget, BudgetOptions, BudgetStats, Operations, PRICES, Plan, PoolTile, SplatShares, TracedPool, pool_tile,
 };
+use crate::integrator::guided::TrainingSchedule;
 use crate::integrator::pcbpt::fit::CacheFit;
+use crate::integrator::pcbpt::guiding::{GuidingStats, PcGuiding};
 use crate::integrator::pool_base::{PoolBase, PoolStats};
 use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work};
 use crate::integrator::run::RunOptions;
@@ -113,6 +116,8 @@ pub struct PcbptOptions {
     #[command(flatten)]
     #[serde(flatten)]
     pub pc: PcOptions,
+    #[command(flatten)]
+    pub guiding: PcGuiding,
 }
 
 /// The light pool and its connections, shared by PCBPT and SPCBPT: light paths per
@@ -473,6 +478,9 @@ pub struct PcbptRender {
     cache_stats: Option<CacheStats>,
     /// Connections and light tracing per iteration (set in `begin`).
     budget: Option<Budget>,
+    /// The guided camera walks' options and training, if guided.
+    guiding: Option<(PcGuiding, TrainingSchedule)>,
+    guiding_stats: Option<GuidingStats>,
 }
 
 /// One PCBPT iteration's pool, cache, and what the budget measures of its preparation.
@@ -495,7 +503,20 @@ impl PcbptRender {
             previous: None,
             cache_stats: None,
             budget: None,
+            guiding: None,
+            guiding_stats: None,
         }
+    }
+
+    /// PCBPT whose camera walks follow a guide trained by `schedule` in `begin`.
+    pub fn guided(mut self, guiding: PcGuiding, schedule: TrainingSchedule) -> PcbptRender {
+        self.guiding = Some((guiding, schedule));
+        self
+    }
+
+    /// The strategies of this render's walks, weighed with `counts`.
+    fn connector<'a>(&'a self, scene: &'a Scene, counts: &'a PcCounts<'a>) -> Connector<'a, PcCounts<'a>> {
+        Connector::for_walks(scene, self.base.heuristic, counts, &self.base.bdpt.limits)
     }
 
     fn budget(&self) -> &Budget {
@@ -540,9 +561,14 @@ impl Iterative for PcbptRender {
     type Pass = PcPass;
     type TileData = PoolTile<()>;
 
-    /// Measures `V̄` on a pilot pool, sets `M` from it, and checks the pool and the cache
-    /// against their memory limits.
+    /// Trains the guide of guided camera walks, measures `V̄` on a pilot pool, sets `M`
+    /// from it, and checks the pool and the cache against their memory limits.
     fn begin(&mut self, ctx: &Ctx) -> Result<(), Error> {
+        if let Some((guiding, schedule)) = &self.guiding {
+            let (guide, stats) = guiding.train(ctx, schedule)?;
+            self.base.bdpt.limits.guide = Some(std::sync::Arc::new(guide));
+            self.guiding_stats = Some(stats);
+        }
         let pilot = self.base.pilot(ctx, self.opts.pool.pool_vertices)?;
         let (o, m) = (&self.opts, self.base.light_paths);
         let (w, h) = (ctx.scene.film.width, ctx.scene.film.height);
@@ -575,7 +601,7 @@ impl Iterative for PcbptRender {
 
     fn prepare(&self, ctx: &Ctx, first: u32, keep: bool, work: &mut Work) -> Prepared<PcPass> {
         let counts = self.counts(ctx.scene);
-        let conn = Connector::new(ctx.scene, self.base.heuristic, &counts);
+        let conn = self.connector(ctx.scene, &counts);
         let traced = self.base.trace(ctx, &conn, Some(self.budget()), first, keep, work);
         let TracedPool { pool, splats, mut counters, splat_shares, mut operations, splat_paths } = traced;
         let t = Instant::now();
@@ -591,7 +617,7 @@ impl Iterative for PcbptRender {
     fn render_tile(&self, ctx: &Ctx, pass: &PcPass, tile: Tile, first: u32, count: u32) -> TileResult<PoolTile<()>> {
         let (pool, cache) = (&pass.pool, &pass.cache);
         let counts = self.counts(ctx.scene);
-        let conn = Connector::new(ctx.scene, self.base.heuristic, &counts);
+        let conn = self.connector(ctx.scene, &counts);
         let budget = self.budget();
         let select = CacheSelection { cache, paths: pool.paths.max(1) as f64, sampling: self.opts.sampling };
         let sampler = self.base.sampler(&conn, pool, budget.plan().connections, &select);
@@ -618,6 +644,7 @@ impl Iterative for PcbptRender {
             pool: self.base.stats,
             cache: self.cache_stats,
             budget: self.budget.as_ref().and_then(Budget::chosen_stats),
+            guiding: self.guiding_stats,
         })
     }
 }
@@ -703,6 +730,8 @@ pub struct PcbptStats {
     pub cache: Option<CacheStats>,
     /// The budget's choice (`--budget auto`).
     pub budget: Option<BudgetStats>,
+    /// The guided camera walks' training (`--pc-guiding`).
+    pub guiding: Option<GuidingStats>,
 }
 
 impl IntegratorStats for PcbptStats {
@@ -720,6 +749,7 @@ impl IntegratorStats for PcbptStats {
             ));
         }
         lines.extend(self.budget.as_ref().and_then(BudgetStats::line));
+        lines.extend(self.guiding.as_ref().map(GuidingStats::line));
         lines
     }
 }
@@ -730,9 +760,13 @@ impl Integrator for PcbptOptions {
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
         self.pc.validate().map_err(Error::Usage)?;
+        self.guiding.validate(scene).map_err(Error::Usage)?;
         let (bdpt, pool) = (Bdpt::for_scene(scene, false), &self.pc.pool);
         let base = PoolBase::new(bdpt, self.heuristic, pool.max_pool_mb, pool.light_paths);
-        let method = PcbptRender::new(base, self.pc.clone());
+        let mut method = PcbptRender::new(base, self.pc.clone());
+        if let Some(schedule) = self.guiding.schedule(opts, Instant::now()) {
+            method = method.guided(self.guiding.clone(), schedule);
+        }
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 

@@ -618,15 +618,28 @@ fn balance_heuristic_of_two_strategies_is_their_density_ratio() {
 /// of each light subpath's third vertex (a negative control).
 fn sampled_weights(perturb: f32) -> (f64, f64, usize, usize) {
     let scene = scene(Variant::VeachAjar);
-    let limits = WalkLimits::new(u32::MAX, 3);
+    sampled_weights_of(&scene, &WalkLimits::new(u32::MAX, 3), perturb, true, 150_000)
+}
+
+/// [`sampled_weights`] on `scene` of `samples` camera samples whose walks are made with
+/// `limits` (a guide's, where it has one); the full path densities follow that guide, or
+/// (`judge_guided` false) the BSDFs alone.
+fn sampled_weights_of(
+    scene: &Scene,
+    limits: &WalkLimits,
+    perturb: f32,
+    judge_guided: bool,
+    samples: u64,
+) -> (f64, f64, usize, usize) {
+    let guide = limits.guide();
     let mut counters = Counters::default();
     let (mut lp, mut cp) = (Vec::new(), Vec::new());
     let (mut walk, mut full, mut differ, mut total) = (0.0f64, 0.0f64, 0usize, 0usize);
-    for i in 0..150_000u64 {
+    for i in 0..samples {
         let mut rng = Sampler::new(&[17, i]);
         let pos = Vec2::new(48.0, 40.0) * rng.next_2d();
-        camera_subpath(&scene, pos, &limits, &mut rng, &mut cp, &mut counters);
-        light_subpath(&scene, &limits, &mut rng, &mut lp, &mut counters);
+        camera_subpath(&scene, pos, limits, &mut rng, &mut cp, &mut counters);
+        light_subpath(&scene, limits, &mut rng, &mut lp, &mut counters);
         if lp.len() > 2 {
             lp[2].pdf_fwd *= perturb;
         }
@@ -638,27 +651,29 @@ fn sampled_weights(perturb: f32) -> (f64, f64, usize, usize) {
                     continue;
                 }
                 let pt = &c[t - 1];
-                let contribution = if s == 0 {
+                let (contribution, conn) = if s == 0 {
                     let Some(light) = scene.shapes[pt.shape as usize].light else { continue };
                     x[0] = as_light(&scene, pt);
-                    pt.beta * scene.lights[light].radiance(pt.ng, pt.uv, pt.wo)
+                    (pt.beta * scene.lights[light].radiance(pt.ng, pt.uv, pt.wo), None)
                 } else {
                     let qs = &l[s - 1];
-                    let Some(conn) = Connection::new(&scene, qs, pt).filter(|_| qs.connectible && pt.connectible)
+                    let Some(conn) =
+                        Connection::carrying(&scene, qs, pt, guide).filter(|_| qs.connectible && pt.connectible)
                     else {
                         continue;
                     };
                     if !crate::integrator::bidir::walk::visible(&scene, qs, pt, &mut counters) {
                         continue;
                     }
-                    qs.beta * conn.light_end.f * conn.camera_end.f * pt.beta / conn.dist2
+                    (qs.beta * conn.light_end.f * conn.camera_end.f * pt.beta / conn.dist2, Some(conn))
                 };
                 let y = crate::math::luminance(contribution) as f64;
                 if y == 0.0 {
                     continue;
                 }
-                let w = mis_weight(&scene, l, c, Heuristic::Power, &Counts::Bdpt) as f64;
-                let b = brute_force_weights(&scene, &x, Heuristic::Power, &Counts::Bdpt)[s];
+                let w = mis_weight_with(&scene, l, c, conn.as_ref(), Heuristic::Power, &Counts::Bdpt) as f64;
+                let judge = if judge_guided { guide } else { None };
+                let b = brute_force_weights_with(&scene, &x, Heuristic::Power, &Counts::Bdpt, judge)[s];
                 walk += y * w;
                 full += y * b;
                 total += 1;
@@ -683,6 +698,29 @@ fn weights_of_sampled_veach_ajar_paths_are_those_of_their_full_path_densities() 
     let (walk, full, differ, total) = sampled_weights(1.01);
     assert!(differ * 20 > total, "a 1% density error changed only {differ} of {total} weights");
     assert!((walk / full - 1.0).abs() > 1e-4, "a 1% density error left the weighted sum at {}", walk / full);
+}
+
+/// Walks guided by a tree trained on `veach-ajar` (every leaf sampling the tree half the
+/// time): the ratio walk over the densities the guided walks and connections record gives
+/// the weights of the full path densities with the guide's camera side, and not those
+/// with the BSDFs' (the negative control).
+#[test]
+fn weights_of_guided_walks_are_those_of_their_full_path_densities() {
+    use crate::integrator::guided::camera_guide::TreeGuide;
+    use crate::integrator::guided::{GuidedOptions, train_tree};
+    let scene = scene(Variant::VeachAjar);
+    let options = GuidedOptions { learn_fraction: false, spatial_threshold: 300.0, ..GuidedOptions::default() };
+    let tree = train_tree(&scene, &options, &[1, 2, 4, 8], 3).unwrap();
+    assert!(tree.leaves.len() > 4, "the tree did not split: {} leaves", tree.leaves.len());
+    let mut limits = WalkLimits::new(u32::MAX, 3);
+    limits.guide = Some(std::sync::Arc::new(TreeGuide { tree, bsdf_fraction: 0.5 }));
+    let (walk, full, differ, total) = sampled_weights_of(&scene, &limits, 1.0, true, 60_000);
+    assert!(total > 30_000, "{total} strategies");
+    assert!((walk / full - 1.0).abs() < 1e-5, "weighted sums {walk} vs {full}: ratio {}", walk / full);
+    assert!(differ * 10_000 < total, "{differ} of {total} weights differ");
+    let (walk, full, differ, total) = sampled_weights_of(&scene, &limits, 1.0, false, 60_000);
+    assert!(differ * 5 > total, "the BSDFs' densities gave the guided weights for {} of {total}", total - differ);
+    assert!((walk / full - 1.0).abs() > 1e-3, "the BSDFs' densities left the weighted sum at {}", walk / full);
 }
 
 #[test]
