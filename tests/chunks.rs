@@ -77,6 +77,13 @@ fn merged_chunks_equal_one_process_bit_for_bit() {
             cases.push(("Spcbpt Subspace".into(), o));
         }
     }
+    // Guided camera walks: every chunk trains the same guide before its iterations.
+    let mut o = options(Pcbpt, 7, 11);
+    o.method.pool_mut().light_paths = 300;
+    o.method.pcbpt_mut().guiding.enabled = true;
+    o.method.pcbpt_mut().guiding.training = 0.5;
+    o.method.pcbpt_mut().guiding.tree.learn_fraction = false;
+    cases.push(("Pcbpt with guided camera walks".into(), o));
     // Budgets measured in iterations 1 and 2 (PCBPT) and 2 and 3 (SPCBPT, after training):
     // the cuts fall inside the measurement, at its end, and beyond.
     let mut o = options(Pcbpt, 7, 11);

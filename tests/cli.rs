@@ -442,12 +442,28 @@ fn pcbpt_cache_over_the_memory_limit_is_refused_and_bad_options_are_named() {
         ("--pc-neighbours", "40"),
         // SPCBPT's own counts.
         ("--pc-mis", "subspace"),
+        ("--pc-guiding-training", "1.5"),
     ] {
         let o = run(&[flag, value]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{err}");
         assert!(err.contains(flag) && !err.contains("panicked") && !out.exists(), "{err}");
     }
+}
+
+/// Guided camera walks train with the guided path tracer, which renders no media: a scene
+/// with media is refused, naming the option and the file.
+#[test]
+fn guided_pcbpt_refuses_a_scene_with_media() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("fog.exr");
+    let scene = root().join("scenes/fog-caustic/scene.xml");
+    let args = ["--integrator", "pcbpt", "--pc-guiding", "true", "--spp", "1", "-o", out.to_str().unwrap()];
+    let o = pcbpt(&[&["render", scene.to_str().unwrap(), "-D", "resx=16", "-D", "resy=16"], &args[..]].concat());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("--pc-guiding") && err.contains("fog-caustic"), "{err}");
+    assert!(!err.contains("panicked") && !out.exists(), "{err}");
 }
 
 #[test]

@@ -57,6 +57,26 @@ fn bidirectional_integrators_are_bit_identical_with_1_and_2_threads() {
     }
 }
 
+/// PCBPT with guided camera walks: the guide's training and the guided walks give the same
+/// image with 1 and 2 threads, and a different one without the guide.
+#[test]
+fn guided_pcbpt_is_bit_identical_with_1_and_2_threads() {
+    let scene = load(&root().join("scenes/cornell-box/scene.xml"), &[("resx", "48"), ("resy", "40")], Backend::Embree);
+    let render = |threads: usize, guided: bool| {
+        let mut o = pcbpt::integrator::RenderOptions::new(IntegratorKind::Pcbpt, pcbpt::integrator::Budget::Spp(8));
+        o.run.seed = 42;
+        o.run.threads = threads;
+        o.method.pcbpt_mut().guiding.enabled = guided;
+        o.method.pcbpt_mut().guiding.tree.learn_fraction = false;
+        pcbpt::integrator::render(&scene, &o).unwrap()
+    };
+    let (one, two) = (render(1, true), render(2, true));
+    let guiding = one.stats.details.get::<pcbpt::integrator::pcbpt::PcbptStats>().and_then(|s| s.guiding);
+    assert!(guiding.is_some_and(|g| g.training_spp == 1), "{guiding:?}");
+    assert!(same_bits(&one.image, &two.image), "guided PCBPT differs between 1 and 2 threads");
+    assert_ne!(one.image, render(2, false).image, "the guide changed nothing");
+}
+
 /// PCBPT's and SPCBPT's budgets are chosen from counts and moments summed in a fixed order:
 /// the same plan, and the same image, whatever the number of threads.
 #[test]

@@ -45,11 +45,11 @@ impl Default for PcGuiding {
 impl PcGuiding {
     /// Checks the options, naming the one at fault.
     pub fn validate(&self, scene: &Scene) -> Result<(), String> {
-        if !self.enabled {
-            return Ok(());
-        }
         if !(self.training > 0.0 && self.training < 1.0) {
             return Err(format!("--pc-guiding-training must lie in (0, 1) (got {})", self.training));
+        }
+        if !self.enabled {
+            return Ok(());
         }
         if scene.volumetric {
             return Err(format!(
