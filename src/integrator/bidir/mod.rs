@@ -1,7 +1,8 @@
 //! The bidirectional core shared by light tracing, BDPT, EORR, light-vertex-cache BDPT,
 //! PCBPT, SPCBPT and the Metropolis integrators: path vertices with area-measure densities,
-//! one random walk for both subpaths and the connections' shadow rays ([`walk`]), the
-//! connection terms, and MIS weights by the ratio walk ([`mis`]).
+//! one random walk for both subpaths and the connections' shadow rays ([`walk`]), camera
+//! walks that follow a guide ([`guide`]), the connection terms, and MIS weights by the ratio
+//! walk ([`mis`]).
 //!
 //! Notation follows pbrt-v4 and the contract: light vertices `y_0..y_{s-1}` (`y_0` on an
 //! emitter), camera vertices `z_0..z_{t-1}` (`z_0` the pinhole); strategy `(s,t)` joins

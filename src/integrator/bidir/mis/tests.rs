@@ -638,8 +638,8 @@ fn sampled_weights_of(
     for i in 0..samples {
         let mut rng = Sampler::new(&[17, i]);
         let pos = Vec2::new(48.0, 40.0) * rng.next_2d();
-        camera_subpath(&scene, pos, limits, &mut rng, &mut cp, &mut counters);
-        light_subpath(&scene, limits, &mut rng, &mut lp, &mut counters);
+        camera_subpath(scene, pos, limits, &mut rng, &mut cp, &mut counters);
+        light_subpath(scene, limits, &mut rng, &mut lp, &mut counters);
         if lp.len() > 2 {
             lp[2].pdf_fwd *= perturb;
         }
@@ -647,22 +647,22 @@ fn sampled_weights_of(
             for s in (0..=lp.len()).filter(|&s| s != 1) {
                 let (l, c) = (&lp[..s], &cp[..t]);
                 let mut x: Vec<Vertex> = l.iter().chain(c.iter().rev()).copied().collect();
-                if x.iter().any(|v| is_delta_surface(&scene, v)) {
+                if x.iter().any(|v| is_delta_surface(scene, v)) {
                     continue;
                 }
                 let pt = &c[t - 1];
                 let (contribution, conn) = if s == 0 {
                     let Some(light) = scene.shapes[pt.shape as usize].light else { continue };
-                    x[0] = as_light(&scene, pt);
+                    x[0] = as_light(scene, pt);
                     (pt.beta * scene.lights[light].radiance(pt.ng, pt.uv, pt.wo), None)
                 } else {
                     let qs = &l[s - 1];
                     let Some(conn) =
-                        Connection::carrying(&scene, qs, pt, guide).filter(|_| qs.connectible && pt.connectible)
+                        Connection::carrying(scene, qs, pt, guide).filter(|_| qs.connectible && pt.connectible)
                     else {
                         continue;
                     };
-                    if !crate::integrator::bidir::walk::visible(&scene, qs, pt, &mut counters) {
+                    if !crate::integrator::bidir::walk::visible(scene, qs, pt, &mut counters) {
                         continue;
                     }
                     (qs.beta * conn.light_end.f * conn.camera_end.f * pt.beta / conn.dist2, Some(conn))
@@ -671,9 +671,9 @@ fn sampled_weights_of(
                 if y == 0.0 {
                     continue;
                 }
-                let w = mis_weight_with(&scene, l, c, conn.as_ref(), Heuristic::Power, &Counts::Bdpt) as f64;
+                let w = mis_weight_with(scene, l, c, conn.as_ref(), Heuristic::Power, &Counts::Bdpt) as f64;
                 let judge = if judge_guided { guide } else { None };
-                let b = brute_force_weights_with(&scene, &x, Heuristic::Power, &Counts::Bdpt, judge)[s];
+                let b = brute_force_weights_with(scene, &x, Heuristic::Power, &Counts::Bdpt, judge)[s];
                 walk += y * w;
                 full += y * b;
                 total += 1;
