@@ -350,13 +350,25 @@ fn parse_render(args: &[String], kind: Option<IntegratorKind>, whose: &str) -> c
     }
 }
 
+/// Writes `text` to standard output. A reader that has stopped reading (`pcbpt compare … |
+/// head`) is no error: what it did not take is dropped.
+fn out(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout.write_all(text.as_bytes()).and_then(|()| stdout.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(Error::Output { path: PathBuf::from("standard output"), msg: e.to_string() })
+        }
+        _ => Ok(()),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(a) => render(a.args),
         Command::CliReference => {
-            print!("{}", cli_reference::markdown(&Cli::command(), render_command));
-            Ok(ExitCode::SUCCESS)
+            out(&cli_reference::markdown(&Cli::command(), render_command)).map(|()| ExitCode::SUCCESS)
         }
         Command::Compare(a) => compare_images(a),
         Command::Merge(a) => merge_parts(a),
@@ -708,19 +720,21 @@ fn compare_images(a: CompareArgs) -> Result<ExitCode> {
             compare::Metric::Flip => compare::flip(&r, &t, keep.as_deref())?,
         };
         if a.json {
-            println!("{}", serde_json::json!({ "metric": metric, "value": v }));
+            out(&format!("{}\n", serde_json::json!({ "metric": metric, "value": v })))?;
         } else {
-            println!("{v:.6e}");
+            out(&format!("{v:.6e}\n"))?;
         }
     } else if a.json {
-        println!("{}", serde_json::to_string_pretty(&m).unwrap_or_default());
+        out(&format!("{}\n", serde_json::to_string_pretty(&m).unwrap_or_default()))?;
     } else {
-        println!("MSE        {:.6e}", m.mse);
-        println!("relMSE     {:.6e}", m.relmse);
-        println!("mean ratio {:.6} (test {:.6} / reference {:.6})", m.mean_ratio, m.test_mean, m.reference_mean);
+        let mut text = format!(
+            "MSE        {:.6e}\nrelMSE     {:.6e}\nmean ratio {:.6} (test {:.6} / reference {:.6})\n",
+            m.mse, m.relmse, m.mean_ratio, m.test_mean, m.reference_mean
+        );
         if m.non_finite > 0 {
-            println!("non-finite pixels in the test image: {}", m.non_finite);
+            text += &format!("non-finite pixels in the test image: {}\n", m.non_finite);
         }
+        out(&text)?;
     }
     if let Some(path) = &a.error_image {
         let bytes = compare::error_image(&r, &t, a.error_scale)?;

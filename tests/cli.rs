@@ -789,3 +789,18 @@ fn progress_in_a_log_is_lines_not_a_bar() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("--log-interval") && err.contains("non-negative"), "{err}");
 }
+
+/// A reader that stops reading (`pcbpt compare … | head`) ends the output quietly: no
+/// panic, no error, exit status 0.
+#[test]
+fn output_into_a_closed_pipe_ends_quietly() {
+    let image = root().join("tests/data/sunlit-room.exr");
+    let image = image.to_str().unwrap();
+    for args in [&["cli-reference"][..], &["compare", image, image][..]] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = Command::new(env!("CARGO_BIN_EXE_pcbpt")).args(args).stdout(writer).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success() && err.is_empty(), "{args:?}: {:?} {err}", o.status);
+    }
+}
