@@ -38,7 +38,7 @@ pub struct PcGuiding {
 
 impl Default for PcGuiding {
     fn default() -> PcGuiding {
-        PcGuiding { enabled: false, training: 0.25, tree: GuidedOptions::default() }
+        PcGuiding { enabled: false, training: 0.1, tree: GuidedOptions::default() }
     }
 }
 
