@@ -101,7 +101,7 @@ fn random_walk<R: Random>(
             }
             if flight.scattered {
                 let p = ray.o + ray.d * (flight.t / len);
-                let Some(wi) = scatter_in_medium(scene, p, m, &ray, beta, (max_vertices, guided), rng, path) else {
+                let Some(wi) = scatter_in_medium(scene, p, m, &ray, beta, max_vertices, guided, rng, path) else {
                     break;
                 };
                 if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
@@ -240,7 +240,8 @@ fn scatter_in_medium<R: Random>(
     m: u32,
     ray: &Ray,
     beta: Rgb,
-    (max_vertices, guided): (usize, Option<(&dyn Guide, TransportMode)>),
+    max_vertices: usize,
+    guided: Option<(&dyn Guide, TransportMode)>,
     rng: &mut R,
     path: &mut Vec<Vertex>,
 ) -> Option<Vec3> {

@@ -27,11 +27,7 @@ impl TreeGuide {
         if v.cell == u32::MAX || bsdf.is_delta() {
             return None;
         }
-        let a = self.tree.bsdf_fraction_in(v.cell, self.bsdf_fraction);
-        if a >= 1.0 {
-            return None;
-        }
-        Some((self.tree.guide_in(v.cell)?, a))
+        self.tree.mixture_in(v.cell, self.bsdf_fraction).filter(|&(_, a)| a < 1.0)
     }
 }
 

@@ -88,8 +88,7 @@ impl<'a> Guided<'a> {
         if bsdf.is_delta() {
             return None;
         }
-        let leaf = self.leaf(si.p);
-        Some((self.tree.guide_in(leaf)?, self.tree.bsdf_fraction_in(leaf, self.bsdf_fraction)))
+        self.tree.mixture_in(self.leaf(si.p), self.bsdf_fraction)
     }
 
     /// The mixture's density of the non-Dirac direction `wi` (shading frame) at `si`, with

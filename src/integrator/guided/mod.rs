@@ -192,8 +192,7 @@ impl Iterative for GuidedRender {
     fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 
     fn details(&self) -> Details {
-        let mut learnt: Vec<f32> = self.tree.leaves.iter().filter_map(|l| l.bsdf_fraction).collect();
-        learnt.sort_by(f32::total_cmp);
+        let learnt = self.tree.learnt_fractions();
         Details::of(GuidedStats {
             training_passes: self.trained.passes,
             training_spp: self.trained.spp,

@@ -363,6 +363,20 @@ impl SdTree {
         self.leaves[leaf as usize].bsdf_fraction.unwrap_or(otherwise)
     }
 
+    /// The mixture the leaf `leaf` samples from: its trained quadtree, if it has one, and its
+    /// BSDF fraction ([`SdTree::bsdf_fraction_in`]).
+    #[inline]
+    pub fn mixture_in(&self, leaf: u32, otherwise: f32) -> Option<(&DirTree, f32)> {
+        Some((self.guide_in(leaf)?, self.bsdf_fraction_in(leaf, otherwise)))
+    }
+
+    /// The BSDF fractions the leaves learnt, least first.
+    pub fn learnt_fractions(&self) -> Vec<f32> {
+        let mut learnt: Vec<f32> = self.leaves.iter().filter_map(|l| l.bsdf_fraction).collect();
+        learnt.sort_by(f32::total_cmp);
+        learnt
+    }
+
     /// The record of `value` at `p` for the direction `d` (world).
     #[inline]
     pub fn record_for(&self, p: Vec3, d: Vec3, value: f32) -> Record {

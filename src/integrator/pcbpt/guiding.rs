@@ -114,8 +114,7 @@ pub struct GuidingStats {
 
 impl GuidingStats {
     fn of(guide: &TreeGuide, trained: &Trained) -> GuidingStats {
-        let mut learnt: Vec<f32> = guide.tree.leaves.iter().filter_map(|l| l.bsdf_fraction).collect();
-        learnt.sort_by(f32::total_cmp);
+        let learnt = guide.tree.learnt_fractions();
         GuidingStats {
             training_passes: trained.passes,
             training_spp: trained.spp,
