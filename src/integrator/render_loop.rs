@@ -224,29 +224,50 @@ pub(crate) fn sample_tile_with<S: PixelSampler>(
     strata: Option<u32>,
     mut sample: impl FnMut(Vec2, &mut S, &mut PixelSink, &mut Counters) -> bool,
 ) -> TileResult {
-    let n = strata.map_or(0, |spp| (spp as f64).sqrt() as u32);
-    let layers = if ctx.layers { STRATEGY_LAYERS } else { 0 };
-    let mut block = ImageBlock::with_layers(tile, ctx.scene.film.filter, layers);
+    let mut block = tile_block(ctx, tile);
     let mut counters = Counters::default();
     let mut splats = Vec::new();
     let mut sink = PixelSink { l: Rgb::ZERO, parts: Vec::new(), layers: ctx.layers, splats: &mut splats };
-    let width = ctx.scene.film.width as u64;
-    for y in tile.y0..tile.y0 + tile.height {
-        for x in tile.x0..tile.x0 + tile.width {
-            let pixel = y as u64 * width + x as u64;
-            for s in first..first + count {
-                let mut sampler = S::for_sample(ctx.seed, pixel, s);
-                let pos = Vec2::new(x as f32, y as f32) + offset_in_pixel(s, n, sampler.next_2d());
-                sink.l = Rgb::ZERO;
-                sink.parts.clear();
-                if sample(pos, &mut sampler, &mut sink, &mut counters) {
-                    block.put_layers(pos, sink.l, &sink.parts);
-                }
-                counters.samples += 1;
-            }
+    for (mut sampler, pos) in camera_samples::<S>(ctx, tile, (first, count), strata) {
+        sink.l = Rgb::ZERO;
+        sink.parts.clear();
+        if sample(pos, &mut sampler, &mut sink, &mut counters) {
+            block.put_layers(pos, sink.l, &sink.parts);
         }
+        counters.samples += 1;
     }
     TileResult { block, splats, counters, data: () }
+}
+
+/// An empty image block for a tile, with the strategy layers when the render keeps them.
+pub(crate) fn tile_block(ctx: &Ctx, tile: Tile) -> ImageBlock {
+    let layers = if ctx.layers { STRATEGY_LAYERS } else { 0 };
+    ImageBlock::with_layers(tile, ctx.scene.film.filter, layers)
+}
+
+/// The camera samples of iterations `first..first + count` of a tile, pixel by pixel (row
+/// by row) and iteration by iteration: each one's sampler (past the two numbers of its
+/// position) and its position on the film, in the first `strata` iterations (rounded
+/// down to a square) in its cell of a square grid over the pixel.
+pub(crate) fn camera_samples<S: PixelSampler>(
+    ctx: &Ctx,
+    tile: Tile,
+    (first, count): (u32, u32),
+    strata: Option<u32>,
+) -> impl Iterator<Item = (S, Vec2)> {
+    let n = strata.map_or(0, |spp| (spp as f64).sqrt() as u32);
+    let width = ctx.scene.film.width as u64;
+    let seed = ctx.seed;
+    (tile.y0..tile.y0 + tile.height).flat_map(move |y| {
+        (tile.x0..tile.x0 + tile.width).flat_map(move |x| {
+            let pixel = y as u64 * width + x as u64;
+            (first..first + count).map(move |s| {
+                let mut sampler = S::for_sample(seed, pixel, s);
+                let pos = Vec2::new(x as f32, y as f32) + offset_in_pixel(s, n, sampler.next_2d());
+                (sampler, pos)
+            })
+        })
+    })
 }
 
 /// Where sample `s` of a pixel lies in it for a `jitter` in the unit square: in cell `s` of

@@ -11,7 +11,7 @@ pub mod shape;
 pub mod vol;
 pub mod xml;
 
-use crate::accel::{Accel, Backend, BuildOptions, Ray};
+use crate::accel::{Accel, Backend, BuildOptions, Hit, Ray};
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::film::Filter;
@@ -148,12 +148,19 @@ impl Scene {
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
         let hit = self.accel.intersect(ray)?;
+        Some(self.interaction(ray, &hit))
+    }
+
+    /// The surface point of a hit along `ray` (as [`Scene::intersect`] gives it, for a hit
+    /// found by a batch query).
+    #[inline]
+    pub fn interaction(&self, ray: &Ray, hit: &Hit) -> SurfaceInteraction {
         let shape = &self.shapes[hit.geom as usize];
-        let mut si = shape.interaction(ray, &hit);
+        let mut si = shape.interaction(ray, hit);
         if let Some(p) = &self.bsdfs[shape.bsdf].perturbation {
             shape.perturb(&mut si, p);
         }
-        Some(si)
+        si
     }
 
     /// `true` when something blocks the ray segment.

@@ -11,6 +11,7 @@
 //! from the paths, runs the same loop ([`PathTracer::li_with`]) with its own.
 
 mod media;
+mod wavefront;
 
 use crate::accel::Ray;
 use crate::bsdf::TransportMode;
@@ -41,6 +42,9 @@ pub struct PathTracer {
     pub strict_normals: bool,
     /// Where each camera sample's random numbers come from.
     pub sampler: SamplerKind,
+    /// Trace the camera samples of a tile as a wavefront ([`wavefront`]) in scenes without
+    /// media.
+    pub wavefront: bool,
 }
 
 /// How a path continues at a surface vertex whose BSDF is `bsdf` (`wo` in the shading frame
@@ -104,6 +108,7 @@ impl PathTracer {
             dirac_emission: true,
             strict_normals: spec.strict_normals,
             sampler: SamplerKind::Independent,
+            wavefront: false,
         }
     }
 
@@ -151,95 +156,150 @@ impl PathTracer {
     pub(crate) fn li_with<R: Random, C: Continuation>(
         &self,
         scene: &Scene,
-        mut ray: Ray,
+        ray: Ray,
         sampler: &mut R,
         counters: &mut Counters,
         cont: &mut C,
     ) -> Rgb {
-        let mut l = Rgb::ZERO;
-        let mut beta = Rgb::ONE;
-        let mut depth = 0u32;
-        // The last BSDF sample's density (solid angle) and whether it was a delta lobe.
-        let mut prev_pdf = 0.0f32;
-        let mut prev_delta = true;
-        let mut prev_p = ray.o;
+        let mut path = PathState::new(ray);
         if self.max_depth == 0 {
-            return l;
+            return path.l;
         }
         loop {
             counters.extension_rays += 1;
-            let Some(si) = scene.intersect(&ray) else {
-                // The ray leaves the scene: lights at infinity.
-                let d = ray.d.normalize();
-                for &light_index in &scene.infinite_lights {
-                    let light = &scene.lights[light_index];
-                    // The density only where the weight needs it.
-                    let (le, pdf) = if weighs_against_light_sampling(depth, prev_delta) {
-                        light.eval_pdf_infinite(d)
-                    } else {
-                        (light.eval_infinite(d), 0.0)
-                    };
-                    if le == Rgb::ZERO {
-                        continue;
-                    }
-                    let w = self
-                        .emission_weight(depth, prev_delta, prev_pdf, || scene.light_sampler.pmf(light_index) * pdf);
-                    l += beta * le * w;
-                    cont.gathered(beta * le * w);
-                }
+            let Some(si) = scene.intersect(&path.ray) else {
+                self.escaped(scene, &mut path, cont);
                 break;
             };
-            depth += 1;
-
-            if let Some((light_index, light)) = scene.area_light(&si) {
-                let le = light.radiance(si.ng, si.uv, si.wo);
-                if le != Rgb::ZERO {
-                    let w = self.emission_weight(depth - 1, prev_delta, prev_pdf, || {
-                        scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, prev_p, &si)
-                    });
-                    l += beta * le * w;
-                    cont.gathered(beta * le * w);
-                }
-            }
-            if depth >= self.max_depth {
-                break;
-            }
-
-            let bsdf = scene.bsdf(&si);
-            let wo = si.shading.to_local(si.wo);
-            if !self.sides_agree(&si, si.wo, wo.z) {
-                break;
-            }
-
-            // Next-event estimation.
-            let direct = self.surface_nee(scene, &si, bsdf, wo, beta, sampler, counters, &*cont, |ray, _| {
+            let step = self.vertex(scene, &mut path, &si, sampler, counters, cont, |ray, _| {
                 if scene.occluded(ray) { Rgb::ZERO } else { Rgb::ONE }
             });
-            l += direct;
-            cont.gathered(direct);
-
-            // Continue the path.
-            let Some((bs, wi_world)) = self.sample_next(&si, bsdf, wo, sampler, cont) else { break };
-            beta *= bs.weight;
-            if beta == Rgb::ZERO {
+            path.l += step.direct;
+            cont.gathered(step.direct);
+            if !step.continues {
                 break;
             }
-            prev_pdf = bs.pdf;
-            prev_delta = bs.delta;
-            prev_p = si.p;
-            cont.continued(&si, wi_world, &bs, beta);
-
-            if depth >= self.rr_depth {
-                let q = max_component(beta).min(0.95);
-                if sampler.next_1d() >= q {
-                    break;
-                }
-                beta /= q;
-            }
-            ray = si.spawn_ray(wi_world);
         }
-        l
+        path.l
     }
+
+    /// A path's ray left the scene: the light of the lights at infinity along it.
+    #[inline(always)]
+    fn escaped<C: Continuation>(&self, scene: &Scene, path: &mut PathState, cont: &mut C) {
+        let d = path.ray.d.normalize();
+        for &light_index in &scene.infinite_lights {
+            let light = &scene.lights[light_index];
+            // The density only where the weight needs it.
+            let (le, pdf) = if weighs_against_light_sampling(path.depth, path.prev_delta) {
+                light.eval_pdf_infinite(d)
+            } else {
+                (light.eval_infinite(d), 0.0)
+            };
+            if le == Rgb::ZERO {
+                continue;
+            }
+            let w = self.emission_weight(path.depth, path.prev_delta, path.prev_pdf, || {
+                scene.light_sampler.pmf(light_index) * pdf
+            });
+            path.l += path.beta * le * w;
+            cont.gathered(path.beta * le * w);
+        }
+    }
+
+    /// A path's ray reached the surface point `si`: its emission, next-event estimation
+    /// (the shadow ray's transmittance from `transmittance`, as in
+    /// [`PathTracer::surface_nee`]) and the next direction, the roulette and the next ray
+    /// (in `path.ray`). The light sample's contribution is returned, not added to `path.l`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn vertex<R: Random, C: Continuation>(
+        &self,
+        scene: &Scene,
+        path: &mut PathState,
+        si: &SurfaceInteraction,
+        sampler: &mut R,
+        counters: &mut Counters,
+        cont: &mut C,
+        transmittance: impl FnOnce(&Ray, bool) -> Rgb,
+    ) -> VertexStep {
+        let end = |direct| VertexStep { direct, continues: false };
+        path.depth += 1;
+        if let Some((light_index, light)) = scene.area_light(si) {
+            let le = light.radiance(si.ng, si.uv, si.wo);
+            if le != Rgb::ZERO {
+                let w = self.emission_weight(path.depth - 1, path.prev_delta, path.prev_pdf, || {
+                    scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, path.prev_p, si)
+                });
+                path.l += path.beta * le * w;
+                cont.gathered(path.beta * le * w);
+            }
+        }
+        if path.depth >= self.max_depth {
+            return end(Rgb::ZERO);
+        }
+
+        let bsdf = scene.bsdf(si);
+        let wo = si.shading.to_local(si.wo);
+        if !self.sides_agree(si, si.wo, wo.z) {
+            return end(Rgb::ZERO);
+        }
+
+        // Next-event estimation.
+        let direct = self.surface_nee(scene, si, bsdf, wo, path.beta, sampler, counters, &*cont, transmittance);
+
+        // Continue the path.
+        let Some((bs, wi_world)) = self.sample_next(si, bsdf, wo, sampler, cont) else { return end(direct) };
+        path.beta *= bs.weight;
+        if path.beta == Rgb::ZERO {
+            return end(direct);
+        }
+        path.prev_pdf = bs.pdf;
+        path.prev_delta = bs.delta;
+        path.prev_p = si.p;
+        cont.continued(si, wi_world, &bs, path.beta);
+
+        if path.depth >= self.rr_depth {
+            let q = max_component(path.beta).min(0.95);
+            if sampler.next_1d() >= q {
+                return end(direct);
+            }
+            path.beta /= q;
+        }
+        path.ray = si.spawn_ray(wi_world);
+        VertexStep { direct, continues: true }
+    }
+}
+
+/// What a path tracer's path carries from one vertex to the next.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PathState {
+    /// The ray to trace next.
+    pub ray: Ray,
+    /// The radiance gathered so far.
+    pub l: Rgb,
+    /// The throughput.
+    pub beta: Rgb,
+    /// The vertices reached so far (segments traced).
+    pub depth: u32,
+    /// The last BSDF sample's density (solid angle) and whether it was a delta lobe.
+    pub prev_pdf: f32,
+    pub prev_delta: bool,
+    /// Where the last ray started.
+    pub prev_p: Vec3,
+}
+
+impl PathState {
+    #[inline(always)]
+    pub fn new(ray: Ray) -> PathState {
+        PathState { ray, l: Rgb::ZERO, beta: Rgb::ONE, depth: 0, prev_pdf: 0.0, prev_delta: true, prev_p: ray.o }
+    }
+}
+
+/// What [`PathTracer::vertex`] gives back: the light sample's contribution and whether the
+/// path goes on along `path.ray`.
+pub(crate) struct VertexStep {
+    pub direct: Rgb,
+    pub continues: bool,
 }
 
 impl PathTracer {
@@ -349,26 +409,42 @@ impl Iterative for PathTracer {
     }
 
     fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
-        match self.sampler {
-            SamplerKind::Independent => self.tile_with::<Sampler>(ctx, tile, first, count),
-            SamplerKind::Sobol => self.tile_with::<SobolSampler>(ctx, tile, first, count),
+        let wavefront = self.wavefront && !ctx.scene.volumetric;
+        match (self.sampler, wavefront) {
+            (SamplerKind::Independent, false) => self.tile_with::<Sampler>(ctx, tile, first, count),
+            (SamplerKind::Sobol, false) => self.tile_with::<SobolSampler>(ctx, tile, first, count),
+            (SamplerKind::Independent, true) => self.tile_wavefront::<Sampler>(ctx, tile, first, count),
+            (SamplerKind::Sobol, true) => self.tile_wavefront::<SobolSampler>(ctx, tile, first, count),
         }
     }
 
     fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 }
 
-/// Options of the path tracer (`--integrator path`): none of its own (its depths are the
-/// scene's and the command line's `--max-depth`, `--rr-depth`).
-#[derive(Clone, Debug, Default, serde::Serialize, clap::Args)]
-pub struct PathOptions {}
+/// Options of the path tracer (`--integrator path`; its depths are the scene's and the
+/// command line's `--max-depth`, `--rr-depth`).
+#[derive(Clone, Debug, serde::Serialize, clap::Args)]
+pub struct PathOptions {
+    /// Trace each tile's paths as a wavefront, bounce by bounce, with batched ray queries
+    /// (false: one path at a time; the same image). Scenes with media are traced one path
+    /// at a time either way.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub wavefront: bool,
+}
+
+impl Default for PathOptions {
+    fn default() -> PathOptions {
+        PathOptions { wavefront: true }
+    }
+}
 
 impl Integrator for PathOptions {
     const BIDIRECTIONAL: bool = false;
     const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
-        let pt = PathTracer { sampler: scene.sampler.kind, ..PathTracer::new(&scene.integrator) };
+        let pt =
+            PathTracer { sampler: scene.sampler.kind, wavefront: self.wavefront, ..PathTracer::new(&scene.integrator) };
         crate::integrator::render_loop::run(scene, opts, pt, false, iterations)
     }
 }

@@ -1,0 +1,127 @@
+//! The path tracer as a wavefront: a tile's camera samples are traced in batches of
+//! [`BATCH`] paths, bounce by bounce. Each bounce asks the backend for the closest hits of
+//! every live path's ray in one batch query (Embree's stream interface), shades the hits one
+//! path at a time with the scalar path tracer's own vertex step ([`PathTracer::vertex`]),
+//! and answers the bounce's shadow rays in one batch of occlusion queries.
+//!
+//! Each path draws its random numbers from its own sampler, in the order the scalar path
+//! tracer draws them (a shadow ray's answer changes no later draw), and adds its light in the
+//! same order, so the two give the same image wherever the batch queries report the hits
+//! single queries report.
+
+use super::{BsdfSampling, PathState, PathTracer};
+use crate::accel::{Hit, Ray};
+use crate::film::Tile;
+use crate::integrator::render_loop::{Ctx, TileResult, camera_samples, tile_block};
+use crate::integrator::stats::Counters;
+use crate::math::Rgb;
+use crate::sampling::PixelSampler;
+use crate::scene::Scene;
+use glam::Vec2;
+
+/// Paths traced together: enough for the batch queries to pay, few enough for the paths'
+/// state (about 100 bytes each) to stay in the core's caches.
+pub(crate) const BATCH: usize = 2048;
+
+/// A camera sample in flight.
+struct Lane<S> {
+    sampler: S,
+    pos: Vec2,
+    path: PathState,
+}
+
+/// The batches' buffers, kept from one bounce and one batch to the next.
+#[derive(Default)]
+struct Queues {
+    /// The live paths (indices into the lanes) and those that go on after this bounce.
+    live: Vec<u32>,
+    next: Vec<u32>,
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    /// The bounce's shadow rays, the path each belongs to with the light it brings if
+    /// nothing blocks it, and the answers.
+    shadow: Vec<Ray>,
+    pending: Vec<(u32, Rgb)>,
+    occluded: Vec<bool>,
+}
+
+impl PathTracer {
+    /// Iterations `first..first + count` of a tile, traced as a wavefront (a scene without
+    /// media).
+    pub(super) fn tile_wavefront<S: PixelSampler>(&self, ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult {
+        let mut block = tile_block(ctx, tile);
+        let mut counters = Counters::default();
+        let mut queues = Queues::default();
+        let mut lanes: Vec<Lane<S>> = Vec::with_capacity(BATCH);
+        let mut samples = camera_samples::<S>(ctx, tile, (first, count), None);
+        loop {
+            lanes.clear();
+            lanes.extend(samples.by_ref().take(BATCH).map(|(sampler, pos)| Lane {
+                sampler,
+                pos,
+                path: PathState::new(ctx.scene.camera.generate_ray(pos)),
+            }));
+            if lanes.is_empty() {
+                break;
+            }
+            if self.max_depth > 0 {
+                self.trace(ctx.scene, &mut lanes, &mut queues, &mut counters);
+            }
+            for lane in &lanes {
+                block.put_layers(lane.pos, lane.path.l, &[]);
+            }
+            counters.samples += lanes.len() as u64;
+        }
+        TileResult { block, splats: Vec::new(), counters, data: () }
+    }
+
+    /// Traces a batch of paths from their camera rays to their ends.
+    fn trace<S: PixelSampler>(&self, scene: &Scene, lanes: &mut [Lane<S>], q: &mut Queues, counters: &mut Counters) {
+        q.live.clear();
+        q.live.extend(0..lanes.len() as u32);
+        counters.camera_rays += lanes.len() as u64;
+        let mut camera = true;
+        while !q.live.is_empty() {
+            q.rays.clear();
+            q.rays.extend(q.live.iter().map(|&i| lanes[i as usize].path.ray));
+            scene.accel.intersect_batch(&q.rays, camera, &mut q.hits);
+            if !camera {
+                counters.extension_rays += q.live.len() as u64;
+            }
+            camera = false;
+
+            q.next.clear();
+            q.shadow.clear();
+            q.pending.clear();
+            for (k, &i) in q.live.iter().enumerate() {
+                let lane = &mut lanes[i as usize];
+                let Some(hit) = &q.hits[k] else {
+                    self.escaped(scene, &mut lane.path, &mut BsdfSampling);
+                    continue;
+                };
+                let si = scene.interaction(&q.rays[k], hit);
+                let mut shadow = None;
+                let step =
+                    self.vertex(scene, &mut lane.path, &si, &mut lane.sampler, counters, &mut BsdfSampling, |r, _| {
+                        shadow = Some(*r);
+                        Rgb::ONE
+                    });
+                if let Some(r) = shadow {
+                    q.shadow.push(r);
+                    q.pending.push((i, step.direct));
+                }
+                if step.continues {
+                    q.next.push(i);
+                }
+            }
+
+            scene.accel.occluded_batch(&q.shadow, false, &mut q.occluded);
+            for (&(i, direct), &blocked) in q.pending.iter().zip(&q.occluded) {
+                if !blocked {
+                    lanes[i as usize].path.l += direct;
+                }
+            }
+            std::mem::swap(&mut q.live, &mut q.next);
+        }
+    }
+}
