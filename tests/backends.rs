@@ -195,3 +195,23 @@ fn both_backends_render_the_same_image() {
     assert!((same_seed.mean_ratio - 1.0).abs() < 1e-3);
     assert!(same_seed.relmse < 0.01 * other_seed.relmse);
 }
+
+#[test]
+fn with_obvhs_the_wavefront_path_tracer_renders_the_scalar_image_bit_for_bit() {
+    // obvhs answers a batch one ray at a time, so the wavefront's hits are the scalar path
+    // tracer's: every image and every ray count must be the same (`tests/wavefront.rs`
+    // compares the two with Embree's stream queries).
+    for name in ["cornell-box/scene.xml", "materials/scene.xml", "sunlit-room/scene.xml", "cutout/scene.xml"] {
+        let scene = load_at(&root().join("scenes").join(name), &[], Some((48, 27)), Backend::Obvhs);
+        let r = |wavefront| {
+            render_with(&scene, IntegratorKind::Path, 4, 9, 2, &|o| o.method.path_mut().wavefront = wavefront)
+        };
+        let (w, s) = (r(true), r(false));
+        assert!(w.image == s.image, "{name}: the images differ");
+        let c = |o: &pcbpt::integrator::RenderOutput| {
+            let c = &o.stats.counters;
+            (c.camera_rays, c.extension_rays, c.shadow_rays)
+        };
+        assert_eq!(c(&w), c(&s), "{name}");
+    }
+}

@@ -54,6 +54,7 @@ def test_the_seed_decides_the_image_and_threads_do_not(cornell):
 # Renders compared with the command line's: (integrator, keywords, the same as arguments).
 SAME_AS_CLI = [
     (None, {}, []),
+    ("path", {"wavefront": False}, ["--integrator", "path", "--wavefront", "false"]),
     ("bdpt", {}, ["--integrator", "bdpt"]),
     ("bdpt", {"heuristic": "balance", "max_depth": 4}, ["--integrator", "bdpt", "--heuristic", "balance", "--max-depth", "4"]),
     ("lvc", {"light_paths": 300}, ["--integrator", "lvc", "--light-paths", "300"]),
@@ -70,7 +71,7 @@ SAME_AS_CLI = [
 
 
 def test_every_integrator_is_compared_with_the_command_line():
-    assert {i for i, _, _ in SAME_AS_CLI if i} == set(pcbpt.integrators()) - {"path"}
+    assert {i for i, _, _ in SAME_AS_CLI if i} == set(pcbpt.integrators())
 
 
 @pytest.mark.parametrize("integrator,options,args", SAME_AS_CLI)

@@ -267,6 +267,14 @@ impl Method {
         }
     }
 
+    /// The path tracer's options. Panics for another integrator.
+    pub fn path_mut(&mut self) -> &mut crate::integrator::path::PathOptions {
+        match self {
+            Method::Path(o) => o,
+            m => not_the("the path tracer's options", m),
+        }
+    }
+
     /// LVC's options. Panics for another integrator.
     pub fn lvc_mut(&mut self) -> &mut LvcOptions {
         match self {
