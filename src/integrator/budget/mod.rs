@@ -82,7 +82,7 @@ use crate::integrator::bidir::bdpt::{Bdpt, Connector};
 use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::pool::{LightPool, PoolCounters, PoolPlan, PoolSampler, PoolSelection};
 use crate::integrator::path::PathTracer;
-use crate::integrator::render_loop::{Ctx, TileResult, Warmup, sample_tile};
+use crate::integrator::render_loop::{Ctx, Iterative, TileResult, Warmup, sample_tile};
 use crate::integrator::stats::Counters;
 use crate::sampling::Sampler;
 use glam::Vec2;
@@ -244,15 +244,12 @@ pub(crate) fn pool_tile<S: CameraSample>(
 }
 
 /// A tile of a plan that [`Plan::path_tracing`]: the path tracer's samples (next-event
-/// estimation and BSDF sampling under the power heuristic, `src/integrator/path/`), which
+/// estimation and BSDF sampling under the power heuristic, `src/integrator/path/`, traced as
+/// a wavefront), which
 /// cost less than the bidirectional camera pass with its stored vertices and ratio walks.
 fn path_traced_tile(ctx: &Ctx, tile: Tile, first: u32, count: u32) -> TileResult {
-    let pt = PathTracer::new(&ctx.scene.integrator);
-    sample_tile(ctx, tile, first, count, |pos, sampler, sink, counters| {
-        let ray = ctx.scene.camera.generate_ray(pos);
-        sink.l = counters.camera_path(|c| pt.radiance(ctx.scene, ray, sampler, c));
-        true
-    })
+    let pt = PathTracer { wavefront: true, ..PathTracer::new(&ctx.scene.integrator) };
+    Iterative::render_tile(&pt, ctx, &(), tile, first, count)
 }
 
 /// The budgets considered when the pool holds `m` light paths and the film `pixels` pixels:
