@@ -38,6 +38,16 @@ fn cases() -> Vec<(&'static str, RenderOptions)> {
     vec![
         ("path", base(Path)),
         ("guided", base(Guided)),
+        // Training passes of 1, 2, 4 and 8 samples per pixel and the tree used wherever a
+        // vertex is guided (no leaf learns to sample the BSDF alone): a change in what each
+        // vertex records changes the tree, and so the image.
+        (
+            "guided_trained",
+            with(Guided, &|o| {
+                o.run.budget = Budget::Spp(32);
+                o.method.guided_mut().learn_fraction = false;
+            }),
+        ),
         ("lighttrace", base(Lighttrace)),
         ("bdpt", base(Bdpt)),
         ("bdpt_balance", with(Bdpt, &|o| *o.method.heuristic_mut().unwrap() = Heuristic::Balance)),

@@ -275,6 +275,14 @@ impl Method {
         }
     }
 
+    /// The guided path tracer's options. Panics for another integrator.
+    pub fn guided_mut(&mut self) -> &mut crate::integrator::guided::GuidedOptions {
+        match self {
+            Method::Guided(o) => o,
+            m => not_the("the guided path tracer's options", m),
+        }
+    }
+
     /// LVC's options. Panics for another integrator.
     pub fn lvc_mut(&mut self) -> &mut LvcOptions {
         match self {

@@ -171,12 +171,14 @@ impl PathTracer {
                 self.escaped(scene, &mut path, cont);
                 break;
             };
-            let step = self.vertex(scene, &mut path, &si, sampler, counters, cont, |ray, _| {
+            let Some(lit) = self.light_at(scene, &mut path, &si, sampler, counters, cont, |ray, _| {
                 if scene.occluded(ray) { Rgb::ZERO } else { Rgb::ONE }
-            });
-            path.l += step.direct;
-            cont.gathered(step.direct);
-            if !step.continues {
+            }) else {
+                break;
+            };
+            path.l += lit.direct;
+            cont.gathered(lit.direct);
+            if !self.go_on(&mut path, &si, &lit, sampler, cont) {
                 break;
             }
         }
@@ -206,23 +208,22 @@ impl PathTracer {
         }
     }
 
-    /// A path's ray reached the surface point `si`: its emission, next-event estimation
-    /// (the shadow ray's transmittance from `transmittance`, as in
-    /// [`PathTracer::surface_nee`]) and the next direction, the roulette and the next ray
-    /// (in `path.ray`). The light sample's contribution is returned, not added to `path.l`.
+    /// A path's ray reached the surface point `si`: its emission (added to `path.l`) and
+    /// next-event estimation there (the shadow ray's transmittance from `transmittance`, as
+    /// in [`PathTracer::surface_nee`]), whose contribution is returned, not added. `None`
+    /// where the path ends at `si` (its last segment, or strict normals).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn vertex<R: Random, C: Continuation>(
+    fn light_at<'s, R: Random, C: Continuation>(
         &self,
-        scene: &Scene,
+        scene: &'s Scene,
         path: &mut PathState,
         si: &SurfaceInteraction,
         sampler: &mut R,
         counters: &mut Counters,
         cont: &mut C,
         transmittance: impl FnOnce(&Ray, bool) -> Rgb,
-    ) -> VertexStep {
-        let end = |direct| VertexStep { direct, continues: false };
+    ) -> Option<Lit<'s>> {
         path.depth += 1;
         if let Some((light_index, light)) = scene.area_light(si) {
             let le = light.radiance(si.ng, si.uv, si.wo);
@@ -235,23 +236,33 @@ impl PathTracer {
             }
         }
         if path.depth >= self.max_depth {
-            return end(Rgb::ZERO);
+            return None;
         }
-
         let bsdf = scene.bsdf(si);
         let wo = si.shading.to_local(si.wo);
         if !self.sides_agree(si, si.wo, wo.z) {
-            return end(Rgb::ZERO);
+            return None;
         }
-
-        // Next-event estimation.
         let direct = self.surface_nee(scene, si, bsdf, wo, path.beta, sampler, counters, &*cont, transmittance);
+        Some(Lit { direct, bsdf, wo })
+    }
 
-        // Continue the path.
-        let Some((bs, wi_world)) = self.sample_next(si, bsdf, wo, sampler, cont) else { return end(direct) };
+    /// After [`PathTracer::light_at`] (and the light sample's contribution gathered): the
+    /// next direction, the throughput, the roulette and the next ray (in `path.ray`);
+    /// `false` where the path ends.
+    #[inline(always)]
+    fn go_on<R: Random, C: Continuation>(
+        &self,
+        path: &mut PathState,
+        si: &SurfaceInteraction,
+        lit: &Lit,
+        sampler: &mut R,
+        cont: &mut C,
+    ) -> bool {
+        let Some((bs, wi_world)) = self.sample_next(si, lit.bsdf, lit.wo, sampler, cont) else { return false };
         path.beta *= bs.weight;
         if path.beta == Rgb::ZERO {
-            return end(direct);
+            return false;
         }
         path.prev_pdf = bs.pdf;
         path.prev_delta = bs.delta;
@@ -261,12 +272,12 @@ impl PathTracer {
         if path.depth >= self.rr_depth {
             let q = max_component(path.beta).min(0.95);
             if sampler.next_1d() >= q {
-                return end(direct);
+                return false;
             }
             path.beta /= q;
         }
         path.ray = si.spawn_ray(wi_world);
-        VertexStep { direct, continues: true }
+        true
     }
 }
 
@@ -295,11 +306,12 @@ impl PathState {
     }
 }
 
-/// What [`PathTracer::vertex`] gives back: the light sample's contribution and whether the
-/// path goes on along `path.ray`.
-pub(crate) struct VertexStep {
+/// A surface vertex's light, from [`PathTracer::light_at`]: the light sample's contribution
+/// (its shadow ray answered or not), and the BSDF and direction the path goes on with.
+pub(crate) struct Lit<'s> {
     pub direct: Rgb,
-    pub continues: bool,
+    bsdf: &'s Bsdf,
+    wo: Vec3,
 }
 
 impl PathTracer {

@@ -1,7 +1,8 @@
 //! The path tracer as a wavefront: a tile's camera samples are traced in batches of
 //! [`BATCH`] paths, bounce by bounce. Each bounce asks the backend for the closest hits of
 //! every live path's ray in one batch query (Embree's stream interface), shades the hits one
-//! path at a time with the scalar path tracer's own vertex step ([`PathTracer::vertex`]),
+//! path at a time with the scalar path tracer's own steps ([`PathTracer::light_at`],
+//! [`PathTracer::go_on`]),
 //! and answers the bounce's shadow rays in one batch of occlusion queries.
 //!
 //! Each path draws its random numbers from its own sampler, in the order the scalar path
@@ -101,16 +102,26 @@ impl PathTracer {
                 };
                 let si = scene.interaction(&q.rays[k], hit);
                 let mut shadow = None;
-                let step =
-                    self.vertex(scene, &mut lane.path, &si, &mut lane.sampler, counters, &mut BsdfSampling, |r, _| {
+                let lit = self.light_at(
+                    scene,
+                    &mut lane.path,
+                    &si,
+                    &mut lane.sampler,
+                    counters,
+                    &mut BsdfSampling,
+                    |r, _| {
                         shadow = Some(*r);
                         Rgb::ONE
-                    });
+                    },
+                );
+                let Some(lit) = lit else { continue };
                 if let Some(r) = shadow {
                     q.shadow.push(r);
-                    q.pending.push((i, step.direct));
+                    q.pending.push((i, lit.direct));
                 }
-                if step.continues {
+                // The path tracer's own continuation gathers nothing, so the light sample's
+                // contribution can wait for the batch's shadow rays.
+                if self.go_on(&mut lane.path, &si, &lit, &mut lane.sampler, &mut BsdfSampling) {
                     q.next.push(i);
                 }
             }
