@@ -11,39 +11,19 @@
 //! Russian roulette); crossing a null surface (a boundary between media) is not: the ray
 //! goes on unchanged in the medium on the other side.
 
-use super::{BsdfSampling, PathTracer, weighs_against_light_sampling};
+use super::{BsdfSampling, PathState, PathTracer};
 use crate::accel::Ray;
 use crate::integrator::stats::Counters;
-use crate::math::{Rgb, SHADOW_EPSILON, max_component};
+use crate::math::{Rgb, SHADOW_EPSILON};
 use crate::medium::Medium;
 use crate::sampling::{Random, power_heuristic};
 use crate::scene::{MAX_NULL_CROSSINGS, Scene};
 use glam::Vec3;
 
-/// Where the path's last vertex was, what its sampling density was, and the throughput.
-struct PathState {
-    l: Rgb,
-    beta: Rgb,
-    /// Vertices after the camera so far (scattering events and surface bounces).
-    depth: u32,
-    prev_pdf: f32,
-    prev_delta: bool,
-    prev_p: Vec3,
-    medium: Option<u32>,
-}
-
 impl PathTracer {
     /// Radiance arriving along a camera ray that starts in the camera's medium.
     pub fn li_media<R: Random>(&self, scene: &Scene, mut ray: Ray, sampler: &mut R, counters: &mut Counters) -> Rgb {
-        let mut s = PathState {
-            l: Rgb::ZERO,
-            beta: Rgb::ONE,
-            depth: 0,
-            prev_pdf: 0.0,
-            prev_delta: true,
-            prev_p: ray.o,
-            medium: scene.camera_medium,
-        };
+        let mut s = PathState { medium: scene.camera_medium, ..PathState::new(ray) };
         if self.max_depth == 0 {
             return s.l;
         }
@@ -73,7 +53,7 @@ impl PathTracer {
                 }
             }
             let Some(si) = hit else {
-                self.add_infinite_lights(scene, d, &mut s);
+                self.escaped(scene, &mut s, d, &mut BsdfSampling);
                 break;
             };
             let bsdf = scene.bsdf(&si);
@@ -87,41 +67,20 @@ impl PathTracer {
                 ray = si.spawn_ray(d);
                 continue;
             }
-            s.depth += 1;
-            if let Some((light_index, light)) = scene.area_light(&si) {
-                let le = light.radiance(si.ng, si.uv, si.wo);
-                if le != Rgb::ZERO {
-                    let w = self.emission_weight(s.depth - 1, s.prev_delta, s.prev_pdf, || {
-                        scene.light_sampler.pmf(light_index) * light.pdf_li(&scene.shapes, s.prev_p, &si)
-                    });
-                    s.l += s.beta * le * w;
-                }
-            }
-            if s.depth >= self.max_depth {
-                break;
-            }
-            let wo = si.shading.to_local(si.wo);
-            if !self.sides_agree(&si, si.wo, wo.z) {
-                break;
-            }
-
-            // Next-event estimation, through the media and null surfaces on the way.
+            // The surface's light, with next-event estimation through the media and null
+            // surfaces on the way; then on by sampling the BSDF.
             let medium = s.medium;
-            s.l += self.surface_nee(scene, &si, bsdf, wo, s.beta, sampler, counters, &BsdfSampling, |ray, infinite| {
+            let Some(lit) = self.light_at(scene, &mut s, &si, sampler, counters, &mut BsdfSampling, |ray, infinite| {
                 scene.transmittance_to(ray, scene.medium_after(&si, ray.d, medium), infinite)
-            });
-
-            // Continue the path by sampling the BSDF.
-            let Some((bs, wi_world)) = self.sample_next(&si, bsdf, wo, sampler, &mut BsdfSampling) else { break };
-            s.beta *= bs.weight;
-            s.prev_pdf = bs.pdf;
-            s.prev_delta = bs.delta;
-            s.prev_p = si.p;
-            s.medium = scene.medium_after(&si, wi_world, s.medium);
-            if !self.roulette(&mut s, sampler) {
+            }) else {
+                break;
+            };
+            s.l += lit.direct;
+            if !self.go_on(&mut s, &si, &lit, sampler, &mut BsdfSampling) {
                 break;
             }
-            ray = si.spawn_ray(wi_world);
+            ray = s.ray;
+            s.medium = scene.medium_after(&si, ray.d, s.medium);
         }
         s.l
     }
@@ -170,38 +129,5 @@ impl PathTracer {
             return None;
         }
         Some(Ray::new(p, wi))
-    }
-
-    /// Russian roulette from `rr_depth` on: `false` when the path ends.
-    fn roulette<R: Random>(&self, s: &mut PathState, sampler: &mut R) -> bool {
-        if s.beta == Rgb::ZERO {
-            return false;
-        }
-        if s.depth >= self.rr_depth {
-            let q = max_component(s.beta).min(0.95);
-            if sampler.next_1d() >= q {
-                return false;
-            }
-            s.beta /= q;
-        }
-        true
-    }
-
-    /// The lights at infinity seen along `d` as the path leaves the scene.
-    fn add_infinite_lights(&self, scene: &Scene, d: Vec3, s: &mut PathState) {
-        for &light_index in &scene.infinite_lights {
-            let light = &scene.lights[light_index];
-            let (le, pdf) = if weighs_against_light_sampling(s.depth, s.prev_delta) {
-                light.eval_pdf_infinite(d)
-            } else {
-                (light.eval_infinite(d), 0.0)
-            };
-            if le == Rgb::ZERO {
-                continue;
-            }
-            let w =
-                self.emission_weight(s.depth, s.prev_delta, s.prev_pdf, || scene.light_sampler.pmf(light_index) * pdf);
-            s.l += s.beta * le * w;
-        }
     }
 }

@@ -168,7 +168,8 @@ impl PathTracer {
         loop {
             counters.extension_rays += 1;
             let Some(si) = scene.intersect(&path.ray) else {
-                self.escaped(scene, &mut path, cont);
+                let d = path.ray.d.normalize();
+                self.escaped(scene, &mut path, d, cont);
                 break;
             };
             let Some(lit) = self.light_at(scene, &mut path, &si, sampler, counters, cont, |ray, _| {
@@ -185,10 +186,10 @@ impl PathTracer {
         path.l
     }
 
-    /// A path's ray left the scene: the light of the lights at infinity along it.
+    /// A path's ray left the scene along the unit direction `d`: the light of the lights
+    /// at infinity along it.
     #[inline(always)]
-    fn escaped<C: Continuation>(&self, scene: &Scene, path: &mut PathState, cont: &mut C) {
-        let d = path.ray.d.normalize();
+    fn escaped<C: Continuation>(&self, scene: &Scene, path: &mut PathState, d: Vec3, cont: &mut C) {
         for &light_index in &scene.infinite_lights {
             let light = &scene.lights[light_index];
             // The density only where the weight needs it.
@@ -268,7 +269,19 @@ impl PathTracer {
         path.prev_delta = bs.delta;
         path.prev_p = si.p;
         cont.continued(si, wi_world, &bs, path.beta);
+        if !self.roulette(path, sampler) {
+            return false;
+        }
+        path.ray = si.spawn_ray(wi_world);
+        true
+    }
 
+    /// Russian roulette from `rr_depth` on: `false` when the path ends (or carries nothing).
+    #[inline(always)]
+    fn roulette<R: Random>(&self, path: &mut PathState, sampler: &mut R) -> bool {
+        if path.beta == Rgb::ZERO {
+            return false;
+        }
         if path.depth >= self.rr_depth {
             let q = max_component(path.beta).min(0.95);
             if sampler.next_1d() >= q {
@@ -276,7 +289,6 @@ impl PathTracer {
             }
             path.beta /= q;
         }
-        path.ray = si.spawn_ray(wi_world);
         true
     }
 }
@@ -297,12 +309,23 @@ pub(crate) struct PathState {
     pub prev_delta: bool,
     /// Where the last ray started.
     pub prev_p: Vec3,
+    /// The medium the ray travels in (`None` in a scene without media).
+    pub medium: Option<u32>,
 }
 
 impl PathState {
     #[inline(always)]
     pub fn new(ray: Ray) -> PathState {
-        PathState { ray, l: Rgb::ZERO, beta: Rgb::ONE, depth: 0, prev_pdf: 0.0, prev_delta: true, prev_p: ray.o }
+        PathState {
+            ray,
+            l: Rgb::ZERO,
+            beta: Rgb::ONE,
+            depth: 0,
+            prev_pdf: 0.0,
+            prev_delta: true,
+            prev_p: ray.o,
+            medium: None,
+        }
     }
 }
 

@@ -2,8 +2,8 @@
 //! [`BATCH`] paths, bounce by bounce. Each bounce asks the backend for the closest hits of
 //! every live path's ray in one batch query (Embree's stream interface), shades the hits one
 //! path at a time with the scalar path tracer's own steps ([`PathTracer::light_at`],
-//! [`PathTracer::go_on`]),
-//! and answers the bounce's shadow rays in one batch of occlusion queries.
+//! [`PathTracer::go_on`]), and answers the bounce's shadow rays in one batch of occlusion
+//! queries.
 //!
 //! Each path draws its random numbers from its own sampler, in the order the scalar path
 //! tracer draws them (a shadow ray's answer changes no later draw), and adds its light in the
@@ -22,7 +22,7 @@ use glam::Vec2;
 
 /// Paths traced together: enough for the batch queries to pay, few enough for the paths'
 /// state (about 100 bytes each) to stay in the core's caches.
-pub(crate) const BATCH: usize = 2048;
+const BATCH: usize = 2048;
 
 /// A camera sample in flight.
 struct Lane<S> {
@@ -97,7 +97,7 @@ impl PathTracer {
             for (k, &i) in q.live.iter().enumerate() {
                 let lane = &mut lanes[i as usize];
                 let Some(hit) = &q.hits[k] else {
-                    self.escaped(scene, &mut lane.path, &mut BsdfSampling);
+                    self.escaped(scene, &mut lane.path, q.rays[k].d.normalize(), &mut BsdfSampling);
                     continue;
                 };
                 let si = scene.interaction(&q.rays[k], hit);
