@@ -11,6 +11,7 @@ use crate::integrator::stats::Counters;
 use crate::math::{Rgb, max_component, offset_origin};
 use crate::sampling::Random;
 use crate::scene::Scene;
+use crate::scene::shape::SurfaceInteraction;
 use glam::{Vec2, Vec3};
 use std::sync::Arc;
 
@@ -55,60 +56,78 @@ impl WalkLimits {
     }
 }
 
-/// Extends `path` (which holds the vertex the ray leaves from) by sampling BSDFs, writing
-/// each vertex's forward density and the previous vertex's reverse density as it goes.
-///
-/// The densities and each vertex's direction back (`wo`) are taken from the vertex
-/// positions, not from the ray that found the vertex: a ray leaves an offset origin, and
-/// where a segment is not much longer than that offset (in corners) the sampled direction
-/// and the direction between the two points differ. Every strategy of a path must see the
-/// same densities of the same points for the MIS weights to sum to one; the connections and
-/// the other strategies evaluate them from positions.
-///
-/// With a guide in `limits`, every surface vertex keeps its cell, a camera walk samples
-/// from the guide where it guides, and the camera side's densities are the guide's.
-#[allow(clippy::too_many_arguments)]
-fn random_walk<R: Random>(
-    scene: &Scene,
-    mut ray: Ray,
-    mut beta: Rgb,
+/// A walk under way: the ray it traces next, the throughput it carries, and what its
+/// Russian roulette and medium tracking keep between steps. [`random_walk`] traces its rays
+/// one at a time; a wavefront asks for many walks' rays in one batch query and hands each
+/// walk what its ray found ([`Walk::step`]).
+#[derive(Clone, Debug)]
+pub(crate) struct Walk {
+    /// The ray the walk follows next.
+    pub ray: Ray,
+    beta: Rgb,
+    /// Throughput of the scattering alone (what Russian roulette looks at).
+    rr_beta: Rgb,
+    bounces: u32,
+    /// The medium the ray travels in, and the null surfaces it crossed.
+    medium: Option<u32>,
+    crossings: usize,
     mode: TransportMode,
-    limits: &WalkLimits,
     max_vertices: usize,
-    rng: &mut R,
-    path: &mut Vec<Vertex>,
-    counters: &mut Counters,
-) {
-    let (rr_depth, guide) = (limits.rr_depth, limits.guide());
-    let guided = guide.map(|g| (g, mode));
-    // Throughput of the scattering alone (what Russian roulette looks at).
-    let mut rr_beta = Rgb::ONE;
-    let mut bounces = 0u32;
-    // The medium the ray travels in, and the null surfaces it crossed.
-    let mut medium = path[path.len() - 1].medium_towards(scene, ray.d);
-    let mut crossings = 0;
-    while path.len() < max_vertices {
-        counters.extension_rays += 1;
-        let hit = scene.intersect(&ray);
-        if let Some(m) = medium {
+}
+
+impl Walk {
+    /// A walk leaving the last vertex of `path` along `ray` with throughput `beta`, to grow
+    /// `path` to at most `max_vertices` vertices.
+    fn new(scene: &Scene, ray: Ray, beta: Rgb, mode: TransportMode, max_vertices: usize, path: &[Vertex]) -> Walk {
+        let medium = path[path.len() - 1].medium_towards(scene, ray.d);
+        Walk { ray, beta, rr_beta: Rgb::ONE, bounces: 0, medium, crossings: 0, mode, max_vertices }
+    }
+
+    /// One step of the walk, given what its ray found (`hit`, the surface point or
+    /// nothing): a vertex pushed onto `path` (a surface or, in a medium, a scattering event)
+    /// unless a null surface was crossed, and the next ray sampled. `true` when the walk goes
+    /// on along [`Walk::ray`]; `path` then has room for another vertex.
+    ///
+    /// The densities and each vertex's direction back (`wo`) are taken from the vertex
+    /// positions, not from the ray that found the vertex: a ray leaves an offset origin, and
+    /// where a segment is not much longer than that offset (in corners) the sampled
+    /// direction and the direction between the two points differ. Every strategy of a path
+    /// must see the same densities of the same points for the MIS weights to sum to one; the
+    /// connections and the other strategies evaluate them from positions.
+    ///
+    /// With a guide in `limits`, every surface vertex keeps its cell, a camera walk samples
+    /// from the guide where it guides, and the camera side's densities are the guide's.
+    pub fn step<R: Random>(
+        &mut self,
+        scene: &Scene,
+        hit: Option<SurfaceInteraction>,
+        limits: &WalkLimits,
+        rng: &mut R,
+        path: &mut Vec<Vertex>,
+    ) -> bool {
+        let (rr_depth, guide, mode) = (limits.rr_depth, limits.guide(), self.mode);
+        let guided = guide.map(|g| (g, mode));
+        let ray = self.ray;
+        if let Some(m) = self.medium {
             let len = ray.d.length();
             let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t * len);
             let flight = scene.media[m as usize].sample(ray.o, ray.d / len, t_max, rng);
-            beta *= flight.weight;
-            rr_beta *= flight.weight;
-            if beta == Rgb::ZERO || !beta.is_finite() {
-                break;
+            self.beta *= flight.weight;
+            self.rr_beta *= flight.weight;
+            if self.beta == Rgb::ZERO || !self.beta.is_finite() {
+                return false;
             }
             if flight.scattered {
                 let p = ray.o + ray.d * (flight.t / len);
-                let Some(wi) = scatter_in_medium(scene, p, m, &ray, beta, max_vertices, guided, rng, path) else {
-                    break;
+                let Some(wi) = scatter_in_medium(scene, p, m, &ray, self.beta, self.max_vertices, guided, rng, path)
+                else {
+                    return false;
                 };
-                if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
-                    break;
+                if !self.roulette(rr_depth, rng) {
+                    return false;
                 }
-                ray = Ray::new(p, wi);
-                continue;
+                self.ray = Ray::new(p, wi);
+                return true;
             }
         }
         let Some(mut si) = hit else {
@@ -116,7 +135,7 @@ fn random_walk<R: Random>(
             if mode == TransportMode::Radiance && !scene.infinite_lights.is_empty() {
                 let n = path.len();
                 let prev = &path[n - 1];
-                let mut v = Vertex::sky(scene, prev.p, ray.d, beta);
+                let mut v = Vertex::sky(scene, prev.p, ray.d, self.beta);
                 if !prev.delta {
                     let (fwd, rev) = prev.densities_with(scene, &v, ray.d, 1.0, guided);
                     v.pdf_fwd = fwd;
@@ -126,26 +145,26 @@ fn random_walk<R: Random>(
                 }
                 path.push(v);
             }
-            break;
+            return false;
         };
         let bsdf_index = scene.bsdf_index(&si);
         let bsdf = &scene.bsdfs[bsdf_index];
         if bsdf.is_null() {
             // A boundary between media: on into the medium behind it, no vertex.
-            crossings += 1;
-            if crossings > crate::scene::MAX_NULL_CROSSINGS {
-                break;
+            self.crossings += 1;
+            if self.crossings > crate::scene::MAX_NULL_CROSSINGS {
+                return false;
             }
-            medium = scene.medium_after(&si, ray.d, medium);
-            ray = si.spawn_ray(ray.d);
-            continue;
+            self.medium = scene.medium_after(&si, ray.d, self.medium);
+            self.ray = si.spawn_ray(ray.d);
+            return true;
         }
         let n = path.len();
         let prev = &path[n - 1];
         let back = prev.p - si.p;
         let dist = back.length();
         if dist == 0.0 || !dist.is_finite() {
-            break;
+            return false;
         }
         // Towards a light at infinity the direction is the light's, exactly. After a Dirac
         // delta (a mirror, glass) it is the ray's: no density of that step enters a weight, and
@@ -158,8 +177,8 @@ fn random_walk<R: Random>(
         } else {
             back / dist
         };
-        let mut v = Vertex::surface(&si, bsdf_index as u32, beta, !bsdf.is_delta());
-        v.medium = medium;
+        let mut v = Vertex::surface(&si, bsdf_index as u32, self.beta, !bsdf.is_delta());
+        v.medium = self.medium;
         if let Some(g) = guide {
             v.cell = g.cell(v.p);
         }
@@ -174,8 +193,8 @@ fn random_walk<R: Random>(
             }
         }
         path.push(v);
-        if path.len() >= max_vertices {
-            break;
+        if path.len() >= self.max_vertices {
+            return false;
         }
         let wo = si.shading.to_local(si.wo);
         let sample = match guide {
@@ -190,7 +209,7 @@ fn random_walk<R: Random>(
                 bsdf.sample(wo, si.at(), u1, u2, mode)
             }
         };
-        let Some(bs) = sample else { break };
+        let Some(bs) = sample else { return false };
         let wi = si.shading.to_world(bs.wi);
         let mut weight = bs.weight;
         if mode == TransportMode::Importance {
@@ -200,33 +219,52 @@ fn random_walk<R: Random>(
             let n = path.len();
             path[n - 1].delta = true;
         }
-        beta *= weight;
-        rr_beta *= weight;
-        if beta == Rgb::ZERO || !beta.is_finite() {
-            break;
+        self.beta *= weight;
+        self.rr_beta *= weight;
+        if self.beta == Rgb::ZERO || !self.beta.is_finite() {
+            return false;
         }
-        if !roulette(&mut beta, &mut rr_beta, &mut bounces, rr_depth, rng) {
-            break;
+        if !self.roulette(rr_depth, rng) {
+            return false;
         }
-        medium = scene.medium_after(&si, wi, medium);
-        ray = si.spawn_ray(wi);
+        self.medium = scene.medium_after(&si, wi, self.medium);
+        self.ray = si.spawn_ray(wi);
+        true
+    }
+
+    /// Counts a bounce and plays Russian roulette from `rr_depth` bounces on, on the
+    /// throughput of the scattering alone: `false` when the walk ends.
+    #[inline]
+    fn roulette<R: Random>(&mut self, rr_depth: u32, rng: &mut R) -> bool {
+        self.bounces += 1;
+        if self.bounces >= rr_depth {
+            let q = max_component(self.rr_beta).min(0.95);
+            if rng.next_1d() >= q {
+                return false;
+            }
+            self.beta /= q;
+            self.rr_beta /= q;
+        }
+        true
     }
 }
 
-/// Counts a bounce and plays Russian roulette from `rr_depth` bounces on, on the
-/// throughput of the scattering alone (`rr_beta`): `false` when the walk ends.
-#[inline]
-fn roulette<R: Random>(beta: &mut Rgb, rr_beta: &mut Rgb, bounces: &mut u32, rr_depth: u32, rng: &mut R) -> bool {
-    *bounces += 1;
-    if *bounces >= rr_depth {
-        let q = max_component(*rr_beta).min(0.95);
-        if rng.next_1d() >= q {
-            return false;
+/// Runs `walk` to its end, its rays traced one at a time, each counted as an extension ray.
+fn random_walk<R: Random>(
+    scene: &Scene,
+    mut walk: Walk,
+    limits: &WalkLimits,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+    counters: &mut Counters,
+) {
+    while path.len() < walk.max_vertices {
+        counters.extension_rays += 1;
+        let hit = scene.intersect(&walk.ray);
+        if !walk.step(scene, hit, limits, rng, path) {
+            break;
         }
-        *beta /= q;
-        *rr_beta /= q;
     }
-    true
 }
 
 /// A walk's scattering event at `p` in medium `m` (the ray `ray` led there): pushes the
@@ -286,16 +324,20 @@ pub fn camera_subpath<R: Random>(
     path: &mut Vec<Vertex>,
     counters: &mut Counters,
 ) {
+    let Some(walk) = camera_start(scene, pos, limits, path) else { return };
+    // The walk's first ray is the camera ray.
+    counters.camera_path(|c| random_walk(scene, walk, limits, rng, path, c));
+}
+
+/// The start of a camera subpath through film position `pos`: `path` cleared to the camera
+/// vertex, and the walk from it along the camera ray (`None` when the subpath has no room
+/// for another vertex).
+pub(crate) fn camera_start(scene: &Scene, pos: Vec2, limits: &WalkLimits, path: &mut Vec<Vertex>) -> Option<Walk> {
     path.clear();
     let ray = scene.camera.generate_ray(pos);
     path.push(Vertex { medium: scene.camera_medium, ..Vertex::camera(ray.o) });
-    if limits.camera_vertices <= 1 {
-        return;
-    }
-    // The walk's first ray is the camera ray.
-    counters.camera_path(|c| {
-        random_walk(scene, ray, Rgb::ONE, TransportMode::Radiance, limits, limits.camera_vertices, rng, path, c)
-    });
+    (limits.camera_vertices > 1)
+        .then(|| Walk::new(scene, ray, Rgb::ONE, TransportMode::Radiance, limits.camera_vertices, path))
 }
 
 /// Traces a light subpath into `path`: a light chosen by power, a point and direction of
@@ -307,25 +349,37 @@ pub fn light_subpath<R: Random>(
     path: &mut Vec<Vertex>,
     counters: &mut Counters,
 ) {
+    if let Some(walk) = light_start(scene, limits, rng, path) {
+        random_walk(scene, walk, limits, rng, path, counters);
+    }
+}
+
+/// The start of a light subpath: `path` cleared to the vertex on the light (or nothing,
+/// when no light emits), and the walk from it (`None` when the subpath ends there).
+pub(crate) fn light_start<R: Random>(
+    scene: &Scene,
+    limits: &WalkLimits,
+    rng: &mut R,
+    path: &mut Vec<Vertex>,
+) -> Option<Walk> {
     path.clear();
     let u_light = rng.next_1d();
     let u1 = rng.next_1d();
     let u_pos = rng.next_2d();
     let u_dir = rng.next_2d();
     if limits.light_vertices == 0 {
-        return;
+        return None;
     }
-    let Some((l, pmf, _)) = scene.light_sampler.sample(u_light) else { return };
+    let (l, pmf, _) = scene.light_sampler.sample(u_light)?;
     let light = &scene.lights[l];
     // The first vertex, the ray the walk leaves it along, and the throughput it carries.
     let (y0, ray, beta) = if light.at_infinity() {
-        let Some(start) = infinite_light_start(scene, l, pmf, u_pos, u_dir) else { return };
-        start
+        infinite_light_start(scene, l, pmf, u_pos, u_dir)?
     } else {
-        let Some(es) = light.sample_emission(&scene.shapes, u1, u_pos, u_dir) else { return };
+        let es = light.sample_emission(&scene.shapes, u1, u_pos, u_dir)?;
         let origin = pmf * es.pdf_pos;
         if origin <= 0.0 || es.pdf_dir <= 0.0 {
-            return;
+            return None;
         }
         let y0 = Vertex::light(l, es.p, es.n, es.uv, Rgb::splat(1.0 / origin), origin);
         // What `y0.end(scene, es.d, ..).f` gives, without its direction density.
@@ -344,9 +398,9 @@ pub fn light_subpath<R: Random>(
     }
     path.push(y0);
     if limits.light_vertices <= 1 || beta == Rgb::ZERO || !beta.is_finite() {
-        return;
+        return None;
     }
-    random_walk(scene, ray, beta, TransportMode::Importance, limits, limits.light_vertices, rng, path, counters);
+    Some(Walk::new(scene, ray, beta, TransportMode::Importance, limits.light_vertices, path))
 }
 
 /// The medium light leaving light `l` at its vertex `y0` in direction `d` travels in: the
