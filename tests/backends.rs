@@ -15,7 +15,7 @@ use common::hits::*;
 use common::*;
 use glam::Vec3;
 use pcbpt::accel::{Accel, Backend, BuildOptions, Cutout, Geometry, Ray};
-use pcbpt::integrator::IntegratorKind;
+use pcbpt::integrator::{IntegratorKind, registry};
 use pcbpt::sampling::{Sampler, square_to_uniform_sphere};
 use pcbpt::scene::mesh::{self, TriangleMesh};
 use std::sync::Arc;
@@ -197,21 +197,25 @@ fn both_backends_render_the_same_image() {
 }
 
 #[test]
-fn with_obvhs_the_wavefront_path_tracer_renders_the_scalar_image_bit_for_bit() {
-    // obvhs answers a batch one ray at a time, so the wavefront's hits are the scalar path
-    // tracer's: every image and every ray count must be the same (`tests/wavefront.rs`
-    // compares the two with Embree's stream queries).
+fn with_obvhs_the_wavefronts_render_the_scalar_images_bit_for_bit() {
+    // obvhs answers a batch one ray at a time, so the wavefronts' hits are those of one
+    // sample at a time: every image (the splats of BDPT's light tracing included) and every
+    // ray count must be the same (`tests/wavefront.rs` compares the two with Embree's stream
+    // queries).
     for name in ["cornell-box/scene.xml", "materials/scene.xml", "sunlit-room/scene.xml", "cutout/scene.xml"] {
         let scene = load_at(&root().join("scenes").join(name), &[], Some((48, 27)), Backend::Obvhs);
-        let r = |wavefront| {
-            render_with(&scene, IntegratorKind::Path, 4, 9, 2, &|o| o.method.path_mut().wavefront = wavefront)
-        };
-        let (w, s) = (r(true), r(false));
-        assert!(w.image == s.image, "{name}: the images differ");
-        let c = |o: &pcbpt::integrator::RenderOutput| {
-            let c = &o.stats.counters;
-            (c.camera_rays, c.extension_rays, c.shadow_rays)
-        };
-        assert_eq!(c(&w), c(&s), "{name}");
+        for kind in [IntegratorKind::Path, IntegratorKind::Bdpt, IntegratorKind::Eorr] {
+            let r = |wavefront: bool| {
+                let args = ["--wavefront".to_string(), wavefront.to_string()];
+                render_with(&scene, kind, 4, 9, 2, &|o| o.method = registry::parse_options(kind, &args).unwrap())
+            };
+            let (w, s) = (r(true), r(false));
+            assert!(w.image == s.image, "{name}, {kind:?}: the images differ");
+            let c = |o: &pcbpt::integrator::RenderOutput| {
+                let c = &o.stats.counters;
+                (c.camera_rays, c.extension_rays, c.shadow_rays, c.connections, c.connections_occluded)
+            };
+            assert_eq!(c(&w), c(&s), "{name}, {kind:?}");
+        }
     }
 }

@@ -56,6 +56,7 @@ SAME_AS_CLI = [
     (None, {}, []),
     ("path", {"wavefront": False}, ["--integrator", "path", "--wavefront", "false"]),
     ("bdpt", {}, ["--integrator", "bdpt"]),
+    ("bdpt", {"wavefront": False}, ["--integrator", "bdpt", "--wavefront", "false"]),
     ("bdpt", {"heuristic": "balance", "max_depth": 4}, ["--integrator", "bdpt", "--heuristic", "balance", "--max-depth", "4"]),
     ("lvc", {"light_paths": 300}, ["--integrator", "lvc", "--light-paths", "300"]),
     ("pssmlt", {"two_stage": False}, ["--integrator", "pssmlt", "--two-stage", "false"]),

@@ -41,11 +41,16 @@ pub struct EorrOptions {
     /// earlier pass, a running mean, which a render cut into chunks cannot use).
     #[arg(long = "eorr-pilot-spp", default_value_t = EorrOptions::default().pilot_spp)]
     pub pilot_spp: u32,
+    /// Trace each tile's samples as a wavefront, their walks bounce by bounce and their
+    /// connections together, with batched ray queries (false: one sample at a time; the
+    /// same image). Scenes with media are traced one sample at a time either way.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub wavefront: bool,
 }
 
 impl Default for EorrOptions {
     fn default() -> EorrOptions {
-        EorrOptions { heuristic: Heuristic::default(), fraction: 0.1, pilot_spp: 16 }
+        EorrOptions { heuristic: Heuristic::default(), fraction: 0.1, pilot_spp: 16, wavefront: true }
     }
 }
 
@@ -109,12 +114,15 @@ pub struct Eorr {
     tau: Option<Vec<f32>>,
     /// Connections the roulette left untraced in the iterations the render keeps.
     skipped: u64,
+    /// Trace the tiles as a wavefront ([`crate::integrator::bidir::wavefront`]) in scenes
+    /// without media.
+    pub wavefront: bool,
 }
 
 impl Eorr {
     pub fn new(bdpt: Bdpt, heuristic: Heuristic, fraction: f32, pilot_spp: u32, scene: &Scene) -> Eorr {
         let pilot = Film::new(scene.film.width, scene.film.height, scene.film.filter);
-        Eorr { bdpt, heuristic, fraction, pilot_spp, pilot, tau: None, skipped: 0 }
+        Eorr { bdpt, heuristic, fraction, pilot_spp, pilot, tau: None, skipped: 0, wavefront: false }
     }
 
     fn in_pilot(&self, iteration: u32) -> bool {
@@ -153,11 +161,15 @@ impl Iterative for Eorr {
         let policy = Roulette { tau: self.tau.as_deref(), width, height, skipped: Cell::new(0) };
         let conn =
             Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &Counts::Bdpt, policy, guide: None };
-        let mut scratch = Scratch::default();
-        let result = sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-            self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);
-            true
-        });
+        let result = if self.wavefront && !ctx.scene.volumetric {
+            self.bdpt.tile_wavefront(ctx, &conn, tile, first, count)
+        } else {
+            let mut scratch = Scratch::default();
+            sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+                self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);
+                true
+            })
+        };
         result.map(|()| conn.policy.skipped.get())
     }
 
@@ -210,7 +222,8 @@ impl Integrator for EorrOptions {
         if !(self.fraction >= 0.0 && self.fraction.is_finite()) {
             return Err(Error::Usage(format!("--eorr-fraction must be a non-negative number, got {}", self.fraction)));
         }
-        let method = Eorr::new(Bdpt::for_scene(scene, false), self.heuristic, self.fraction, self.pilot_spp, scene);
+        let mut method = Eorr::new(Bdpt::for_scene(scene, false), self.heuristic, self.fraction, self.pilot_spp, scene);
+        method.wavefront = self.wavefront;
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 

@@ -155,7 +155,26 @@ pub(crate) struct PixelSink<'a> {
     splats: &'a mut Vec<Splat>,
 }
 
-impl PixelSink<'_> {
+impl<'a> PixelSink<'a> {
+    /// An empty sink whose splats go to `splats`, keeping the strategies' parts when the
+    /// render keeps its strategy `layers`.
+    pub fn new(layers: bool, splats: &'a mut Vec<Splat>) -> PixelSink<'a> {
+        PixelSink { l: Rgb::ZERO, parts: Vec::new(), layers, splats }
+    }
+
+    /// Empties the sink for the next camera sample (its splats stay where they went).
+    #[inline]
+    pub fn clear(&mut self) {
+        self.l = Rgb::ZERO;
+        self.parts.clear();
+    }
+
+    /// Adds the sample's radiance and parts to `block` at film position `pos`.
+    #[inline]
+    pub fn put(&self, block: &mut ImageBlock, pos: Vec2) {
+        block.put_layers(pos, self.l, &self.parts);
+    }
+
     /// Strategy `(s, t)`'s contribution to the pixel.
     #[inline]
     pub fn add(&mut self, s: usize, t: usize, value: Rgb) {
@@ -227,12 +246,11 @@ pub(crate) fn sample_tile_with<S: PixelSampler>(
     let mut block = tile_block(ctx, tile);
     let mut counters = Counters::default();
     let mut splats = Vec::new();
-    let mut sink = PixelSink { l: Rgb::ZERO, parts: Vec::new(), layers: ctx.layers, splats: &mut splats };
+    let mut sink = PixelSink::new(ctx.layers, &mut splats);
     for (mut sampler, pos) in camera_samples::<S>(ctx, tile, (first, count), strata) {
-        sink.l = Rgb::ZERO;
-        sink.parts.clear();
+        sink.clear();
         if sample(pos, &mut sampler, &mut sink, &mut counters) {
-            block.put_layers(pos, sink.l, &sink.parts);
+            sink.put(&mut block, pos);
         }
         counters.samples += 1;
     }

@@ -123,24 +123,31 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
         sink: &mut impl Sink,
         counters: &mut Counters,
     ) {
-        let scene = self.scene;
+        let Some((y0, conn, c)) = self.light_sample(camera, rng) else { return };
         let t = camera.len();
-        let pt = &camera[t - 1];
+        self.finish(from_ref(&y0), camera, &conn, c, None, pos, rng, sink, counters, |s, c, w| s.add(1, t, c * w));
+    }
+
+    /// The light sample of `s = 1` at `z_{t-1}`: the vertex `y_0` on the light, the
+    /// connection and its unweighted contribution (`None` when it carries nothing).
+    pub(crate) fn light_sample<R: Random>(&self, camera: &[Vertex], rng: &mut R) -> Option<(Vertex, Connection, Rgb)> {
+        let scene = self.scene;
+        let pt = &camera[camera.len() - 1];
         let u = rng.next_1d();
         let u1 = rng.next_1d();
         let u2 = rng.next_2d();
         if !pt.is_connectible() {
-            return;
+            return None;
         }
-        let Some((l, pmf, _)) = scene.light_sampler.sample(u) else { return };
-        let Some(ls) = scene.lights[l].sample_li(&scene.shapes, &scene.bounds, pt.p, u1, u2) else { return };
+        let (l, pmf, _) = scene.light_sampler.sample(u)?;
+        let ls = scene.lights[l].sample_li(&scene.shapes, &scene.bounds, pt.p, u1, u2)?;
         let camera_end = pt.end_with(scene, ls.wi, TransportMode::Radiance, self.guide);
         if camera_end.f == Rgb::ZERO {
-            return;
+            return None;
         }
         let c = pt.beta * camera_end.f * ls.li / (pmf * ls.pdf);
         let light = &scene.lights[l];
-        let (y0, conn) = if light.at_infinity() {
+        Some(if light.at_infinity() {
             // A light at infinity: `y_0` is the direction, and `z_{t-1}`'s density from it
             // that of a point on the disk facing it (no distance term either way).
             let mut y0 = Vertex::light(l, ls.p, ls.wi, Vec2::ZERO, Rgb::ONE, 0.0);
@@ -148,34 +155,48 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
             y0.connectible = false;
             y0.pdf_fwd = y0.pdf_light_origin(scene);
             let light_end = End { f: Rgb::ZERO, pdf_fwd: crate::integrator::bidir::disk_pdf(scene), pdf_rev: 0.0 };
-            (y0, Connection { w: -ls.wi, dist2: 1.0, inv_dist2: 1.0, light_end, camera_end })
+            (y0, Connection { w: -ls.wi, dist2: 1.0, inv_dist2: 1.0, light_end, camera_end }, c)
         } else {
             let y0 = Vertex::light(l, ls.p, ls.n, Vec2::ZERO, Rgb::ONE, light_origin_pdf(scene, l));
             let dist2 = (ls.p - pt.p).length_squared();
             // Only the emission density matters at a sampled light point.
             let light_end = End { f: Rgb::ZERO, pdf_fwd: light.pdf_emission_direction(ls.n, -ls.wi), pdf_rev: 0.0 };
-            (y0, Connection { w: -ls.wi, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end })
-        };
-        self.finish(from_ref(&y0), camera, &conn, c, None, pos, rng, sink, counters, |s, c, w| s.add(1, t, c * w));
+            (y0, Connection { w: -ls.wi, dist2, inv_dist2: 1.0 / dist2, light_end, camera_end }, c)
+        })
     }
 
     /// `t = 1`: `y_{s-1}` connects to the camera and splats onto the film.
     pub fn to_camera<R: Random>(&self, light: &[Vertex], rng: &mut R, sink: &mut impl Sink, counters: &mut Counters) {
-        let scene = self.scene;
+        let Some((raster, conn, c)) = self.camera_connection(light) else { return };
         let s = light.len();
-        let qs = &light[s - 1];
+        let z0 = self.camera_vertex();
+        self.finish(light, from_ref(&z0), &conn, c, None, raster, rng, sink, counters, |sk, c, w| {
+            sk.splat(s, 1, raster, c * w)
+        });
+    }
+
+    /// The camera's vertex `z_0`.
+    #[inline]
+    pub(crate) fn camera_vertex(&self) -> Vertex {
+        Vertex { medium: self.scene.camera_medium, ..Vertex::camera(self.scene.camera.position) }
+    }
+
+    /// The connection of `t = 1` from `y_{s-1}`: where it lands on the film, the connection
+    /// and its unweighted contribution (`None` when it carries nothing).
+    pub(crate) fn camera_connection(&self, light: &[Vertex]) -> Option<(Vec2, Connection, Rgb)> {
+        let scene = self.scene;
+        let qs = &light[light.len() - 1];
         if !qs.is_connectible() {
-            return;
+            return None;
         }
-        let Some(k) = scene.camera.connect(qs.p) else { return };
+        let k = scene.camera.connect(qs.p)?;
         let light_end = qs.end_with(scene, k.wi, TransportMode::Importance, self.guide);
         if light_end.f == Rgb::ZERO {
-            return;
+            return None;
         }
         let inv_dist2 = k.inv_dist2;
         // `We cos θ_camera` is the direction's density `k.pdf_dir`.
         let c = qs.beta * light_end.f * (k.pdf_dir * inv_dist2);
-        let z0 = Vertex { medium: scene.camera_medium, ..Vertex::camera(scene.camera.position) };
         let conn = Connection {
             w: k.wi,
             dist2: k.dist2,
@@ -184,9 +205,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
             // What `z0.end(scene, -k.wi, ..)` gives, without projecting the direction again.
             camera_end: End { f: Rgb::ZERO, pdf_fwd: k.pdf_dir, pdf_rev: 0.0 },
         };
-        self.finish(light, from_ref(&z0), &conn, c, None, k.raster, rng, sink, counters, |sk, c, w| {
-            sk.splat(s, 1, k.raster, c * w)
-        });
+        Some((k.raster, conn, c))
     }
 
     /// `s, t >= 2`: joins `y_{s-1}` and `z_{t-1}` with a shadow ray; `scale` multiplies the
@@ -203,21 +222,26 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
         sink: &mut impl Sink,
         counters: &mut Counters,
     ) -> bool {
-        let scene = self.scene;
-        let (s, t) = (light.len(), camera.len());
-        let (qs, pt) = (&light[s - 1], &camera[t - 1]);
-        if !qs.is_connectible() || !pt.is_connectible() {
-            return false;
-        }
-        let Some(conn) = Connection::carrying(scene, qs, pt, self.guide) else { return false };
-        let f = conn.light_end.f * conn.camera_end.f;
-        if f == Rgb::ZERO {
-            return false;
-        }
-        let c = qs.beta * f * pt.beta * (scale * conn.inv_dist2);
+        let Some((conn, c)) = self.connection(light, camera, scale) else { return false };
         self.finish(light, camera, &conn, c, Some(scale), pos, rng, sink, counters, |sk, c, w| {
             sk.add_connection(light, camera, c, w)
         })
+    }
+
+    /// The connection of `y_{s-1}` and `z_{t-1}` and its unweighted contribution, `scale`
+    /// included (`None` when it carries nothing).
+    #[inline]
+    pub(crate) fn connection(&self, light: &[Vertex], camera: &[Vertex], scale: f32) -> Option<(Connection, Rgb)> {
+        let (qs, pt) = (&light[light.len() - 1], &camera[camera.len() - 1]);
+        if !qs.is_connectible() || !pt.is_connectible() {
+            return None;
+        }
+        let conn = Connection::carrying(self.scene, qs, pt, self.guide)?;
+        let f = conn.light_end.f * conn.camera_end.f;
+        if f == Rgb::ZERO {
+            return None;
+        }
+        Some((conn, qs.beta * f * pt.beta * (scale * conn.inv_dist2)))
     }
 
     /// Shows a sink that observes them the connection about to be delivered; `drawn` is
@@ -255,31 +279,59 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
         counters: &mut Counters,
         deliver: impl FnOnce(&mut S, Rgb, f32),
     ) -> bool {
-        let (a, b) = (&light[light.len() - 1], &camera[camera.len() - 1]);
-        if self.policy.judges() {
-            // The weight is part of what the policy judges, so it comes first.
-            let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
-            if w == 0.0 {
-                return false;
-            }
-            let Some(k) = self.policy.keep(c * w, pos, rng) else { return false };
-            let tr = self.trace(a, b, counters);
-            let visible = tr != Rgb::ZERO;
-            if visible {
-                self.observe(light, camera, conn, drawn, sink);
-                deliver(sink, c * tr, w * k);
-            }
-            visible
-        } else {
-            let tr = self.trace(a, b, counters);
-            if tr == Rgb::ZERO {
-                return false;
-            }
-            let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
-            self.observe(light, camera, conn, drawn, sink);
-            deliver(sink, c * tr, w);
-            true
+        let Some(weight) = self.judge(light, camera, conn, c, pos, rng) else { return false };
+        let tr = self.trace(&light[light.len() - 1], &camera[camera.len() - 1], counters);
+        if tr == Rgb::ZERO {
+            return false;
         }
+        self.deliver(light, camera, conn, c * tr, weight, drawn, sink, deliver);
+        true
+    }
+
+    /// What the connection policy decides before a connection's shadow ray: `None` to leave
+    /// it untraced, `Some(None)` to weigh it after the ray (the MIS weight is only computed
+    /// for visible connections), `Some(Some(w))` for a policy that judges, whose weight
+    /// (its factor included) comes first.
+    #[inline]
+    pub(crate) fn judge<R: Random>(
+        &self,
+        light: &[Vertex],
+        camera: &[Vertex],
+        conn: &Connection,
+        c: Rgb,
+        pos: Vec2,
+        rng: &mut R,
+    ) -> Option<Option<f32>> {
+        if !self.policy.judges() {
+            return Some(None);
+        }
+        let w = mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts);
+        if w == 0.0 {
+            return None;
+        }
+        let k = self.policy.keep(c * w, pos, rng)?;
+        Some(Some(w * k))
+    }
+
+    /// Delivers a visible connection's contribution `c` (the transmittance included) with
+    /// its MIS weight, `weight` when [`Connector::judge`] gave it.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(crate) fn deliver<S: Sink>(
+        &self,
+        light: &[Vertex],
+        camera: &[Vertex],
+        conn: &Connection,
+        c: Rgb,
+        weight: Option<f32>,
+        drawn: Option<f32>,
+        sink: &mut S,
+        deliver: impl FnOnce(&mut S, Rgb, f32),
+    ) {
+        let w = weight
+            .unwrap_or_else(|| mis_weight_with(self.scene, light, camera, Some(conn), self.heuristic, self.counts));
+        self.observe(light, camera, conn, drawn, sink);
+        deliver(sink, c, w);
     }
 }
 
@@ -384,11 +436,22 @@ pub fn check_lights(scene: &Scene, integrator: &str) -> Result<(), String> {
 }
 
 /// Options of BDPT (`--integrator bdpt`).
-#[derive(Clone, Debug, Default, serde::Serialize, clap::Args)]
+#[derive(Clone, Debug, serde::Serialize, clap::Args)]
 pub struct BdptOptions {
     /// MIS heuristic.
     #[arg(long, value_enum, default_value_t = Heuristic::default())]
     pub heuristic: Heuristic,
+    /// Trace each tile's samples as a wavefront, their walks bounce by bounce and their
+    /// connections together, with batched ray queries (false: one sample at a time; the
+    /// same image). Scenes with media are traced one sample at a time either way.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub wavefront: bool,
+}
+
+impl Default for BdptOptions {
+    fn default() -> BdptOptions {
+        BdptOptions { heuristic: Heuristic::default(), wavefront: true }
+    }
 }
 
 /// Options of light tracing (`--integrator lighttrace`): none of its own.
@@ -399,6 +462,9 @@ pub struct LighttraceOptions {}
 pub struct BdptRender {
     pub bdpt: Bdpt,
     pub heuristic: Heuristic,
+    /// Trace BDPT's tiles as a wavefront ([`crate::integrator::bidir::wavefront`]) in scenes
+    /// without media.
+    pub wavefront: bool,
 }
 
 impl Iterative for BdptRender {
@@ -412,6 +478,9 @@ impl Iterative for BdptRender {
     fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
         let counts = if self.bdpt.light_only { Counts::LightTrace } else { Counts::Bdpt };
         let conn = Connector::new(ctx.scene, self.heuristic, &counts);
+        if self.wavefront && !self.bdpt.light_only && !ctx.scene.volumetric {
+            return self.bdpt.tile_wavefront(ctx, &conn, tile, first, count);
+        }
         let mut scratch = Scratch::default();
         // Light tracing only splats, but for the sky seen directly.
         let camera_samples = !self.bdpt.light_only || !ctx.scene.infinite_lights.is_empty();
@@ -444,7 +513,7 @@ impl Integrator for LighttraceOptions {
     const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
-        let method = BdptRender { bdpt: Bdpt::for_scene(scene, true), heuristic: Default::default() };
+        let method = BdptRender { bdpt: Bdpt::for_scene(scene, true), heuristic: Default::default(), wavefront: false };
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 }
@@ -454,7 +523,8 @@ impl Integrator for BdptOptions {
     const MEDIA: bool = true;
 
     fn render(&self, scene: &Scene, opts: &RunOptions, iterations: Iterations) -> Rendered {
-        let method = BdptRender { bdpt: Bdpt::for_scene(scene, false), heuristic: self.heuristic };
+        let bdpt = Bdpt::for_scene(scene, false);
+        let method = BdptRender { bdpt, heuristic: self.heuristic, wavefront: self.wavefront };
         crate::integrator::render_loop::run(scene, opts, method, true, iterations)
     }
 

@@ -14,6 +14,7 @@ pub mod guide;
 pub mod mis;
 pub mod pool;
 pub mod walk;
+pub mod wavefront;
 
 use crate::bsdf::TransportMode;
 use crate::integrator::bidir::guide::Guide;

@@ -461,7 +461,7 @@ fn transmittance_in_media(scene: &Scene, a: &Vertex, b: &Vertex) -> Rgb {
 /// The shadow ray between `a` and `b`, from the finite one when the other lies at infinity,
 /// with the vertices it starts from and ends at.
 #[inline(always)]
-fn shadow_segment<'v>(a: &'v Vertex, b: &'v Vertex) -> (Ray, &'v Vertex, &'v Vertex) {
+pub(crate) fn shadow_segment<'v>(a: &'v Vertex, b: &'v Vertex) -> (Ray, &'v Vertex, &'v Vertex) {
     // The segment stops `SHADOW_EPSILON` of its length short of its far end. A vertex at
     // infinity is a point beyond the scene, some scene diameters away: the ray starts at the
     // finite vertex, so that margin lies outside the scene rather than in front of the

@@ -1,0 +1,268 @@
+//! BDPT's per-sample estimator ([`Bdpt::sample`]) as a wavefront: a tile's camera samples
+//! are taken [`BATCH`] at a time. Their camera walks advance bounce by bounce, each bounce's
+//! rays answered in one batch query (Embree's stream interface), then their light walks the
+//! same way; then every strategy of every sample is evaluated, and the shadow rays of all
+//! their connections are answered in one batch of occlusion queries; last, each sample's
+//! visible strategies are weighted and delivered, sample by sample.
+//!
+//! Each sample draws its random numbers from its own sampler, in the order
+//! [`Bdpt::sample`] draws them (no draw depends on a shadow ray's answer), and delivers its
+//! contributions in the same order, so the two give the same image wherever the batch
+//! queries report the hits single queries report. The MIS weights stay scalar: they are
+//! computed at delivery, for the visible connections only, as one sample at a time does.
+
+use crate::accel::{Hit, Ray};
+use crate::film::Tile;
+use crate::integrator::bidir::bdpt::{Bdpt, ConnectionPolicy, Connector};
+use crate::integrator::bidir::mis::StrategyCounts;
+use crate::integrator::bidir::walk::{Walk, camera_start, light_start, shadow_segment};
+use crate::integrator::bidir::{Connection, Sink, Vertex};
+use crate::integrator::render_loop::{Ctx, PixelSink, TileResult, camera_samples, tile_block};
+use crate::integrator::stats::Counters;
+use crate::math::Rgb;
+use crate::sampling::{Random, Sampler};
+use crate::scene::Scene;
+use glam::Vec2;
+use std::slice::from_ref;
+
+/// Samples traced together: enough for the batch queries to pay (about ten shadow rays and
+/// eight walk rays a sample), few enough for their subpaths to stay in the core's caches.
+const BATCH: usize = 256;
+
+/// A camera sample in flight: its sampler, its film position, its two subpaths and the walk
+/// that is growing one of them.
+struct Lane {
+    sampler: Sampler,
+    pos: Vec2,
+    camera: Vec<Vertex>,
+    light: Vec<Vertex>,
+    walk: Option<Walk>,
+}
+
+/// A strategy of a sample, evaluated and waiting for its shadow ray's answer (all but
+/// [`Strategy::Emission`] have one, answered in the order of the strategies): the
+/// connection, its unweighted contribution and what [`Connector::judge`] decided.
+enum Strategy {
+    /// `s = 0`: the camera subpath's first `t` vertices end on an emitter.
+    Emission { t: usize },
+    /// `s = 1`: the light sample `y0` (an index into [`Queues::light_samples`]) seen from
+    /// the camera subpath's `t`-th vertex.
+    NextEvent { t: usize, y0: usize, conn: Connection, c: Rgb, weight: Option<f32> },
+    /// `t = 1`: the light subpath's first `s` vertices seen by the camera at `raster`.
+    ToCamera { s: usize, raster: Vec2, conn: Connection, c: Rgb, weight: Option<f32> },
+    /// `s, t >= 2`.
+    Connect { s: usize, t: usize, conn: Connection, c: Rgb, weight: Option<f32> },
+}
+
+/// The batches' buffers, kept from one batch to the next.
+#[derive(Default)]
+struct Queues {
+    /// The walks under way (indices into the lanes) and those that go on after this bounce.
+    live: Vec<u32>,
+    next: Vec<u32>,
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    /// Every lane's strategies, lane after lane, and where each lane's end.
+    strategies: Vec<Strategy>,
+    ends: Vec<usize>,
+    light_samples: Vec<Vertex>,
+    /// The connections' shadow rays, in the order of the strategies, and their answers.
+    shadow: Vec<Ray>,
+    occluded: Vec<bool>,
+}
+
+impl Bdpt {
+    /// Iterations `first..first + count` of a tile of BDPT (not light tracing alone), its
+    /// strategies evaluated by `conn`, traced as a wavefront (a scene without media).
+    pub(crate) fn tile_wavefront<C: StrategyCounts, P: ConnectionPolicy>(
+        &self,
+        ctx: &Ctx,
+        conn: &Connector<C, P>,
+        tile: Tile,
+        first: u32,
+        count: u32,
+    ) -> TileResult {
+        debug_assert!(!self.light_only && !ctx.scene.volumetric);
+        let scene = ctx.scene;
+        let mut block = tile_block(ctx, tile);
+        let mut counters = Counters::default();
+        let mut splats = Vec::new();
+        let mut q = Queues::default();
+        let mut lanes: Vec<Lane> = Vec::with_capacity(BATCH);
+        let mut samples = camera_samples::<Sampler>(ctx, tile, (first, count), None);
+        loop {
+            let mut n = 0;
+            for (sampler, pos) in samples.by_ref().take(BATCH) {
+                if n == lanes.len() {
+                    lanes.push(Lane { sampler, pos, camera: Vec::new(), light: Vec::new(), walk: None });
+                } else {
+                    (lanes[n].sampler, lanes[n].pos) = (sampler, pos);
+                }
+                n += 1;
+            }
+            if n == 0 {
+                break;
+            }
+            let lanes = &mut lanes[..n];
+            for lane in lanes.iter_mut() {
+                lane.walk = camera_start(scene, lane.pos, &self.limits, &mut lane.camera);
+            }
+            self.walk(scene, lanes, true, &mut q, &mut counters);
+            for lane in lanes.iter_mut() {
+                lane.sampler.start_stream(1);
+                lane.walk = light_start(scene, &self.limits, &mut lane.sampler, &mut lane.light);
+            }
+            counters.light_paths += n as u64;
+            self.walk(scene, lanes, false, &mut q, &mut counters);
+            self.evaluate(conn, lanes, &mut q, &mut counters);
+            scene.accel.occluded_batch(&q.shadow, false, &mut q.occluded);
+            let mut sink = PixelSink::new(ctx.layers, &mut splats);
+            let mut answers = q.occluded.iter().copied();
+            let mut start = 0;
+            for (lane, &end) in lanes.iter().zip(&q.ends) {
+                sink.clear();
+                for strategy in &q.strategies[start..end] {
+                    deliver(conn, lane, strategy, &q.light_samples, &mut answers, &mut sink, &mut counters);
+                }
+                sink.put(&mut block, lane.pos);
+                start = end;
+            }
+            counters.samples += n as u64;
+        }
+        TileResult { block, splats, counters, data: () }
+    }
+
+    /// Runs the lanes' walks (camera walks, the first bounce's rays counted as camera rays,
+    /// or light walks) to their ends, each bounce's rays in one batch query.
+    fn walk(&self, scene: &Scene, lanes: &mut [Lane], camera: bool, q: &mut Queues, counters: &mut Counters) {
+        q.live.clear();
+        q.live.extend(0..lanes.len() as u32);
+        let mut first = camera;
+        loop {
+            // The walks still under way, and their rays.
+            q.next.clear();
+            q.rays.clear();
+            for &i in &q.live {
+                if let Some(walk) = &lanes[i as usize].walk {
+                    q.next.push(i);
+                    q.rays.push(walk.ray);
+                }
+            }
+            std::mem::swap(&mut q.live, &mut q.next);
+            if q.live.is_empty() {
+                break;
+            }
+            scene.accel.intersect_batch(&q.rays, first, &mut q.hits);
+            if first {
+                counters.camera_rays += q.live.len() as u64;
+            } else {
+                counters.extension_rays += q.live.len() as u64;
+            }
+            first = false;
+            for (k, &i) in q.live.iter().enumerate() {
+                let lane = &mut lanes[i as usize];
+                let si = q.hits[k].as_ref().map(|hit| scene.interaction(&q.rays[k], hit));
+                let path = if camera { &mut lane.camera } else { &mut lane.light };
+                let Some(walk) = lane.walk.as_mut() else { continue };
+                if !walk.step(scene, si, &self.limits, &mut lane.sampler, path) {
+                    lane.walk = None;
+                }
+            }
+        }
+    }
+
+    /// Evaluates every strategy of every lane, in [`Bdpt::sample`]'s order, drawing each
+    /// lane's numbers from its sampler: the strategies and the connections' shadow rays
+    /// go to `q`.
+    fn evaluate<C: StrategyCounts, P: ConnectionPolicy>(
+        &self,
+        conn: &Connector<C, P>,
+        lanes: &mut [Lane],
+        q: &mut Queues,
+        counters: &mut Counters,
+    ) {
+        q.strategies.clear();
+        q.ends.clear();
+        q.light_samples.clear();
+        q.shadow.clear();
+        let z0 = conn.camera_vertex();
+        for lane in lanes.iter_mut() {
+            let rng = &mut lane.sampler;
+            rng.start_stream(2);
+            let (camera, light, pos) = (&lane.camera, &lane.light, lane.pos);
+            for t in 1..=camera.len() {
+                for s in self.allowed_light_lengths(t, light.len()) {
+                    let (z, y) = (&camera[..t], &light[..s]);
+                    let (strategy, ray) = match (s, t) {
+                        (0, _) => {
+                            q.strategies.push(Strategy::Emission { t });
+                            continue;
+                        }
+                        (_, 1) => {
+                            let Some((raster, c_, c)) = conn.camera_connection(y) else { continue };
+                            let Some(weight) = conn.judge(y, from_ref(&z0), &c_, c, raster, rng) else { continue };
+                            (Strategy::ToCamera { s, raster, conn: c_, c, weight }, shadow_segment(&y[s - 1], &z0).0)
+                        }
+                        (1, _) => {
+                            let Some((y0, c_, c)) = conn.light_sample(z, rng) else { continue };
+                            let Some(weight) = conn.judge(from_ref(&y0), z, &c_, c, pos, rng) else { continue };
+                            let ray = shadow_segment(&y0, &z[t - 1]).0;
+                            q.light_samples.push(y0);
+                            let y0 = q.light_samples.len() - 1;
+                            (Strategy::NextEvent { t, y0, conn: c_, c, weight }, ray)
+                        }
+                        _ => {
+                            let Some((c_, c)) = conn.connection(y, z, 1.0) else { continue };
+                            let Some(weight) = conn.judge(y, z, &c_, c, pos, rng) else { continue };
+                            (Strategy::Connect { s, t, conn: c_, c, weight }, shadow_segment(&y[s - 1], &z[t - 1]).0)
+                        }
+                    };
+                    q.strategies.push(strategy);
+                    q.shadow.push(ray);
+                    counters.connections += 1;
+                    counters.shadow_rays += 1;
+                }
+            }
+            q.ends.push(q.strategies.len());
+        }
+    }
+}
+
+/// Delivers one evaluated strategy of `lane` to its pixel's sink, a connection only when
+/// its shadow ray (the next of `answers`) found its ends visible to each other.
+fn deliver<C: StrategyCounts, P: ConnectionPolicy>(
+    conn: &Connector<C, P>,
+    lane: &Lane,
+    strategy: &Strategy,
+    light_samples: &[Vertex],
+    answers: &mut impl Iterator<Item = bool>,
+    sink: &mut PixelSink,
+    counters: &mut Counters,
+) {
+    let (camera, light) = (&lane.camera, &lane.light);
+    if let Strategy::Emission { t } = *strategy {
+        conn.emission(&camera[..t], sink);
+        return;
+    }
+    if answers.next().unwrap_or(true) {
+        counters.connections_occluded += 1;
+        return;
+    }
+    match *strategy {
+        Strategy::Emission { .. } => {}
+        Strategy::NextEvent { t, y0, conn: ref c_, c, weight } => {
+            let y = from_ref(&light_samples[y0]);
+            conn.deliver(y, &camera[..t], c_, c, weight, None, sink, |sk, c, w| sk.add(1, t, c * w));
+        }
+        Strategy::ToCamera { s, raster, conn: ref c_, c, weight } => {
+            let z0 = conn.camera_vertex();
+            conn.deliver(&light[..s], from_ref(&z0), c_, c, weight, None, sink, |sk, c, w| {
+                sk.splat(s, 1, raster, c * w)
+            });
+        }
+        Strategy::Connect { s, t, conn: ref c_, c, weight } => {
+            let (y, z) = (&light[..s], &camera[..t]);
+            conn.deliver(y, z, c_, c, weight, None, sink, |sk, c, w| sk.add_connection(y, z, c, w));
+        }
+    }
+}
