@@ -130,6 +130,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
 
     /// The light sample of `s = 1` at `z_{t-1}`: the vertex `y_0` on the light, the
     /// connection and its unweighted contribution (`None` when it carries nothing).
+    #[inline(always)]
     pub(crate) fn light_sample<R: Random>(&self, camera: &[Vertex], rng: &mut R) -> Option<(Vertex, Connection, Rgb)> {
         let scene = self.scene;
         let pt = &camera[camera.len() - 1];
@@ -183,6 +184,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
 
     /// The connection of `t = 1` from `y_{s-1}`: where it lands on the film, the connection
     /// and its unweighted contribution (`None` when it carries nothing).
+    #[inline(always)]
     pub(crate) fn camera_connection(&self, light: &[Vertex]) -> Option<(Vec2, Connection, Rgb)> {
         let scene = self.scene;
         let qs = &light[light.len() - 1];
@@ -230,7 +232,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
 
     /// The connection of `y_{s-1}` and `z_{t-1}` and its unweighted contribution, `scale`
     /// included (`None` when it carries nothing).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn connection(&self, light: &[Vertex], camera: &[Vertex], scale: f32) -> Option<(Connection, Rgb)> {
         let (qs, pt) = (&light[light.len() - 1], &camera[camera.len() - 1]);
         if !qs.is_connectible() || !pt.is_connectible() {
@@ -292,7 +294,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
     /// it untraced, `Some(None)` to weigh it after the ray (the MIS weight is only computed
     /// for visible connections), `Some(Some(w))` for a policy that judges, whose weight
     /// (its factor included) comes first.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn judge<R: Random>(
         &self,
         light: &[Vertex],
@@ -316,7 +318,7 @@ impl<C: StrategyCounts, P: ConnectionPolicy> Connector<'_, C, P> {
     /// Delivers a visible connection's contribution `c` (the transmittance included) with
     /// its MIS weight, `weight` when [`Connector::judge`] gave it.
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     pub(crate) fn deliver<S: Sink>(
         &self,
         light: &[Vertex],

@@ -97,6 +97,7 @@ impl Walk {
     ///
     /// With a guide in `limits`, every surface vertex keeps its cell, a camera walk samples
     /// from the guide where it guides, and the camera side's densities are the guide's.
+    #[inline]
     pub fn step<R: Random>(
         &mut self,
         scene: &Scene,

@@ -12,7 +12,7 @@
 //! computed at delivery, for the visible connections only, as one sample at a time does.
 
 use crate::accel::{Hit, Ray};
-use crate::film::Tile;
+use crate::film::{ImageBlock, Tile};
 use crate::integrator::bidir::bdpt::{Bdpt, ConnectionPolicy, Connector};
 use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::walk::{Walk, camera_start, light_start, shadow_segment};
@@ -116,17 +116,7 @@ impl Bdpt {
             self.walk(scene, lanes, false, &mut q, &mut counters);
             self.evaluate(conn, lanes, &mut q, &mut counters);
             scene.accel.occluded_batch(&q.shadow, false, &mut q.occluded);
-            let mut sink = PixelSink::new(ctx.layers, &mut splats);
-            let mut answers = q.occluded.iter().copied();
-            let mut start = 0;
-            for (lane, &end) in lanes.iter().zip(&q.ends) {
-                sink.clear();
-                for strategy in &q.strategies[start..end] {
-                    deliver(conn, lane, strategy, &q.light_samples, &mut answers, &mut sink, &mut counters);
-                }
-                sink.put(&mut block, lane.pos);
-                start = end;
-            }
+            deliver_batch(conn, lanes, &q, &mut PixelSink::new(ctx.layers, &mut splats), &mut block, &mut counters);
             counters.samples += n as u64;
         }
         TileResult { block, splats, counters, data: () }
@@ -225,6 +215,28 @@ impl Bdpt {
             }
             q.ends.push(q.strategies.len());
         }
+    }
+}
+
+/// Delivers the strategies of a batch's lanes, lane after lane, each lane's pixel (its
+/// radiance and strategy parts) added to `block` when its strategies are in.
+fn deliver_batch<C: StrategyCounts, P: ConnectionPolicy>(
+    conn: &Connector<C, P>,
+    lanes: &[Lane],
+    q: &Queues,
+    sink: &mut PixelSink,
+    block: &mut ImageBlock,
+    counters: &mut Counters,
+) {
+    let mut answers = q.occluded.iter().copied();
+    let mut start = 0;
+    for (lane, &end) in lanes.iter().zip(&q.ends) {
+        sink.clear();
+        for strategy in &q.strategies[start..end] {
+            deliver(conn, lane, strategy, &q.light_samples, &mut answers, sink, counters);
+        }
+        sink.put(block, lane.pos);
+        start = end;
     }
 }
 
