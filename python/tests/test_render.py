@@ -95,7 +95,7 @@ def test_statistics_are_the_stats_files(cornell):
     _, stats = pcbpt.render(cornell, "bdpt", spp=2, threads=2, stats=True, heuristic="balance")
     render = stats["render"]
     assert render["integrator"] == "bdpt"
-    assert render["options"] == {"heuristic": "balance"}
+    assert render["options"] == {"heuristic": "balance", "wavefront": True}
     assert (render["spp"], render["width"], render["height"], render["threads"]) == (2, 24, 20, 2)
     assert render["seconds"] > 0 and not render["interrupted"]
     assert stats["output"] is None and stats["embree_version"]
