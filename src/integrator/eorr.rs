@@ -14,9 +14,9 @@
 //! pilot, so such a render is not cut into chunks.
 
 use crate::film::{Film, Tile};
-use crate::integrator::bidir::bdpt::{Bdpt, ConnectionPolicy, Connector, Scratch};
+use crate::integrator::bidir::bdpt::{Bdpt, ConnectionPolicy, Connector};
 use crate::integrator::bidir::mis::{Counts, Heuristic};
-use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, add_results, sample_tile};
+use crate::integrator::render_loop::{Ctx, Iterative, Prepared, TileResult, Warmup, Work, add_results};
 use crate::integrator::run::RunOptions;
 use crate::integrator::run::{Integrator, Iterations, Rendered};
 use crate::integrator::stats::{Details, IntegratorStats, RenderStats};
@@ -161,15 +161,7 @@ impl Iterative for Eorr {
         let policy = Roulette { tau: self.tau.as_deref(), width, height, skipped: Cell::new(0) };
         let conn =
             Connector { scene: ctx.scene, heuristic: self.heuristic, counts: &Counts::Bdpt, policy, guide: None };
-        let result = if self.wavefront && !ctx.scene.volumetric {
-            self.bdpt.tile_wavefront(ctx, &conn, tile, first, count)
-        } else {
-            let mut scratch = Scratch::default();
-            sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-                self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);
-                true
-            })
-        };
+        let result = self.bdpt.render_tile(ctx, &conn, tile, first, count, self.wavefront);
         result.map(|()| conn.policy.skipped.get())
     }
 

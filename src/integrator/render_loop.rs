@@ -29,6 +29,7 @@
 //! Light-tracing contributions (`t = 1`) are splatted: each tile (and each part of a light
 //! pool) collects its splats in a list, and the lists are added to the film in order.
 
+use crate::accel::{Hit, Ray};
 use crate::error::Error;
 use crate::film::{Film, ImageBlock, STRATEGY_LAYERS, Splat, Tile, strategy_layer, strategy_layer_name, tiles};
 use crate::integrator::noise::Halves;
@@ -255,6 +256,32 @@ pub(crate) fn sample_tile_with<S: PixelSampler>(
         counters.samples += 1;
     }
     TileResult { block, splats, counters, data: () }
+}
+
+/// One bounce of a wavefront: the lanes whose rays are traced (indices into the batch's
+/// lanes), those that go on after it, their rays and the hits found, the buffers kept from
+/// one bounce and one batch to the next.
+#[derive(Default)]
+pub(crate) struct Bounce {
+    pub live: Vec<u32>,
+    pub next: Vec<u32>,
+    pub rays: Vec<Ray>,
+    pub hits: Vec<Option<Hit>>,
+}
+
+impl Bounce {
+    /// Asks the backend for the closest hits of the bounce's rays in one batch query,
+    /// counted as camera rays (and flagged coherent) on a walk's first bounce, `camera`,
+    /// else as extension rays.
+    pub fn intersect(&mut self, scene: &Scene, camera: bool, counters: &mut Counters) {
+        scene.accel.intersect_batch(&self.rays, camera, &mut self.hits);
+        let n = self.rays.len() as u64;
+        if camera {
+            counters.camera_rays += n;
+        } else {
+            counters.extension_rays += n;
+        }
+    }
 }
 
 /// An empty image block for a tile, with the strategy layers when the render keeps them.

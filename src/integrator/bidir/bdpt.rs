@@ -480,22 +480,38 @@ impl Iterative for BdptRender {
     fn render_tile(&self, ctx: &Ctx, _: &(), tile: Tile, first: u32, count: u32) -> TileResult {
         let counts = if self.bdpt.light_only { Counts::LightTrace } else { Counts::Bdpt };
         let conn = Connector::new(ctx.scene, self.heuristic, &counts);
-        if self.wavefront && !self.bdpt.light_only && !ctx.scene.volumetric {
-            return self.bdpt.tile_wavefront(ctx, &conn, tile, first, count);
-        }
-        let mut scratch = Scratch::default();
-        // Light tracing only splats, but for the sky seen directly.
-        let camera_samples = !self.bdpt.light_only || !ctx.scene.infinite_lights.is_empty();
-        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
-            self.bdpt.sample(&conn, pos, rng, &mut scratch, sink, counters);
-            camera_samples
-        })
+        self.bdpt.render_tile(ctx, &conn, tile, first, count, self.wavefront)
     }
 
     fn finish(&mut self, _: &Ctx, _: (), _: Range<u32>, _: &[TileResult]) {}
 }
 
 impl Bdpt {
+    /// Iterations `first..first + count` of a tile, each camera sample's strategies
+    /// evaluated by `conn`: as a wavefront ([`crate::integrator::bidir::wavefront`]) when
+    /// `wavefront` is set, but for light tracing alone and in scenes with media, which are
+    /// traced one sample at a time.
+    pub(crate) fn render_tile<C: StrategyCounts, P: ConnectionPolicy>(
+        &self,
+        ctx: &Ctx,
+        conn: &Connector<C, P>,
+        tile: Tile,
+        first: u32,
+        count: u32,
+        wavefront: bool,
+    ) -> TileResult {
+        if wavefront && !self.light_only && !ctx.scene.volumetric {
+            return self.tile_wavefront(ctx, conn, tile, first, count);
+        }
+        let mut scratch = Scratch::default();
+        // Light tracing only splats, but for the sky seen directly.
+        let camera_samples = !self.light_only || !ctx.scene.infinite_lights.is_empty();
+        sample_tile(ctx, tile, first, count, |pos, rng, sink, counters| {
+            self.sample(conn, pos, rng, &mut scratch, sink, counters);
+            camera_samples
+        })
+    }
+
     /// The bidirectional estimator with the scene's depth limits and emitter visibility
     /// (light tracing alone with `light_only`).
     pub fn for_scene(scene: &Scene, light_only: bool) -> Bdpt {

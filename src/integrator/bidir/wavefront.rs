@@ -11,13 +11,13 @@
 //! queries report the hits single queries report. The MIS weights stay scalar: they are
 //! computed at delivery, for the visible connections only, as one sample at a time does.
 
-use crate::accel::{Hit, Ray};
+use crate::accel::Ray;
 use crate::film::{ImageBlock, Tile};
 use crate::integrator::bidir::bdpt::{Bdpt, ConnectionPolicy, Connector};
 use crate::integrator::bidir::mis::StrategyCounts;
 use crate::integrator::bidir::walk::{Walk, camera_start, light_start, shadow_segment};
 use crate::integrator::bidir::{Connection, Sink, Vertex};
-use crate::integrator::render_loop::{Ctx, PixelSink, TileResult, camera_samples, tile_block};
+use crate::integrator::render_loop::{Bounce, Ctx, PixelSink, TileResult, camera_samples, tile_block};
 use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::sampling::{Random, Sampler};
@@ -39,29 +39,39 @@ struct Lane {
     walk: Option<Walk>,
 }
 
-/// A strategy of a sample, evaluated and waiting for its shadow ray's answer (all but
-/// [`Strategy::Emission`] have one, answered in the order of the strategies): the
-/// connection, its unweighted contribution and what [`Connector::judge`] decided.
+/// A strategy of a sample, evaluated: an emitter the camera subpath ends on, or a
+/// connection waiting for its shadow ray's answer (answered in the order of the strategies)
+/// with its unweighted contribution `c` and what [`Connector::judge`] decided.
 enum Strategy {
     /// `s = 0`: the camera subpath's first `t` vertices end on an emitter.
-    Emission { t: usize },
+    Emission {
+        t: usize,
+    },
+    Connected {
+        ends: Ends,
+        conn: Connection,
+        c: Rgb,
+        weight: Option<f32>,
+    },
+}
+
+/// The subpaths a connection joins.
+#[derive(Clone, Copy)]
+enum Ends {
     /// `s = 1`: the light sample `y0` (an index into [`Queues::light_samples`]) seen from
     /// the camera subpath's `t`-th vertex.
-    NextEvent { t: usize, y0: usize, conn: Connection, c: Rgb, weight: Option<f32> },
+    NextEvent { t: usize, y0: usize },
     /// `t = 1`: the light subpath's first `s` vertices seen by the camera at `raster`.
-    ToCamera { s: usize, raster: Vec2, conn: Connection, c: Rgb, weight: Option<f32> },
+    ToCamera { s: usize, raster: Vec2 },
     /// `s, t >= 2`.
-    Connect { s: usize, t: usize, conn: Connection, c: Rgb, weight: Option<f32> },
+    Connect { s: usize, t: usize },
 }
 
 /// The batches' buffers, kept from one batch to the next.
 #[derive(Default)]
 struct Queues {
-    /// The walks under way (indices into the lanes) and those that go on after this bounce.
-    live: Vec<u32>,
-    next: Vec<u32>,
-    rays: Vec<Ray>,
-    hits: Vec<Option<Hit>>,
+    /// The walks under way and their rays.
+    bounce: Bounce,
     /// Every lane's strategies, lane after lane, and where each lane's end.
     strategies: Vec<Strategy>,
     ends: Vec<usize>,
@@ -74,7 +84,7 @@ struct Queues {
 impl Bdpt {
     /// Iterations `first..first + count` of a tile of BDPT (not light tracing alone), its
     /// strategies evaluated by `conn`, traced as a wavefront (a scene without media).
-    pub(crate) fn tile_wavefront<C: StrategyCounts, P: ConnectionPolicy>(
+    pub(super) fn tile_wavefront<C: StrategyCounts, P: ConnectionPolicy>(
         &self,
         ctx: &Ctx,
         conn: &Connector<C, P>,
@@ -125,33 +135,29 @@ impl Bdpt {
     /// Runs the lanes' walks (camera walks, the first bounce's rays counted as camera rays,
     /// or light walks) to their ends, each bounce's rays in one batch query.
     fn walk(&self, scene: &Scene, lanes: &mut [Lane], camera: bool, q: &mut Queues, counters: &mut Counters) {
-        q.live.clear();
-        q.live.extend(0..lanes.len() as u32);
+        let b = &mut q.bounce;
+        b.live.clear();
+        b.live.extend(0..lanes.len() as u32);
         let mut first = camera;
         loop {
             // The walks still under way, and their rays.
-            q.next.clear();
-            q.rays.clear();
-            for &i in &q.live {
+            b.next.clear();
+            b.rays.clear();
+            for &i in &b.live {
                 if let Some(walk) = &lanes[i as usize].walk {
-                    q.next.push(i);
-                    q.rays.push(walk.ray);
+                    b.next.push(i);
+                    b.rays.push(walk.ray);
                 }
             }
-            std::mem::swap(&mut q.live, &mut q.next);
-            if q.live.is_empty() {
+            std::mem::swap(&mut b.live, &mut b.next);
+            if b.live.is_empty() {
                 break;
             }
-            scene.accel.intersect_batch(&q.rays, first, &mut q.hits);
-            if first {
-                counters.camera_rays += q.live.len() as u64;
-            } else {
-                counters.extension_rays += q.live.len() as u64;
-            }
+            b.intersect(scene, first, counters);
             first = false;
-            for (k, &i) in q.live.iter().enumerate() {
+            for (k, &i) in b.live.iter().enumerate() {
                 let lane = &mut lanes[i as usize];
-                let si = q.hits[k].as_ref().map(|hit| scene.interaction(&q.rays[k], hit));
+                let si = b.hits[k].as_ref().map(|hit| scene.interaction(&b.rays[k], hit));
                 let path = if camera { &mut lane.camera } else { &mut lane.light };
                 let Some(walk) = lane.walk.as_mut() else { continue };
                 if !walk.step(scene, si, &self.limits, &mut lane.sampler, path) {
@@ -183,7 +189,7 @@ impl Bdpt {
             for t in 1..=camera.len() {
                 for s in self.allowed_light_lengths(t, light.len()) {
                     let (z, y) = (&camera[..t], &light[..s]);
-                    let (strategy, ray) = match (s, t) {
+                    let (ends, conn_, c, weight, ray) = match (s, t) {
                         (0, _) => {
                             q.strategies.push(Strategy::Emission { t });
                             continue;
@@ -191,23 +197,22 @@ impl Bdpt {
                         (_, 1) => {
                             let Some((raster, c_, c)) = conn.camera_connection(y) else { continue };
                             let Some(weight) = conn.judge(y, from_ref(&z0), &c_, c, raster, rng) else { continue };
-                            (Strategy::ToCamera { s, raster, conn: c_, c, weight }, shadow_segment(&y[s - 1], &z0).0)
+                            (Ends::ToCamera { s, raster }, c_, c, weight, shadow_segment(&y[s - 1], &z0).0)
                         }
                         (1, _) => {
                             let Some((y0, c_, c)) = conn.light_sample(z, rng) else { continue };
                             let Some(weight) = conn.judge(from_ref(&y0), z, &c_, c, pos, rng) else { continue };
                             let ray = shadow_segment(&y0, &z[t - 1]).0;
                             q.light_samples.push(y0);
-                            let y0 = q.light_samples.len() - 1;
-                            (Strategy::NextEvent { t, y0, conn: c_, c, weight }, ray)
+                            (Ends::NextEvent { t, y0: q.light_samples.len() - 1 }, c_, c, weight, ray)
                         }
                         _ => {
                             let Some((c_, c)) = conn.connection(y, z, 1.0) else { continue };
                             let Some(weight) = conn.judge(y, z, &c_, c, pos, rng) else { continue };
-                            (Strategy::Connect { s, t, conn: c_, c, weight }, shadow_segment(&y[s - 1], &z[t - 1]).0)
+                            (Ends::Connect { s, t }, c_, c, weight, shadow_segment(&y[s - 1], &z[t - 1]).0)
                         }
                     };
-                    q.strategies.push(strategy);
+                    q.strategies.push(Strategy::Connected { ends, conn: conn_, c, weight });
                     q.shadow.push(ray);
                     counters.connections += 1;
                     counters.shadow_rays += 1;
@@ -252,27 +257,26 @@ fn deliver<C: StrategyCounts, P: ConnectionPolicy>(
     counters: &mut Counters,
 ) {
     let (camera, light) = (&lane.camera, &lane.light);
-    if let Strategy::Emission { t } = *strategy {
-        conn.emission(&camera[..t], sink);
-        return;
-    }
+    let (ends, c_, c, weight) = match strategy {
+        Strategy::Emission { t } => return conn.emission(&camera[..*t], sink),
+        Strategy::Connected { ends, conn, c, weight } => (*ends, conn, *c, *weight),
+    };
     if answers.next().unwrap_or(true) {
         counters.connections_occluded += 1;
         return;
     }
-    match *strategy {
-        Strategy::Emission { .. } => {}
-        Strategy::NextEvent { t, y0, conn: ref c_, c, weight } => {
+    match ends {
+        Ends::NextEvent { t, y0 } => {
             let y = from_ref(&light_samples[y0]);
             conn.deliver(y, &camera[..t], c_, c, weight, None, sink, |sk, c, w| sk.add(1, t, c * w));
         }
-        Strategy::ToCamera { s, raster, conn: ref c_, c, weight } => {
+        Ends::ToCamera { s, raster } => {
             let z0 = conn.camera_vertex();
             conn.deliver(&light[..s], from_ref(&z0), c_, c, weight, None, sink, |sk, c, w| {
                 sk.splat(s, 1, raster, c * w)
             });
         }
-        Strategy::Connect { s, t, conn: ref c_, c, weight } => {
+        Ends::Connect { s, t } => {
             let (y, z) = (&light[..s], &camera[..t]);
             conn.deliver(y, z, c_, c, weight, None, sink, |sk, c, w| sk.add_connection(y, z, c, w));
         }

@@ -11,9 +11,9 @@
 //! single queries report.
 
 use super::{BsdfSampling, PathState, PathTracer};
-use crate::accel::{Hit, Ray};
+use crate::accel::Ray;
 use crate::film::Tile;
-use crate::integrator::render_loop::{Ctx, TileResult, camera_samples, tile_block};
+use crate::integrator::render_loop::{Bounce, Ctx, TileResult, camera_samples, tile_block};
 use crate::integrator::stats::Counters;
 use crate::math::Rgb;
 use crate::sampling::PixelSampler;
@@ -34,11 +34,8 @@ struct Lane<S> {
 /// The batches' buffers, kept from one bounce and one batch to the next.
 #[derive(Default)]
 struct Queues {
-    /// The live paths (indices into the lanes) and those that go on after this bounce.
-    live: Vec<u32>,
-    next: Vec<u32>,
-    rays: Vec<Ray>,
-    hits: Vec<Option<Hit>>,
+    /// The live paths and their rays.
+    bounce: Bounce,
     /// The bounce's shadow rays, the path each belongs to with the light it brings if
     /// nothing blocks it, and the answers.
     shadow: Vec<Ray>,
@@ -78,29 +75,26 @@ impl PathTracer {
 
     /// Traces a batch of paths from their camera rays to their ends.
     fn trace<S: PixelSampler>(&self, scene: &Scene, lanes: &mut [Lane<S>], q: &mut Queues, counters: &mut Counters) {
-        q.live.clear();
-        q.live.extend(0..lanes.len() as u32);
-        counters.camera_rays += lanes.len() as u64;
+        let b = &mut q.bounce;
+        b.live.clear();
+        b.live.extend(0..lanes.len() as u32);
         let mut camera = true;
-        while !q.live.is_empty() {
-            q.rays.clear();
-            q.rays.extend(q.live.iter().map(|&i| lanes[i as usize].path.ray));
-            scene.accel.intersect_batch(&q.rays, camera, &mut q.hits);
-            if !camera {
-                counters.extension_rays += q.live.len() as u64;
-            }
+        while !b.live.is_empty() {
+            b.rays.clear();
+            b.rays.extend(b.live.iter().map(|&i| lanes[i as usize].path.ray));
+            b.intersect(scene, camera, counters);
             camera = false;
 
-            q.next.clear();
+            b.next.clear();
             q.shadow.clear();
             q.pending.clear();
-            for (k, &i) in q.live.iter().enumerate() {
+            for (k, &i) in b.live.iter().enumerate() {
                 let lane = &mut lanes[i as usize];
-                let Some(hit) = &q.hits[k] else {
-                    self.escaped(scene, &mut lane.path, q.rays[k].d.normalize(), &mut BsdfSampling);
+                let Some(hit) = &b.hits[k] else {
+                    self.escaped(scene, &mut lane.path, b.rays[k].d.normalize(), &mut BsdfSampling);
                     continue;
                 };
-                let si = scene.interaction(&q.rays[k], hit);
+                let si = scene.interaction(&b.rays[k], hit);
                 let mut shadow = None;
                 let lit = self.light_at(
                     scene,
@@ -122,7 +116,7 @@ impl PathTracer {
                 // The path tracer's own continuation gathers nothing, so the light sample's
                 // contribution can wait for the batch's shadow rays.
                 if self.go_on(&mut lane.path, &si, &lit, &mut lane.sampler, &mut BsdfSampling) {
-                    q.next.push(i);
+                    b.next.push(i);
                 }
             }
 
@@ -132,7 +126,7 @@ impl PathTracer {
                     lanes[i as usize].path.l += direct;
                 }
             }
-            std::mem::swap(&mut q.live, &mut q.next);
+            std::mem::swap(&mut b.live, &mut b.next);
         }
     }
 }
